@@ -1,0 +1,109 @@
+"""Spectral annotations stored on Blender datablocks (``<datablock>.spectral_bench``).
+
+Ranges are soft (UI sliders) on purpose: an out-of-range value is kept and reported by the
+IR validation with scene, object and field, rather than silently clamped.
+"""
+import bpy
+from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProperty,
+                       IntProperty, PointerProperty, StringProperty)
+
+from ..exporters import ir, spectra
+
+SPECTRUM_TYPES = [
+    ("CONSTANT", "Constant", "The same value at every wavelength"),
+    ("SAMPLED", "Sampled", "Wavelength/value pairs, linearly interpolated, edge values padded"),
+    ("NAMED", "Named", "A named table (CIE illuminants), 1.0 at 560 nm times scale"),
+    ("BLACKBODY", "Blackbody", "Planck's law at a temperature, 1.0 at 560 nm times scale"),
+]
+
+
+def _named_items(self, context):
+    return [(n, n, "") for n in spectra.named_spectra()]
+
+
+class SpectrumSample(bpy.types.PropertyGroup):
+    wavelength: FloatProperty(name="Wavelength (nm)", default=550.0)
+    value: FloatProperty(name="Value", default=0.0)
+
+
+class SpectrumProps(bpy.types.PropertyGroup):
+    kind: EnumProperty(name="Type", items=SPECTRUM_TYPES, default="CONSTANT")
+    value: FloatProperty(name="Value", default=0.5, soft_min=0.0)
+    named: StringProperty(name="Name", default="cie_d65",
+                          search=lambda self, context, edit_text: spectra.named_spectra())
+    scale: FloatProperty(name="Scale", default=1.0, soft_min=0.0)
+    temperature: FloatProperty(name="Temperature (K)", default=6500.0, soft_min=1000.0)
+    samples: CollectionProperty(type=SpectrumSample)
+
+
+MATERIAL_KINDS = [
+    ("NONE", "None", "Not annotated: the exporter reports it"),
+    ("DIFFUSE", "Diffuse", "Lambertian reflector"),
+    ("CONDUCTOR", "Conductor", "Metal with complex IOR (named table or eta/k spectra)"),
+    ("DIELECTRIC", "Dielectric", "Transparent dielectric with a real IOR"),
+]
+DISTRIBUTIONS = [("SMOOTH", "Smooth", "Perfectly specular")] + [
+    (d.upper(), d.upper() if d == "ggx" else d.title(), f"{d} microfacet distribution") for d in ir.DISTRIBUTIONS]
+
+
+class MaterialProps(bpy.types.PropertyGroup):
+    kind: EnumProperty(name="Model", items=MATERIAL_KINDS, default="NONE")
+    reflectance: PointerProperty(type=SpectrumProps)
+    conductor_named: BoolProperty(name="Named Conductor", default=True)
+    conductor: StringProperty(name="Conductor", default="Cu",
+                              search=lambda self, context, edit_text: list(spectra.NAMED_CONDUCTORS))
+    eta: PointerProperty(type=SpectrumProps)
+    k: PointerProperty(type=SpectrumProps)
+    int_ior: FloatProperty(name="Interior IOR", default=1.5046, soft_min=1.0, soft_max=3.0, precision=4)
+    ext_ior: FloatProperty(name="Exterior IOR", default=ir.AIR_IOR, soft_min=1.0, soft_max=3.0, precision=6)
+    distribution: EnumProperty(name="Microfacets", items=DISTRIBUTIONS, default="SMOOTH")
+    alpha: FloatProperty(name="Alpha", default=0.1, soft_min=0.0, soft_max=1.0, precision=4,
+                         description="Microfacet width alpha (Blender roughness r is alpha = r^2)")
+
+
+class LightProps(bpy.types.PropertyGroup):
+    radiance: PointerProperty(type=SpectrumProps)
+
+
+class WorldProps(bpy.types.PropertyGroup):
+    enabled: BoolProperty(name="Uniform Environment", default=False)
+    radiance: PointerProperty(type=SpectrumProps)
+
+
+SHAPES = [
+    ("MESH", "Mesh", "Export the triangulated mesh"),
+    ("SPHERE", "Analytic Sphere", "Export as an exact sphere (object location and uniform scale)"),
+    ("RECTANGLE", "Analytic Rectangle", "Export as the square [-1,1]^2 in local XY, normal +Z"),
+]
+
+
+class ObjectProps(bpy.types.PropertyGroup):
+    shape: EnumProperty(name="Shape", items=SHAPES, default="MESH")
+
+
+class SceneProps(bpy.types.PropertyGroup):
+    case: StringProperty(name="Case", default="custom")
+    description: StringProperty(name="Description", default="")
+    spp: IntProperty(name="Samples", default=64, soft_min=1)
+    max_depth: IntProperty(name="Max Depth", default=64, soft_min=1)
+    needs_polarization: BoolProperty(name="Needs Polarisation", default=False)
+    needs_fluorescence: BoolProperty(name="Needs Fluorescence", default=False)
+
+
+CLASSES = (SpectrumSample, SpectrumProps, MaterialProps, LightProps, WorldProps, ObjectProps, SceneProps)
+TARGETS = {bpy.types.Material: MaterialProps, bpy.types.Light: LightProps, bpy.types.World: WorldProps,
+           bpy.types.Object: ObjectProps, bpy.types.Scene: SceneProps}
+
+
+def register():
+    for cls in CLASSES:
+        bpy.utils.register_class(cls)
+    for target, group in TARGETS.items():
+        target.spectral_bench = PointerProperty(type=group)
+
+
+def unregister():
+    for target in TARGETS:
+        del target.spectral_bench
+    for cls in reversed(CLASSES):
+        bpy.utils.unregister_class(cls)

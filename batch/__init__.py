@@ -1,0 +1,1 @@
+"""Headless batch runner: CLI, jobs, backends, comparison, summary."""

@@ -1,0 +1,66 @@
+"""The scene IR: a JSON-compatible dict, one test scene each, described by schema/scene.schema.json.
+
+Conventions (every writer follows them):
+- World space is Blender's: right-handed, Z up, lengths in scene units.
+- ``camera.to_world`` maps camera space (looking down -Z, +Y up, +X right: Blender's and
+  OpenGL's convention) to world space; ``fov`` in degrees along ``fov_axis`` ("x" or "y").
+- ``rectangle`` is the square [-1, 1]^2 in its local z = 0 plane, normal and emission +Z.
+- ``sphere`` is analytic: ``center`` and ``radius``.
+- ``mesh`` has inline ``vertices``/``faces`` (triangles) or a ``file`` (PLY/OBJ, relative to
+  the JSON file), both with an optional ``to_world``.
+- Roughness ``alpha`` is the microfacet width (GGX/Beckmann alpha, Walter et al. 2007);
+  alpha 0 is a smooth surface. Blender's "Roughness" r corresponds to alpha = r^2.
+- Spectra and their radiometric normalisation: see spectra.py.
+- Pixel filter is a box: each pixel is the plain integral over its area, so pixels are
+  independent and a reference downsamples exactly to any integer factor (see batch/compare.py).
+"""
+import copy
+
+FORMAT = "spectral-bench-scene"
+VERSION = 1
+
+PHENOMENA = ("spectral", "polarization", "fluorescence", "dispersion", "thin_film")
+CASES = ("reflectance", "spectral_accuracy", "polarization", "iridescence", "fluorescence",
+         "dispersion", "stability", "custom")
+DISTRIBUTIONS = ("ggx", "beckmann")
+AIR_IOR = 1.000277  # Mitsuba's "air"
+
+
+def identity():
+    return [[1.0 if i == j else 0.0 for j in range(4)] for i in range(4)]
+
+
+def derived_needs(scene):
+    """Phenomena a scene needs from its content: a non-constant spectrum or a named conductor
+    needs a spectral renderer. Explicit ``needs`` entries are kept on top of these."""
+    needs = set(scene.get("needs", []))
+
+    def spectral(spec):
+        return spec is not None and spec.get("type") != "constant"
+
+    env = scene.get("environment")
+    if env and spectral(env.get("radiance")):
+        needs.add("spectral")
+    for obj in scene.get("objects", []):
+        bsdf = obj.get("bsdf") or {}
+        if bsdf.get("type") == "conductor":
+            needs.add("spectral")
+        for key in ("reflectance", "eta", "k"):
+            if spectral(bsdf.get(key)):
+                needs.add("spectral")
+        em = obj.get("emitter") or {}
+        if spectral(em.get("radiance")):
+            needs.add("spectral")
+    return sorted(needs)
+
+
+def with_derived_needs(scene):
+    out = copy.deepcopy(scene)
+    out["needs"] = derived_needs(scene)
+    return out
+
+
+def describe(scene):
+    """One line for logs."""
+    return (f"{scene['name']} [{scene.get('case', '?')}] {scene['render']['width']}x"
+            f"{scene['render']['height']} {scene['render']['spp']} spp, needs {','.join(scene.get('needs', [])) or 'rgb'}")

@@ -1,0 +1,138 @@
+"""Mitsuba 3 XML writer: IR scene -> folder with scene.xml, meshes/*.ply and spectra/*.spd.
+
+The folder loads with ``mitsuba scene.xml`` or ``mi.load_file`` unchanged. Sample count,
+seed and max depth are XML defaults ($spp, $seed, $max_depth) so a caller may override them.
+"""
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+
+from . import ir, mesh_io, spectra
+
+# Blender/OpenGL cameras look down -Z with +Y up; Mitsuba's look down +Z with +X to the
+# image's left. Mitsuba to_world = IR to_world @ diag(-1, 1, -1).
+_CAMERA_FLIP = np.diag([-1.0, 1.0, -1.0, 1.0])
+
+
+def _matrix_text(m):
+    return " ".join(repr(float(x)) for x in np.asarray(m, dtype=np.float64).reshape(-1))
+
+
+def _transform(parent, m):
+    t = ET.SubElement(parent, "transform", name="to_world")
+    ET.SubElement(t, "matrix", value=_matrix_text(m))
+
+
+class _Writer:
+    def __init__(self, scene, out_dir):
+        self.scene = scene
+        self.out = Path(out_dir)
+        self.files = []
+
+    def spectrum(self, parent, name, spec, stem):
+        if spectra.is_constant(spec):
+            ET.SubElement(parent, "spectrum", name=name, value=repr(float(spec["value"])))
+            return
+        wl, vals = spectra.tabulate(spec)
+        rel = f"spectra/{stem}.spd"
+        path = self.out / rel
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text("".join(f"{w:.6g} {v:.9g}\n" for w, v in zip(wl, vals)))
+        self.files.append(path)
+        ET.SubElement(parent, "spectrum", name=name, filename=rel)
+
+    def bsdf(self, parent, obj):
+        b = obj["bsdf"]
+        stem = obj["name"]
+        rough = b.get("roughness")
+        is_rough = rough is not None and rough["alpha"] > 0
+        if b["type"] == "diffuse":
+            node = ET.SubElement(parent, "bsdf", type="diffuse")
+            self.spectrum(node, "reflectance", b["reflectance"], f"{stem}_reflectance")
+            return
+        if b["type"] == "conductor":
+            node = ET.SubElement(parent, "bsdf", type="roughconductor" if is_rough else "conductor")
+            if "material" in b:
+                ET.SubElement(node, "string", name="material", value=b["material"])
+            else:
+                self.spectrum(node, "eta", b["eta"], f"{stem}_eta")
+                self.spectrum(node, "k", b["k"], f"{stem}_k")
+        elif b["type"] == "dielectric":
+            node = ET.SubElement(parent, "bsdf", type="roughdielectric" if is_rough else "dielectric")
+            ET.SubElement(node, "float", name="int_ior", value=repr(float(b["int_ior"])))
+            ET.SubElement(node, "float", name="ext_ior", value=repr(float(b.get("ext_ior", ir.AIR_IOR))))
+        else:
+            raise ValueError(f"unknown bsdf type {b['type']!r}")
+        if is_rough:
+            ET.SubElement(node, "string", name="distribution", value=rough["distribution"])
+            ET.SubElement(node, "float", name="alpha", value=repr(float(rough["alpha"])))
+
+    def shape(self, root, obj):
+        s = obj["shape"]
+        if s["type"] == "rectangle":
+            node = ET.SubElement(root, "shape", type="rectangle", id=obj["name"])
+            _transform(node, s["to_world"])
+        elif s["type"] == "sphere":
+            node = ET.SubElement(root, "shape", type="sphere", id=obj["name"])
+            ET.SubElement(node, "point", name="center", x=repr(float(s["center"][0])),
+                          y=repr(float(s["center"][1])), z=repr(float(s["center"][2])))
+            ET.SubElement(node, "float", name="radius", value=repr(float(s["radius"])))
+        elif s["type"] == "mesh":
+            verts, faces = mesh_io.load_mesh(s, self.scene.get("_base_dir"))
+            rel = f"meshes/{obj['name']}.ply"
+            self.files.append(mesh_io.write_ply(self.out / rel, verts, faces))
+            node = ET.SubElement(root, "shape", type="ply", id=obj["name"])
+            ET.SubElement(node, "string", name="filename", value=rel)
+            if "to_world" in s:
+                _transform(node, s["to_world"])
+        else:
+            raise ValueError(f"unknown shape type {s['type']!r}")
+        if obj.get("bsdf"):
+            self.bsdf(node, obj)
+        elif obj.get("emitter"):
+            # an emitter without a BSDF is black on reflection, as in the IR
+            node_b = ET.SubElement(node, "bsdf", type="diffuse")
+            ET.SubElement(node_b, "spectrum", name="reflectance", value="0")
+        if obj.get("emitter"):
+            em = ET.SubElement(node, "emitter", type="area")
+            self.spectrum(em, "radiance", obj["emitter"]["radiance"], f"{obj['name']}_radiance")
+
+    def write(self):
+        sc, r = self.scene, self.scene["render"]
+        root = ET.Element("scene", version="3.0.0")
+        root.append(ET.Comment(f" {sc['name']} ({sc.get('case')}), written from the scene IR v{ir.VERSION} "))
+        ET.SubElement(root, "default", name="spp", value=str(r["spp"]))
+        ET.SubElement(root, "default", name="seed", value="0")
+        ET.SubElement(root, "default", name="max_depth", value=str(r.get("max_depth", 64)))
+        integ = ET.SubElement(root, "integrator", type="path")
+        ET.SubElement(integ, "integer", name="max_depth", value="$max_depth")
+        cam = sc["camera"]
+        sensor = ET.SubElement(root, "sensor", type="perspective")
+        ET.SubElement(sensor, "float", name="fov", value=repr(float(cam["fov"])))
+        ET.SubElement(sensor, "string", name="fov_axis", value=cam.get("fov_axis", "x"))
+        _transform(sensor, np.asarray(cam["to_world"], dtype=np.float64) @ _CAMERA_FLIP)
+        sampler = ET.SubElement(sensor, "sampler", type="independent")
+        ET.SubElement(sampler, "integer", name="sample_count", value="$spp")
+        ET.SubElement(sampler, "integer", name="seed", value="$seed")
+        film = ET.SubElement(sensor, "film", type="hdrfilm")
+        ET.SubElement(film, "integer", name="width", value=str(r["width"]))
+        ET.SubElement(film, "integer", name="height", value=str(r["height"]))
+        ET.SubElement(film, "string", name="pixel_format", value="rgb")
+        ET.SubElement(film, "rfilter", type="box")
+        env = sc.get("environment")
+        if env:
+            em = ET.SubElement(root, "emitter", type="constant", id="environment")
+            self.spectrum(em, "radiance", env["radiance"], "environment_radiance")
+        for obj in sc["objects"]:
+            self.shape(root, obj)
+        ET.indent(root, space="  ")
+        self.out.mkdir(parents=True, exist_ok=True)
+        xml_path = self.out / "scene.xml"
+        ET.ElementTree(root).write(xml_path, encoding="utf-8", xml_declaration=True)
+        return xml_path
+
+
+def write(scene, out_dir):
+    """Write ``scene`` into ``out_dir``; returns the path of scene.xml."""
+    return _Writer(scene, out_dir).write()

@@ -1,0 +1,157 @@
+"""Validation of an IR scene: JSON Schema for shape, then value checks.
+
+Every problem names the scene, the object (or camera / render / environment) and the field,
+so a user can find it in Blender or in the JSON file.
+"""
+import json
+import math
+from functools import lru_cache
+from pathlib import Path
+
+import jsonschema
+
+from . import ir, spectra
+
+SCHEMA_PATH = Path(__file__).resolve().parent / "schema" / "scene.schema.json"
+
+
+class SceneError(ValueError):
+    """One or more problems in a scene; ``problems`` is a list of (object, field, message)."""
+
+    def __init__(self, scene, problems):
+        self.scene = scene
+        self.problems = list(problems)
+        lines = [f"scene {scene!r}, object {obj!r}, field {field!r}: {msg}" for obj, field, msg in self.problems]
+        super().__init__("; ".join(lines) if len(lines) < 2 else "\n  " + "\n  ".join(lines))
+
+
+@lru_cache(maxsize=1)
+def schema():
+    return json.loads(SCHEMA_PATH.read_text())
+
+
+def _finite(x):
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+
+def _schema_problems(data):
+    validator = jsonschema.Draft202012Validator(schema())
+    for err in sorted(validator.iter_errors(data), key=lambda e: list(e.absolute_path)):
+        path = list(err.absolute_path)
+        obj = "scene"
+        if len(path) >= 2 and path[0] == "objects" and isinstance(path[1], int):
+            objs = data.get("objects", [])
+            name = objs[path[1]].get("name") if isinstance(objs[path[1]], dict) else None
+            obj = name or f"objects[{path[1]}]"
+            path = path[2:]
+        elif path and path[0] in ("camera", "render", "environment"):
+            obj = path[0]
+            path = path[1:]
+        field = ".".join(str(p) for p in path) or "(root)"
+        msg = err.message
+        if err.validator == "oneOf":
+            msg = "does not match any allowed form: " + "; ".join(sorted({c.message for c in err.context})[:4])
+        yield obj, field, msg
+
+
+def _value_problems(scene):
+    r = scene["render"]
+    for key in ("spp", "width", "height"):
+        if r[key] < 1:
+            yield "render", key, f"must be >= 1, got {r[key]}"
+    cam = scene["camera"]
+    cam_name = cam.get("name", "camera")
+    if not _finite(cam["fov"]) or not 0 < cam["fov"] < 180:
+        yield cam_name, "fov", f"must be in (0, 180) degrees, got {cam['fov']!r}"
+    for i, row in enumerate(cam["to_world"]):
+        for j, v in enumerate(row):
+            if not _finite(v):
+                yield cam_name, f"to_world[{i}][{j}]", f"must be finite, got {v!r}"
+    env = scene.get("environment")
+    if env:
+        for field, msg in spectra.check(env["radiance"], "radiance"):
+            yield "environment", field, msg
+    names = set()
+    for obj in scene["objects"]:
+        name = obj["name"]
+        if name in names:
+            yield name, "name", "is used by two objects"
+        names.add(name)
+        yield from ((name, f, m) for f, m in _shape_problems(obj["shape"], scene.get("_base_dir")))
+        bsdf = obj.get("bsdf")
+        if bsdf:
+            yield from ((name, "bsdf." + f, m) for f, m in _bsdf_problems(bsdf))
+        em = obj.get("emitter")
+        if em:
+            yield from ((name, "emitter." + f, m) for f, m in spectra.check(em["radiance"], "radiance"))
+        if not bsdf and not em:
+            yield name, "bsdf", "object has neither a BSDF nor an emitter annotation"
+
+
+def _shape_problems(shape, base_dir):
+    for key in ("to_world",):
+        for i, row in enumerate(shape.get(key, [])):
+            for j, v in enumerate(row):
+                if not _finite(v):
+                    yield f"shape.{key}[{i}][{j}]", f"must be finite, got {v!r}"
+    if shape["type"] == "sphere":
+        if not _finite(shape["radius"]) or shape["radius"] <= 0:
+            yield "shape.radius", f"must be > 0, got {shape['radius']!r}"
+        if not all(_finite(c) for c in shape["center"]):
+            yield "shape.center", f"must be finite, got {shape['center']!r}"
+    if shape["type"] == "mesh":
+        if "file" in shape:
+            path = Path(shape["file"])
+            if not path.is_absolute() and base_dir:
+                path = Path(base_dir) / path
+            if not path.is_file():
+                yield "shape.file", f"mesh file not found: {path}"
+        else:
+            if not shape["faces"] or not shape["vertices"]:
+                yield "shape.faces", "mesh has no faces (missing mesh data)"
+            n = len(shape["vertices"])
+            if any(i >= n for f in shape["faces"] for i in f):
+                yield "shape.faces", f"face index out of range (mesh has {n} vertices)"
+            if not all(_finite(c) for v in shape["vertices"] for c in v):
+                yield "shape.vertices", "must be finite"
+
+
+def _bsdf_problems(bsdf):
+    kind = bsdf["type"]
+    if kind == "diffuse":
+        yield from spectra.check(bsdf["reflectance"], "reflectance")
+    if kind == "conductor":
+        if "material" in bsdf and bsdf["material"] not in spectra.NAMED_CONDUCTORS:
+            yield "material", (f"unknown conductor {bsdf['material']!r} "
+                               f"(known: {', '.join(spectra.NAMED_CONDUCTORS)})")
+        for key in ("eta", "k"):
+            if key in bsdf:
+                yield from spectra.check(bsdf[key], key)
+    if kind == "dielectric":
+        for key in ("int_ior", "ext_ior"):
+            v = bsdf.get(key, ir.AIR_IOR)
+            if not _finite(v) or v <= 0:
+                yield key, f"must be a finite IOR > 0, got {v!r}"
+    rough = bsdf.get("roughness")
+    if rough is not None:
+        a = rough["alpha"]
+        if not _finite(a) or a < 0:
+            yield "roughness.alpha", f"must be a finite number >= 0, got {a!r}"
+
+
+def check(scene):
+    """Raise SceneError listing every problem of ``scene`` (an IR dict); return it otherwise."""
+    name = scene.get("name", "?") if isinstance(scene, dict) else "?"
+    if not isinstance(scene, dict):
+        raise SceneError(name, [("scene", "(root)", "a scene must be a JSON object")])
+    if scene.get("format") != ir.FORMAT or scene.get("version") != ir.VERSION:
+        raise SceneError(name, [("scene", "version", f"expected format {ir.FORMAT!r} version {ir.VERSION}, "
+                                 f"got {scene.get('format')!r} version {scene.get('version')!r}")])
+    data = {k: v for k, v in scene.items() if not k.startswith("_")}
+    problems = list(_schema_problems(data))
+    if problems:
+        raise SceneError(name, problems)
+    problems = list(_value_problems(scene))
+    if problems:
+        raise SceneError(name, problems)
+    return scene
