@@ -1,0 +1,92 @@
+"""Mitsuba 3 backend: renders the exported scene.xml in a child process.
+
+Default route: batch/mitsuba_worker.py with the mitsuba Python package (independent passes,
+render time measured inside). With ``-e mitsuba=PATH`` the user's ``mitsuba`` executable
+renders instead (``mitsuba -m VARIANT -Dspp=N -Dseed=S -o out.exr scene.xml``).
+"""
+import importlib.util
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from ...exporters import mitsuba_writer
+from .. import exr, llvm
+
+WORKER = Path(__file__).resolve().parents[1] / "mitsuba_worker.py"
+NATIVE = {"spectral", "polarization"}
+
+
+class BackendFailure(RuntimeError):
+    pass
+
+
+class MitsubaBackend:
+    name = "mitsuba"
+    formats = ("mitsuba",)
+
+    def __init__(self, executable=None, force_variant=None):
+        self.executable = executable
+        self.force_variant = force_variant
+
+    def availability(self):
+        """(available, reason)."""
+        if self.executable:
+            return (Path(self.executable).exists(), f"mitsuba executable not found: {self.executable}")
+        if importlib.util.find_spec("mitsuba") is None:
+            return False, "the mitsuba Python package is not installed (pip install mitsuba==3.9.1)"
+        return True, ""
+
+    def llvm_message(self):
+        return llvm.find()[1]
+
+    def mode_for(self, scene):
+        """(variant, None) or (None, reason the scene is unsupported)."""
+        missing = sorted(set(scene.get("needs", [])) - NATIVE)
+        if missing:
+            return None, (f"Mitsuba 3 has no native {', '.join(missing)} "
+                          "(needs a plugin this backend does not have yet)")
+        if self.force_variant:
+            return self.force_variant, None
+        needs = set(scene.get("needs", []))
+        prefix = "llvm_ad_" if llvm.find()[0] else "scalar_"
+        if "polarization" in needs:
+            return prefix + "spectral_polarized", None
+        if "spectral" in needs:
+            return prefix + "spectral", None
+        return prefix + "rgb", None
+
+    def export(self, scene, out_dir):
+        return mitsuba_writer.write(scene, out_dir)
+
+    def render(self, xml_path, variant, spp, out_exr, passes=1, seed=0, timeout=1800, log_path=None):
+        """Render; returns a dict with time_s, wall_s, spp, variant, versions. Raises BackendFailure."""
+        if self.executable:
+            return self._render_cli(xml_path, variant, spp, out_exr, seed, timeout, log_path)
+        result_path = Path(out_exr).with_suffix(".result.json")
+        cmd = [sys.executable, str(WORKER), "--xml", str(xml_path), "--variant", variant, "--spp", str(spp),
+               "--passes", str(passes), "--seed", str(seed), "--out", str(out_exr), "--result", str(result_path)]
+        self._run(cmd, timeout, log_path)
+        return json.loads(result_path.read_text())
+
+    def _run(self, cmd, timeout, log_path):
+        t0 = time.perf_counter()
+        try:
+            proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, env=llvm.env())
+        except subprocess.TimeoutExpired as exc:
+            raise BackendFailure(f"render timed out after {timeout} s") from exc
+        if log_path:
+            Path(log_path).write_text(f"$ {' '.join(cmd)}\n{proc.stdout}\n{proc.stderr}")
+        if proc.returncode != 0:
+            tail = (proc.stderr.strip() or proc.stdout.strip()).splitlines()[-3:]
+            raise BackendFailure(f"mitsuba exited with {proc.returncode}: {' | '.join(tail)[-600:]}")
+        return time.perf_counter() - t0
+
+    def _render_cli(self, xml_path, variant, spp, out_exr, seed, timeout, log_path):
+        cmd = [self.executable, "-m", variant, f"-Dspp={spp}", f"-Dseed={seed}", "-o", str(out_exr), str(xml_path)]
+        wall = self._run(cmd, timeout, log_path)
+        img = exr.read_rgb(out_exr)  # normalise channel layout to R, G, B
+        exr.write(out_exr, img)
+        return {"variant": variant, "spp": spp, "passes": 1, "seed": seed, "time_s": wall, "wall_s": wall,
+                "resolution": [img.shape[1], img.shape[0]], "versions": {"mitsuba": "executable " + self.executable}}

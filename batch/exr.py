@@ -1,0 +1,38 @@
+"""EXR files through the OpenEXR package: float32 RGB(A) images and named extra channels."""
+from pathlib import Path
+
+import numpy as np
+import OpenEXR
+
+
+def write(path, rgb, extra=None, header=None):
+    """Write an HxWx3 image as R,G,B (float32) plus ``extra`` {channel name: HxW array}
+    (kept in its dtype: float16 arrays are stored as HALF). ZIP compression."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    channels = {"RGB": np.ascontiguousarray(rgb[..., :3], dtype=np.float32)}
+    for name, arr in (extra or {}).items():
+        channels[name] = np.ascontiguousarray(arr)
+    head = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    head.update(header or {})
+    with OpenEXR.File(head, channels) as f:
+        f.write(str(path))
+    return path
+
+
+def read(path):
+    """{channel name: HxW float32 array}; an RGB(A) group is split into R, G, B(, A)."""
+    out = {}
+    with OpenEXR.File(str(path), separate_channels=True) as f:
+        for name, ch in f.channels().items():
+            out[name] = np.asarray(ch.pixels, dtype=np.float32)
+    return out
+
+
+def read_rgb(path, prefix=""):
+    """HxWx3 float32 from channels <prefix>R, G, B (also Mitsuba's 'RGB' group names)."""
+    ch = read(path)
+    try:
+        return np.stack([ch[prefix + c] for c in "RGB"], axis=-1)
+    except KeyError as exc:
+        raise ValueError(f"{path}: no channels {prefix}R,G,B (has {sorted(ch)})") from exc

@@ -1,0 +1,64 @@
+"""Render a Mitsuba 3 scene folder in independent passes (run as a child process).
+
+    python batch/mitsuba_worker.py --xml scene.xml --variant llvm_ad_spectral --spp 64 \
+        --passes 1 --seed 0 --out render.exr --result result.json
+
+Writes the mean image (R, G, B) and, with two or more passes, the standard error of that mean
+per pixel (stderr.R, stderr.G, stderr.B) from the pass-to-pass spread. ``time_s`` counts the
+render calls only; ``wall_s`` includes loading the scene and JIT compilation.
+"""
+import argparse
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--xml", required=True)
+    ap.add_argument("--variant", required=True)
+    ap.add_argument("--spp", type=int, required=True)
+    ap.add_argument("--passes", type=int, default=1)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--result", required=True)
+    args = ap.parse_args(argv)
+    t0 = time.perf_counter()
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    import pkg_bootstrap
+    pkg_bootstrap.package()
+    from spectral_bench.batch import exr
+    import drjit as dr
+    import mitsuba as mi
+    import numpy as np
+
+    mi.set_variant(args.variant)
+    scene = mi.load_file(args.xml)
+    per_pass = math.ceil(args.spp / args.passes)
+    images, render_s = [], 0.0
+    for k in range(args.passes):
+        t = time.perf_counter()
+        img = mi.render(scene, spp=per_pass, seed=args.seed + k)
+        dr.eval(img)
+        arr = np.array(img, dtype=np.float64)
+        render_s += time.perf_counter() - t
+        images.append(arr[..., :3])
+    stack = np.stack(images)
+    mean = stack.mean(axis=0)
+    extra = {}
+    if args.passes > 1:
+        stderr = stack.std(axis=0, ddof=1) / math.sqrt(args.passes)
+        extra = {f"stderr.{c}": stderr[..., i].astype(np.float32) for i, c in enumerate("RGB")}
+    exr.write(args.out, mean, extra)
+    result = {"variant": args.variant, "spp": per_pass * args.passes, "passes": args.passes,
+              "seed": args.seed, "time_s": render_s, "wall_s": time.perf_counter() - t0,
+              "resolution": [int(mean.shape[1]), int(mean.shape[0])],
+              "versions": {"mitsuba": mi.__version__, "drjit": dr.__version__, "numpy": np.__version__,
+                           "python": sys.version.split()[0]}}
+    Path(args.result).write_text(json.dumps(result, indent=1))
+
+
+if __name__ == "__main__":
+    main()

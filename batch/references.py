@@ -1,0 +1,67 @@
+"""Reference images: references/<scene>.exr (mean R, G, B as float32; standard error of the
+mean per pixel as stderr.R/G/B) and references/<scene>.json (provenance).
+
+A reference records the fingerprint of the scene it was rendered from (the IR without the
+sample count); a changed scene makes it stale, and stale references are never used for a
+verdict. References change only through ``batch/make_references.py`` (an explicit request).
+"""
+import copy
+import hashlib
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ..exporters import ir_json
+from . import exr
+
+REFERENCE_DIR = Path(__file__).resolve().parents[1] / "references"
+
+
+def fingerprint(scene):
+    """sha256 of the scene IR without render.spp (which does not change the expected image)."""
+    data = copy.deepcopy({k: v for k, v in scene.items() if not k.startswith("_")})
+    data["render"].pop("spp", None)
+    data.pop("description", None)
+    return hashlib.sha256(ir_json.dumps(data).encode()).hexdigest()
+
+
+class Reference:
+    def __init__(self, mean, stderr, provenance, path):
+        self.mean, self.stderr, self.provenance, self.path = mean, stderr, provenance, path
+
+    @property
+    def spp(self):
+        return self.provenance["spp"]
+
+
+def load(scene_name, directory=None):
+    """Reference or None if there is none."""
+    directory = Path(directory or REFERENCE_DIR)
+    exr_path, meta_path = directory / f"{scene_name}.exr", directory / f"{scene_name}.json"
+    if not exr_path.is_file() or not meta_path.is_file():
+        return None
+    ch = exr.read(exr_path)
+    mean = np.stack([ch[c] for c in "RGB"], axis=-1)
+    stderr = np.stack([ch[f"stderr.{c}"] for c in "RGB"], axis=-1)
+    return Reference(mean, stderr, json.loads(meta_path.read_text()), exr_path)
+
+
+def check_usable(ref, scene):
+    """None if ``ref`` can judge renders of ``scene``, else the reason it cannot."""
+    if ref is None:
+        return "no reference for this scene"
+    if ref.provenance.get("fingerprint") != fingerprint(scene):
+        return (f"reference {ref.path.name} is stale: the scene changed since it was rendered "
+                f"({ref.provenance.get('date')}); re-render it with batch/make_references.py")
+    return None
+
+
+def save(scene, mean, stderr, provenance, directory=None):
+    directory = Path(directory or REFERENCE_DIR)
+    directory.mkdir(parents=True, exist_ok=True)
+    extra = {f"stderr.{c}": stderr[..., i].astype(np.float32) for i, c in enumerate("RGB")}
+    exr.write(directory / f"{scene['name']}.exr", mean, extra)
+    meta = dict(provenance, scene=scene["name"], fingerprint=fingerprint(scene))
+    (directory / f"{scene['name']}.json").write_text(json.dumps(meta, indent=1, sort_keys=True) + "\n")
+    return directory / f"{scene['name']}.exr"

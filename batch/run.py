@@ -1,0 +1,63 @@
+"""Batch runner entry point.
+
+    python batch/run.py [options]                              (bpy as a Python module)
+    blender -b scenes.blend -P batch/run.py -- [options]       (inside Blender)
+
+Both take the same options (see --help) and give the same jobs.
+"""
+import logging
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+import pkg_bootstrap  # noqa: E402
+
+
+def setup_logging(log_file=None):
+    logger = logging.getLogger("spectral_bench")
+    logger.setLevel(logging.INFO)
+    logger.handlers.clear()
+    console = logging.StreamHandler(sys.stderr)
+    console.setFormatter(logging.Formatter("%(message)s"))
+    logger.addHandler(console)
+    if log_file:
+        fh = logging.FileHandler(log_file)
+        fh.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(message)s"))
+        logger.addHandler(fh)
+    return logger
+
+
+def main(argv=None):
+    pkg_bootstrap.package()
+    from spectral_bench.batch import cli, runner
+    try:
+        opts = cli.parse(cli.split_argv(sys.argv if argv is None else argv))
+    except cli.SettingsError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    logger = setup_logging(opts["log"])
+    if opts["list"]:
+        jobs, _ = runner.plan(opts)
+        for scene, case, backend in jobs:
+            print(f"{scene}\t{case}\t{backend}")
+        return 0
+    try:
+        code = runner.run(opts)
+    except runner.OutputExists as exc:
+        logger.error("error: %s", exc)
+        return 2
+    if opts["visualize"]:
+        import webbrowser
+        out = max(Path(".").glob("outputs-*"), default=None) if not opts["out"] else Path(opts["out"])
+        if out:
+            webbrowser.open((out / "summary.md").resolve().as_uri())
+    return code
+
+
+if __name__ == "__main__":
+    code = main()
+    try:
+        import bpy  # noqa: F401  - under Blender, sys.exit is how -P scripts set the exit status
+    except ImportError:
+        pass
+    sys.exit(code)

@@ -1,0 +1,244 @@
+"""The batch: scenes x backends -> exports, renders, comparisons, metrics.json, summary.
+
+One job never takes down the batch: every failure (bad scene, crashed render, failed
+comparison) becomes a run with status "failed" and a reason, and metrics.json is rewritten
+after every job so that finished results survive a crash of the runner itself.
+"""
+import copy
+import datetime as _dt
+import json
+import logging
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..exporters import ir_json
+from . import backends, compare, exr, flip_isolated, previews, references, scene_sources, summary
+from .progress import Progress
+
+log = logging.getLogger("spectral_bench")
+
+
+class OutputExists(RuntimeError):
+    pass
+
+
+def output_dir(opts):
+    out = Path(opts["out"] or _dt.datetime.now().strftime("outputs-%Y%m%d-%H%M%S"))
+    if (out / "metrics.json").exists():
+        raise OutputExists(f"{out} already holds results (metrics.json); choose another --out, nothing was changed")
+    out.mkdir(parents=True, exist_ok=True)
+    return out
+
+
+def select(results, opts):
+    """Filter (name, IR or error) by --scene and --case; unknown --scene names become errors."""
+    names, cases = opts["scene"], opts["case"]
+    chosen = [(n, r) for n, r in results
+              if (not names or n in names) and (not cases or scene_sources.case_of(r) in cases
+                                                  or isinstance(r, Exception))]
+    for missing in sorted(set(names or []) - {n for n, _ in results}):
+        from ..exporters.validate import SceneError
+        chosen.append((missing, SceneError(missing, [("scene", "name", "no scene of this name in the input")])))
+    return chosen
+
+
+def backend_names(opts):
+    return list(opts["renderer"] or backends.BACKENDS)
+
+
+def make_backend(name, opts):
+    execs = opts["exec"]
+    kwargs = {"executable": execs.get(name) or (execs.get("*") if len(backend_names(opts)) == 1 else None)}
+    if name == "mitsuba":
+        kwargs["force_variant"] = opts["variant"]
+    return backends.get(name, **kwargs)
+
+
+def plan(opts):
+    """The job list [(scene name, case, backend name)] and the scenes; no rendering."""
+    inputs = opts["input"] or scene_sources.default_input()
+    scenes = select(scene_sources.load(inputs), opts)
+    jobs = [(name, scene_sources.case_of(sc), b) for name, sc in scenes for b in backend_names(opts)]
+    return jobs, scenes
+
+
+def for_run(scene, opts):
+    """The scene with --spp and --scale applied."""
+    sc = copy.deepcopy(scene)
+    if opts["spp"]:
+        sc["render"]["spp"] = int(opts["spp"])
+    if opts["scale"] and opts["scale"] != 1.0:
+        sc["render"]["width"] = max(1, round(sc["render"]["width"] * opts["scale"]))
+        sc["render"]["height"] = max(1, round(sc["render"]["height"] * opts["scale"]))
+    return sc
+
+
+def _entry(name, scene, backend, **kw):
+    e = {"scene": name, "case": scene_sources.case_of(scene), "backend": backend, "mode": None,
+         "status": "ok", "reason": "", "spp": None, "resolution": None, "time_s": None, "image": None,
+         "metrics": {"rmse": None, "relmse": None, "mape": None, "flip": None}, "probes": []}
+    e.update(kw)
+    return e
+
+
+class Run:
+    def __init__(self, opts):
+        self.opts = opts
+        self.out = output_dir(opts)
+        self.runs = []
+        self.started = _dt.datetime.now().isoformat(timespec="seconds")
+
+    def save(self):
+        data = {"started": self.started, "options": {k: v for k, v in self.opts.items() if k != "exec"},
+                "runs": self.runs}
+        tmp = self.out / "metrics.json.tmp"
+        tmp.write_text(json.dumps(data, indent=1, default=str) + "\n")
+        tmp.replace(self.out / "metrics.json")
+
+    def add(self, entry):
+        self.runs.append(entry)
+        self.save()
+        status = entry["status"].upper()
+        log.info("%-8s %s / %s %s%s", status, entry["scene"], entry["backend"], entry.get("mode") or "",
+                 f": {entry['reason']}" if entry["reason"] else "")
+
+    # -- export only ------------------------------------------------------------------------
+    def export_only(self, scenes):
+        formats = self.opts["format"] or ["mitsuba", "json"]
+        progress = Progress(len(scenes) * len(formats))
+        for name, scene in scenes:
+            for fmt in formats:
+                progress.show(f"{name} ({fmt})")
+                if isinstance(scene, Exception):
+                    self.add(_entry(name, scene, fmt, mode="export", status="failed", reason=str(scene)))
+                else:
+                    sc = for_run(scene, self.opts)
+                    target = self.out / name / fmt
+                    try:
+                        path = (ir_json.write(sc, target / f"{name}.json") if fmt == "json"
+                                else backends.get("mitsuba").export(sc, target))
+                        self.add(_entry(name, sc, fmt, mode="export", image=None,
+                                        export=str(path.relative_to(self.out))))
+                    except Exception as exc:  # noqa: BLE001 - one bad export must not stop the batch
+                        self.add(_entry(name, sc, fmt, mode="export", status="failed", reason=f"export failed: {exc}"))
+                progress.step(f"{name} ({fmt})")
+
+    # -- render and compare -----------------------------------------------------------------
+    def render_all(self, scenes):
+        names = backend_names(self.opts)
+        made = {n: make_backend(n, self.opts) for n in names}
+        llvm_said = False
+        progress = Progress(len(scenes) * len(names))
+        for name, scene in scenes:
+            for bname in names:
+                progress.show(f"{name} ({bname})")
+                backend = made[bname]
+                if isinstance(scene, Exception):
+                    self.add(_entry(name, scene, bname, status="failed", reason=str(scene)))
+                    progress.step(f"{name} ({bname})")
+                    continue
+                ok, why = backend.availability()
+                if not ok:
+                    self.add(_entry(name, scene, bname, status="skipped", reason=why))
+                    progress.step(f"{name} ({bname})")
+                    continue
+                if bname == "mitsuba" and not llvm_said:
+                    log.info("%s", backend.llvm_message())
+                    llvm_said = True
+                try:
+                    self.add(self.render_one(name, scene, backend))
+                except Exception as exc:  # noqa: BLE001 - one crashed job must not stop the batch
+                    log.exception("job %s / %s crashed", name, bname)
+                    self.add(_entry(name, scene, bname, status="failed", reason=f"internal error: {exc!r}"))
+                progress.step(f"{name} ({bname})")
+
+    def render_one(self, name, scene, backend):
+        sc = for_run(scene, self.opts)
+        r = sc["render"]
+        entry = _entry(name, sc, backend.name, spp=r["spp"], resolution=[r["width"], r["height"]])
+        mode, why = backend.mode_for(sc)
+        if mode is None:
+            entry.update(status="unsupported", reason=why)
+            return entry
+        entry["mode"] = mode
+        ir_json.write(sc, self.out / name / "json" / f"{name}.json")
+        xml = backend.export(sc, self.out / name / backend.formats[0])
+        res_dir = self.out / name / "results" / backend.name
+        res_dir.mkdir(parents=True, exist_ok=True)
+        image = res_dir / "render.exr"
+        try:
+            info = backend.render(xml, mode, r["spp"], image, passes=self.opts["passes"], seed=self.opts["seed"],
+                                  timeout=self.opts["timeout"], log_path=res_dir / "render.log")
+        except backends.mitsuba_backend.BackendFailure as exc:
+            entry.update(status="failed", reason=f"render failed: {exc}")
+            return entry
+        entry.update(time_s=info["time_s"], wall_s=info["wall_s"], spp=info["spp"],
+                     image=str(image.relative_to(self.out)), versions=info.get("versions"))
+        test = exr.read_rgb(image)
+        entry["sanity"] = compare.image_sanity(test)
+        previews.save_linear(res_dir / "render.png", test)
+        self.compare(entry, scene, test, res_dir)
+        return entry
+
+    def compare(self, entry, scene, test, res_dir):
+        ref = references.load(entry["scene"], self.opts["references"])
+        unusable = references.check_usable(ref, scene)
+        if ref is None:
+            entry["reason"] = "no reference: rendered, not compared"
+            return
+        if unusable:
+            entry.update(status="failed", reason=unusable)
+            return
+        try:
+            mean, var_of_mean, sigma2 = compare.reference_at(ref.mean, ref.stderr, ref.spp, test.shape)
+        except ValueError as exc:
+            entry.update(status="failed", reason=f"cannot compare with the reference: {exc}")
+            return
+        entry["reference"] = {"path": str(ref.path), "spp": ref.spp, "backend": ref.provenance.get("backend"),
+                              "mode": ref.provenance.get("mode")}
+        entry["metrics"].update(compare.metrics(test, mean))
+        zt = compare.z_test(test, mean, var_of_mean, sigma2, entry["spp"], alpha=self.opts["alpha"],
+                            block=self.opts["block"])
+        entry["test"] = zt.as_dict()
+        exr.write(res_dir / "reference.exr", mean)
+        exr.write(res_dir / "diff_abs.exr", np.abs(test - mean))
+        exr.write(res_dir / "diff_rel.exr", np.abs(test - mean) / (np.abs(mean) + compare.REL_EPS))
+        zfull = np.kron(zt.zmap, np.ones((zt.block, zt.block, 1)))
+        exr.write(res_dir / "zscore.exr", zfull)
+        previews.save_linear(res_dir / "reference.png", mean)
+        previews.save_signed(res_dir / "diff.png", (test - mean).mean(axis=-1),
+                             scale=max(float(np.percentile(np.abs(mean), 99)), 1e-6) * 0.25)
+        previews.save_signed(res_dir / "zscore.png", zfull.max(axis=-1) * (np.abs(zfull).max(axis=-1) > 0), scale=6)
+        if self.opts["flip"]:
+            flip, err = flip_isolated.hdr_flip(res_dir / "reference.exr", self.out / entry["image"], res_dir / "flip.exr")
+            entry["metrics"]["flip"] = flip
+            if err:
+                entry["flip_error"] = err
+            elif (res_dir / "flip.exr").exists():
+                previews.save_gray(res_dir / "flip.png", exr.read_rgb(res_dir / "flip.exr")[..., 0])
+        if not zt.passed:
+            entry.update(status="failed", reason=(
+                f"differs from the reference beyond its noise: min p = {zt.p_min:.3g} < {zt.threshold:.3g} "
+                f"(alpha {zt.alpha} Sidak-corrected over {zt.blocks} tests), max |z| = {zt.z_max:.1f}"))
+
+
+def run(opts):
+    """Run the batch; returns the exit status (0 only when every job that ran passed)."""
+    t0 = time.perf_counter()
+    _jobs, scenes = plan(opts)
+    batch = Run(opts)
+    log.info("writing to %s", batch.out)
+    if not scenes:
+        log.error("no scene matches the selection")
+        batch.save()
+        return 2
+    if opts["export_only"]:
+        batch.export_only(scenes)
+    else:
+        batch.render_all(scenes)
+    text = summary.write(batch.out, batch.runs, time.perf_counter() - t0)
+    print(text)
+    failed = [r for r in batch.runs if r["status"] == "failed"]
+    return 1 if failed else 0

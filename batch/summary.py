@@ -1,0 +1,41 @@
+"""The readable summary: summary.md in the output folder, also printed. Failures first."""
+from pathlib import Path
+
+ORDER = {"failed": 0, "unsupported": 1, "skipped": 2, "ok": 3}
+
+
+def _num(x, fmt="{:.4g}"):
+    return "" if x is None else fmt.format(x)
+
+
+def table(runs):
+    rows = ["| status | scene | backend | mode | spp | resolution | time (s) | RMSE | relMSE | MAPE | FLIP | noise test | reason |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in sorted(runs, key=lambda r: (ORDER.get(r["status"], 9), r["scene"], r["backend"])):
+        m = r.get("metrics") or {}
+        t = r.get("test")
+        test = f"p_min {t['p_min']:.2g} / {t['threshold']:.2g}" if t else ""
+        res = "x".join(map(str, r["resolution"])) if r.get("resolution") else ""
+        reason = (r.get("reason") or "").replace("|", "/").replace("\n", " ")
+        rows.append(f"| {r['status']} | {r['scene']} | {r['backend']} | {r.get('mode') or ''} | {_num(r.get('spp'), '{}')} "
+                    f"| {res} | {_num(r.get('time_s'), '{:.2f}')} | {_num(m.get('rmse'))} | {_num(m.get('relmse'))} "
+                    f"| {_num(m.get('mape'))} | {_num(m.get('flip'))} | {test} | {reason[:300]} |")
+    return "\n".join(rows)
+
+
+def counts(runs):
+    out = {}
+    for r in runs:
+        out[r["status"]] = out.get(r["status"], 0) + 1
+    return out
+
+
+def write(out_dir, runs, elapsed_s):
+    c = counts(runs)
+    head = ", ".join(f"{n} {s}" for s, n in sorted(c.items(), key=lambda kv: ORDER.get(kv[0], 9)))
+    text = (f"# Spectral benchmark results\n\n{len(runs)} jobs in {elapsed_s:.1f} s: {head or 'nothing ran'}.\n\n"
+            "A render passes when it agrees with its reference within the reference's noise (block Z-test, "
+            "Sidak-corrected). Images and diffs: `<scene>/results/<backend>/`; all numbers: `metrics.json`.\n\n"
+            + table(runs) + "\n")
+    Path(out_dir, "summary.md").write_text(text)
+    return text
