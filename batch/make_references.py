@@ -1,9 +1,10 @@
 """Render reference images (an explicit request: this is the only thing that changes references/).
 
-    .venv/bin/python batch/make_references.py [-s SCENE ...] [--factor 64] [--passes 8]
+    .venv/bin/python batch/make_references.py [-s SCENE ...] [--spp 4096 | --factor F] [--passes 8]
 
-Each reference is rendered with the Mitsuba backend at the scene's resolution with
-``factor`` x the scene's sample count, in ``passes`` independent passes (distinct seeds); the
+Each reference is rendered with the Mitsuba backend at the scene's resolution with ``spp``
+samples per pixel (or ``factor`` x the scene's own), in ``passes`` independent passes (distinct
+seeds); the
 pass-to-pass spread gives the per-pixel standard error stored beside the mean.
 """
 import argparse
@@ -25,7 +26,8 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("-i", "--input", nargs="+", default=[str(scene_sources.DEFAULT_BLEND)])
     ap.add_argument("-s", "--scene", action="append")
-    ap.add_argument("--factor", type=int, default=64, help="reference spp = factor x scene spp (default 64)")
+    ap.add_argument("--spp", type=int, default=4096, help="reference samples per pixel (default 4096)")
+    ap.add_argument("--factor", type=int, help="reference spp = factor x the scene's spp (instead of --spp)")
     ap.add_argument("--passes", type=int, default=8)
     ap.add_argument("--seed", type=int, default=1000, help="first seed (distinct from the runner's default 0)")
     ap.add_argument("--out", default=str(references.REFERENCE_DIR))
@@ -44,7 +46,7 @@ def main(argv=None):
         if mode is None:
             print(f"{name}: unsupported: {why}")
             continue
-        spp = scene["render"]["spp"] * args.factor
+        spp = scene["render"]["spp"] * args.factor if args.factor else args.spp
         with tempfile.TemporaryDirectory() as tmp:
             xml = backend.export(scene, Path(tmp) / "mitsuba")
             image = Path(tmp) / "ref.exr"

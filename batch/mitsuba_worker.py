@@ -14,6 +14,8 @@ import sys
 import time
 from pathlib import Path
 
+MAX_WAVEFRONT = 1 << 24
+
 
 def main(argv=None):
     ap = argparse.ArgumentParser()
@@ -37,14 +39,24 @@ def main(argv=None):
     mi.set_variant(args.variant)
     scene = mi.load_file(args.xml)
     per_pass = math.ceil(args.spp / args.passes)
-    images, render_s = [], 0.0
-    for k in range(args.passes):
-        t = time.perf_counter()
-        img = mi.render(scene, spp=per_pass, seed=args.seed + k)
-        dr.eval(img)
-        arr = np.array(img, dtype=np.float64)
-        render_s += time.perf_counter() - t
-        images.append(arr[..., :3])
+    # The LLVM variants trace all samples of a render call as one wavefront: keep each call
+    # under MAX_WAVEFRONT samples (memory), averaging equal chunks of distinct seeds.
+    width, height = scene.sensors()[0].film().size()
+    chunks = max(1, math.ceil(per_pass * width * height / MAX_WAVEFRONT))
+    while per_pass % chunks:
+        chunks += 1
+    images, render_s, seed = [], 0.0, args.seed
+    for _k in range(args.passes):
+        acc = None
+        for _j in range(chunks):
+            t = time.perf_counter()
+            img = mi.render(scene, spp=per_pass // chunks, seed=seed)
+            dr.eval(img)
+            arr = np.array(img, dtype=np.float64)[..., :3]
+            render_s += time.perf_counter() - t
+            seed += 1
+            acc = arr if acc is None else acc + arr
+        images.append(acc / chunks)
     stack = np.stack(images)
     mean = stack.mean(axis=0)
     extra = {}
@@ -53,7 +65,7 @@ def main(argv=None):
         extra = {f"stderr.{c}": stderr[..., i].astype(np.float32) for i, c in enumerate("RGB")}
     exr.write(args.out, mean, extra)
     result = {"variant": args.variant, "spp": per_pass * args.passes, "passes": args.passes,
-              "seed": args.seed, "time_s": render_s, "wall_s": time.perf_counter() - t0,
+              "seed": args.seed, "chunks_per_pass": chunks, "time_s": render_s, "wall_s": time.perf_counter() - t0,
               "resolution": [int(mean.shape[1]), int(mean.shape[0])],
               "versions": {"mitsuba": mi.__version__, "drjit": dr.__version__, "numpy": np.__version__,
                            "python": sys.version.split()[0]}}

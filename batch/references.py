@@ -19,10 +19,16 @@ REFERENCE_DIR = Path(__file__).resolve().parents[1] / "references"
 
 
 def fingerprint(scene):
-    """sha256 of the scene IR without render.spp (which does not change the expected image)."""
+    """sha256 of what determines the expected image: the IR without the sample count, the
+    description and the names of the scene's objects (objects sorted by content)."""
     data = copy.deepcopy({k: v for k, v in scene.items() if not k.startswith("_")})
     data["render"].pop("spp", None)
-    data.pop("description", None)
+    for key in ("description", "name", "case"):
+        data.pop(key, None)
+    data["camera"].pop("name", None)
+    for obj in data["objects"]:
+        obj.pop("name", None)
+    data["objects"].sort(key=lambda o: json.dumps(o, sort_keys=True))
     return hashlib.sha256(ir_json.dumps(data).encode()).hexdigest()
 
 

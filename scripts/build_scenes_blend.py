@@ -75,16 +75,17 @@ def add_area_light(scene, name, size, location, illuminant, scale):
     return obj
 
 
-def add_camera(scene, origin=(0, -4, 1), target=(0, 0, 0)):
-    cam = bpy.data.cameras.new(f"{scene.name}_camera")
+def add_camera(scene, name, origin=(0, -4, 1), target=(0, 0, 0)):
+    cam = bpy.data.cameras.new(name)
     # The thesis cameras are Mitsuba's default: 50 mm on the 43.27 mm diagonal of 35 mm film,
     # which for a square image is a 30.594 mm side: 34.02 degrees horizontal field of view.
     cam.lens, cam.sensor_width, cam.sensor_fit = 50.0, math.hypot(36.0, 24.0) / math.sqrt(2.0), "HORIZONTAL"
-    obj = bpy.data.objects.new(f"{scene.name}_camera", cam)
+    obj = bpy.data.objects.new(name, cam)
     obj.location = origin
     obj.rotation_euler = (Vector(target) - Vector(origin)).to_track_quat("-Z", "Y").to_euler()
     scene.collection.objects.link(obj)
     scene.camera = obj
+    return obj
 
 
 def new_scene(name, case, spp, description):
@@ -106,21 +107,28 @@ def build():
     grey = material("grey_0.5", "DIFFUSE", reflectance=0.5)
     glass = material("ggx_glass", "DIELECTRIC", int_ior=1.5046, ext_ior=1.000277,
                      distribution="GGX", alpha=0.2)
-    for angle in (50, 60, 70, 80):
-        scene = new_scene(f"ggx_copper_{angle}", "reflectance", 64,
-                          f"Rough GGX copper square (alpha 0.2) turned {angle} degrees about x, grey floor, "
-                          "small D65 area light above")
-        add_object(scene, "copper_plate", square, copper, "RECTANGLE", rotation=(math.radians(angle), 0, 0))
-        add_object(scene, "floor", square, grey, "RECTANGLE", location=(0, 0, -1), scale=10.0)
-        add_area_light(scene, "light", 1.0, (0, 0, 1.5), "cie_d65", 4.0)
-        add_camera(scene)
+    # Blender object names are global: the floor, light and camera are one object each, linked
+    # into all four copper scenes; each scene has its own plate.
+    copper_scenes = [new_scene(f"ggx_copper_{angle}", "reflectance", 64,
+                               f"Rough GGX copper square (alpha 0.2) turned {angle} degrees about x, grey floor, "
+                               "small D65 area light above") for angle in (50, 60, 70, 80)]
+    first = copper_scenes[0]
+    floor = add_object(first, "floor", square, grey, "RECTANGLE", location=(0, 0, -1), scale=10.0)
+    light = add_area_light(first, "light", 1.0, (0, 0, 1.5), "cie_d65", 4.0)
+    camera = add_camera(first, "copper_camera")
+    for angle, scene in zip((50, 60, 70, 80), copper_scenes):
+        add_object(scene, f"copper_plate_{angle}", square, copper, "RECTANGLE", rotation=(math.radians(angle), 0, 0))
+        if scene is not first:
+            for obj in (floor, light, camera):
+                scene.collection.objects.link(obj)
+            scene.camera = camera
     scene = new_scene("ggx_glass", "reflectance", 256,
                       "Rough GGX glass sphere (alpha 0.2, IOR 1.5046) under a D65 area light, clear of the sphere")
     add_object(scene, "glass_sphere", sphere, glass, "SPHERE")
     # The thesis' light touched the sphere's top (z = 1.000002 vs 1.0), which made the image
     # ill-conditioned; ours leaves a 0.25 gap.
-    add_area_light(scene, "light", 2.0, (0, 0, 1.25), "cie_d65", 5.0)
-    add_camera(scene)
+    add_area_light(scene, "glass_light", 2.0, (0, 0, 1.25), "cie_d65", 5.0)
+    add_camera(scene, "glass_camera")
     for s in list(bpy.data.scenes):
         if not s.spectral_bench.case or s.name == "Scene":
             bpy.data.scenes.remove(s)

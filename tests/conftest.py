@@ -1,0 +1,40 @@
+import copy
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+import pkg_bootstrap  # noqa: E402
+
+pkg_bootstrap.package()
+GOLDEN = ROOT / "golden" / "ir"
+REFLECTANCE = ["ggx_copper_50", "ggx_copper_60", "ggx_copper_70", "ggx_copper_80", "ggx_glass"]
+
+
+@pytest.fixture(scope="session")
+def golden():
+    from spectral_bench.exporters import ir_json
+    return {p.stem: ir_json.load(p) for p in sorted(GOLDEN.glob("*.json"))}
+
+
+def run_batch(*args, timeout=900):
+    """The real command line, in a child process, as a user runs it."""
+    proc = subprocess.run([sys.executable, str(ROOT / "batch" / "run.py"), *map(str, args)],
+                          capture_output=True, text=True, timeout=timeout, cwd=ROOT)
+    return proc
+
+
+def metrics(out):
+    return json.loads((Path(out) / "metrics.json").read_text())
+
+
+def write_scene(tmp_path, scene, name=None):
+    from spectral_bench.exporters import ir_json
+    sc = copy.deepcopy(scene)
+    if name:
+        sc["name"] = name
+    return ir_json.write(sc, tmp_path / f"{sc['name']}.json")

@@ -1,0 +1,123 @@
+"""scenes.blend -> IR -> JSON -> IR, against the golden files; Blender-side errors.
+
+Each test that edits the Blender data runs in a child process (bpy has one global state)."""
+import json
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+from conftest import GOLDEN, REFLECTANCE, ROOT
+from spectral_bench.exporters import ir_json
+
+
+def bpy_script(body, timeout=300):
+    code = textwrap.dedent(f"""
+        import json, sys
+        sys.path.insert(0, {str(ROOT)!r})
+        import pkg_bootstrap; pkg_bootstrap.package()
+        import bpy
+        from spectral_bench.batch import blend_input
+        from spectral_bench.exporters import extract_blender, ir_json, validate
+        results = dict(blend_input.load_blend({str(ROOT / 'scenes.blend')!r}))
+    """) + textwrap.dedent(body)
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=timeout)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+@pytest.fixture(scope="module")
+def extracted():
+    return bpy_script("print(json.dumps({n: (ir_json.dumps(r) if isinstance(r, dict) else str(r)) for n, r in results.items()}))")
+
+
+def test_scenes_blend_has_the_reflectance_case(extracted):
+    assert sorted(extracted) == REFLECTANCE
+    for name in REFLECTANCE:
+        assert json.loads(extracted[name])["case"] == "reflectance"
+
+
+@pytest.mark.parametrize("name", REFLECTANCE)
+def test_extraction_matches_golden_file(extracted, name):
+    """A change to scenes.blend must show up as a reviewable diff of golden/ir/ (regenerate
+    with scripts/update_golden.py)."""
+    assert extracted[name] == (GOLDEN / f"{name}.json").read_text()
+
+
+@pytest.mark.parametrize("name", REFLECTANCE)
+def test_ir_json_ir_is_lossless(extracted, name, tmp_path):
+    scene = json.loads(extracted[name])
+    back = ir_json.load(ir_json.write(scene, tmp_path / f"{name}.json"))
+    back.pop("_base_dir")
+    assert back == scene
+    assert ir_json.dumps(back) == extracted[name]
+
+
+def test_copper_geometry_follows_the_thesis(extracted):
+    sc = json.loads(extracted["ggx_copper_70"])
+    plate = next(o for o in sc["objects"] if o["name"] == "copper_plate_70")
+    m = plate["shape"]["to_world"]
+    # rotated 70 degrees about x: the normal (third column) is (0, -sin 70, cos 70)
+    assert [m[0][2], m[1][2], m[2][2]] == pytest.approx([0.0, -0.939693, 0.34202], abs=1e-6)
+    light = next(o for o in sc["objects"] if o["emitter"])
+    lm = light["shape"]["to_world"]
+    assert lm[2][2] == pytest.approx(-1.0) and lm[2][3] == pytest.approx(1.5)  # faces down at z = 1.5
+    assert light["emitter"]["radiance"] == {"type": "named", "name": "cie_d65", "scale": 4.0}
+    assert sc["camera"]["fov"] == pytest.approx(34.0221, abs=1e-4)  # Mitsuba's default 50 mm camera
+
+
+def test_blender_side_errors_name_scene_object_field():
+    out = bpy_script("""
+        sc = bpy.data.scenes["ggx_copper_60"]
+        sc.objects["copper_plate_60"].active_material.spectral_bench.alpha = -0.5
+        sc.objects["floor"].active_material.spectral_bench.kind = "NONE"
+        try:
+            extract_blender.extract_scene(sc)
+            print(json.dumps(None))
+        except validate.SceneError as e:
+            print(json.dumps({"problems": e.problems, "text": str(e)}))
+    """)
+    fields = {(o, f) for o, f, _ in out["problems"]}
+    assert ("floor", "material[grey_0.5].spectral_bench.kind") in fields
+    assert "ggx_copper_60" in out["text"]
+
+
+def test_negative_roughness_from_blender_is_rejected_with_its_field():
+    out = bpy_script("""
+        sc = bpy.data.scenes["ggx_copper_60"]
+        sc.objects["copper_plate_60"].active_material.spectral_bench.alpha = -0.5
+        try:
+            extract_blender.extract_scene(sc)
+            print(json.dumps(None))
+        except validate.SceneError as e:
+            print(json.dumps({"problems": e.problems}))
+    """)
+    assert ["copper_plate_60", "bsdf.roughness.alpha", "must be a finite number >= 0, got -0.5"] in out["problems"]
+
+
+def test_mesh_objects_export_with_their_triangles_and_a_missing_mesh_is_named():
+    out = bpy_script("""
+        sc = bpy.data.scenes["ggx_glass"]
+        mesh = bpy.data.meshes.new("tri")
+        mesh.from_pydata([(0, 0, 0), (1, 0, 0), (0, 1, 0), (1, 1, 0)], [], [(0, 1, 3, 2)])
+        obj = bpy.data.objects.new("quad", mesh)
+        obj.location = (0, 0, -2)
+        mesh.materials.append(bpy.data.materials["grey_0.5"])
+        sc.collection.objects.link(obj)
+        ir = extract_blender.extract_scene(sc)
+        quad = next(o for o in ir["objects"] if o["name"] == "quad")
+        empty = bpy.data.objects.new("empty_mesh", bpy.data.meshes.new("nothing"))
+        empty.data.materials.append(bpy.data.materials["grey_0.5"])
+        sc.collection.objects.link(empty)
+        try:
+            extract_blender.extract_scene(sc)
+            err = None
+        except validate.SceneError as e:
+            err = e.problems
+        print(json.dumps({"quad": quad, "err": err}))
+    """)
+    assert out["quad"]["shape"]["type"] == "mesh"
+    assert len(out["quad"]["shape"]["faces"]) == 2 and len(out["quad"]["shape"]["vertices"]) == 4
+    assert out["quad"]["shape"]["to_world"][2][3] == -2.0
+    assert ["empty_mesh", "data", "mesh has no faces (missing mesh)"] in out["err"]
