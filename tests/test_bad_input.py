@@ -53,7 +53,7 @@ def test_wrong_version_is_named(golden, tmp_path):
 
 def test_wrong_shape_is_named(golden, tmp_path):
     sc = copy.deepcopy(golden["ggx_glass"])
-    del sc["objects"][0]["shape"]["radius"]
+    del _obj(sc, "glass_sphere")["shape"]["radius"]
     sc["render"]["spp"] = "many"
     with pytest.raises(validate.SceneError) as info:
         ir_json.load(ir_json.write(sc, tmp_path / "s.json"))

@@ -1,0 +1,94 @@
+"""The comparison's arithmetic and the calibration of its noise test, on synthetic images
+whose statistics are known exactly."""
+import numpy as np
+import pytest
+
+from spectral_bench.batch import compare, exr, flip_isolated
+
+
+def test_metrics_on_known_values():
+    ref = np.full((2, 2, 3), 1.0)
+    test = ref.copy()
+    test[0, 0, 0] = 2.0
+    m = compare.metrics(test, ref)
+    assert m["rmse"] == pytest.approx(np.sqrt(1 / 12))
+    assert m["relmse"] == pytest.approx((1 / 1.01) / 12)
+    assert m["mape"] == pytest.approx((1 / 1.01) / 12)
+
+
+def test_downsample_of_box_filtered_pixels_is_exact():
+    img = np.arange(4 * 4 * 3, dtype=float).reshape(4, 4, 3)
+    d = compare.downsample(img, 2)
+    assert d.shape == (2, 2, 3)
+    assert d[0, 0, 0] == pytest.approx(np.mean(img[:2, :2, 0]))
+
+
+def test_reference_at_rejects_non_integer_factors():
+    with pytest.raises(ValueError, match="integer"):
+        compare.reference_at(np.ones((10, 10, 3)), np.ones((10, 10, 3)), 16, (3, 3, 3))
+
+
+def _synthetic(rng, f=2, spp=16, shape=(32, 32), bias=0.0):
+    """A reference of mean mu (with edges), and a render drawn with the per-sample variance."""
+    H, W = shape[0] * f, shape[1] * f
+    yy, xx = np.mgrid[0:H, 0:W]
+    mu = 0.5 + 0.4 * (xx > W // 2)[..., None] * np.array([1.0, 0.5, 0.2]) + 0.1 * np.sin(yy / 5.0)[..., None]
+    sigma2 = 0.3 * mu  # per-sample variance of each small pixel
+    n_ref = 4096
+    ref_stderr = np.sqrt(sigma2 / n_ref)
+    ref_mean = mu + rng.normal(size=mu.shape) * ref_stderr
+    # a big pixel sampled s times uniformly: variance = mean(sigma2) + spread of mu inside it
+    big_mu = compare.downsample(mu, f)
+    big_var = compare.downsample(sigma2, f) + compare.downsample(mu**2, f) - big_mu**2
+    test = big_mu * (1 + bias) + rng.normal(size=big_mu.shape) * np.sqrt(big_var / spp)
+    return test, ref_mean, ref_stderr, n_ref, spp
+
+
+def test_noise_test_passes_unbiased_renders_at_its_nominal_rate():
+    rng = np.random.default_rng(1)
+    failures = 0
+    for _ in range(40):
+        test, rm, rs, n, spp = _synthetic(rng)
+        mean, vom, s2 = compare.reference_at(rm, rs, n, test.shape)
+        failures += not compare.z_test(test, mean, vom, s2, spp, alpha=0.05).passed
+    # each trial fails with probability <= 5 %: P(more than 8 of 40) < 0.001
+    assert failures <= 8, failures
+
+
+def test_noise_test_fails_a_two_percent_bias():
+    rng = np.random.default_rng(2)
+    test, rm, rs, n, spp = _synthetic(rng, spp=256, bias=0.02)
+    mean, vom, s2 = compare.reference_at(rm, rs, n, test.shape)
+    zt = compare.z_test(test, mean, vom, s2, spp)
+    assert not zt.passed and zt.p_min < zt.threshold
+
+
+def test_noise_test_fails_light_where_the_reference_is_black():
+    ref = np.zeros((16, 16, 3))
+    test = ref.copy()
+    test[3, 3] = 0.5
+    zt = compare.z_test(test, ref, np.zeros_like(ref), np.zeros_like(ref), 16)
+    assert not zt.passed
+
+
+def test_noise_test_fails_nan():
+    rng = np.random.default_rng(3)
+    test, rm, rs, n, spp = _synthetic(rng)
+    mean, vom, s2 = compare.reference_at(rm, rs, n, test.shape)
+    test[0, 0, 0] = np.nan
+    assert not compare.z_test(test, mean, vom, s2, spp).passed
+
+
+def test_flip_runs_isolated_and_bad_input_cannot_exit_the_caller(tmp_path):
+    rng = np.random.default_rng(4)
+    a = rng.random((24, 24, 3)).astype(np.float32)
+    exr.write(tmp_path / "a.exr", a)
+    exr.write(tmp_path / "b.exr", a)
+    exr.write(tmp_path / "c.exr", a * 2)
+    same, err = flip_isolated.hdr_flip(tmp_path / "a.exr", tmp_path / "b.exr", tmp_path / "f.exr")
+    assert err is None and same == pytest.approx(0.0, abs=1e-6)
+    diff, err = flip_isolated.hdr_flip(tmp_path / "a.exr", tmp_path / "c.exr", tmp_path / "f.exr")
+    assert err is None and diff > 0.01
+    exr.write(tmp_path / "nan.exr", np.full((24, 24, 3), np.nan, dtype=np.float32))
+    value, err = flip_isolated.hdr_flip(tmp_path / "a.exr", tmp_path / "nan.exr", tmp_path / "f.exr")
+    assert value is None and "NaN" in err
