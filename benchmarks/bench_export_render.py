@@ -1,0 +1,99 @@
+"""Time export of all scenes and render of each scene, Mitsuba scalar vs LLVM variant, same spp.
+
+    .venv/bin/python benchmarks/bench_export_render.py [--scale 0.5] [--repeat 3] [--write]
+
+Prints a Markdown table; --write also records it in benchmarks/RESULTS.md. Render time counts
+the render calls only; wall time adds process start, scene loading and JIT compilation.
+Run it on a quiet machine: the numbers are only as good as the machine's idleness.
+"""
+import argparse
+import datetime as dt
+import os
+import platform
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+import pkg_bootstrap  # noqa: E402
+
+
+def cpu_model():
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown CPU"
+
+
+def main():
+    pkg_bootstrap.package()
+    from spectral_bench.batch import backends, runner, scene_sources
+    from spectral_bench.exporters import ir_json, mitsuba_writer
+
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--scale", type=float, default=0.5)
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--write", action="store_true")
+    args = ap.parse_args()
+
+    t = time.perf_counter()
+    scenes = scene_sources.load([str(scene_sources.DEFAULT_BLEND)])
+    t_extract_first = time.perf_counter() - t
+    export_times = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for k in range(args.repeat):
+            t = time.perf_counter()
+            scenes = scene_sources.load([str(scene_sources.DEFAULT_BLEND)])
+            for name, sc in scenes:
+                mitsuba_writer.write(sc, Path(tmp) / f"{k}" / name / "mitsuba")
+                ir_json.write(sc, Path(tmp) / f"{k}" / name / "json" / f"{name}.json")
+            export_times.append(time.perf_counter() - t)
+
+    backend = backends.get("mitsuba")
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, sc in scenes:
+            sc = runner.for_run(sc, {"spp": None, "scale": args.scale})
+            xml = backend.export(sc, Path(tmp) / name)
+            mode, _ = backend.mode_for(sc)
+            kind = mode.split("_", 2)[-1] if mode.startswith("llvm") else mode.split("_", 1)[-1]
+            times = {}
+            for variant in (f"scalar_{kind}", f"llvm_ad_{kind}"):
+                runs = [backend.render(xml, variant, sc["render"]["spp"], Path(tmp) / f"{name}_{variant}.exr")
+                        for _ in range(args.repeat)]
+                times[variant] = (statistics.median(r["time_s"] for r in runs),
+                                  statistics.median(r["wall_s"] for r in runs))
+            s, l = times[f"scalar_{kind}"], times[f"llvm_ad_{kind}"]
+            rows.append(f"| {name} | {sc['render']['width']}x{sc['render']['height']} | {sc['render']['spp']} "
+                        f"| {s[0]:.2f} ({s[1]:.2f}) | {l[0]:.2f} ({l[1]:.2f}) | {s[0] / l[0]:.1f}x |")
+
+    n = len(scenes)
+    text = "\n".join([
+        f"## Export and render times, {dt.date.today().isoformat()}",
+        "",
+        f"Machine: {cpu_model()}, {os.cpu_count()} cores, {platform.system()} {platform.release()}; "
+        f"Python {platform.python_version()}; medians of {args.repeat} runs.",
+        "",
+        f"Export of all {n} scenes from scenes.blend (extract + Mitsuba XML + JSON): "
+        f"{statistics.median(export_times):.2f} s (first extraction incl. opening the .blend: {t_extract_first:.2f} s).",
+        "",
+        "| scene | resolution | spp | scalar render s (wall s) | LLVM render s (wall s) | speed-up (render) |",
+        "|---|---|---|---|---|---|",
+        *rows,
+        "",
+    ])
+    print(text)
+    if args.write:
+        path = Path(__file__).resolve().parent / "RESULTS.md"
+        head = "# Benchmark results\n\nRecorded by `benchmarks/bench_export_render.py --write`; newest first.\n\n"
+        old = path.read_text()[len(head):] if path.exists() and path.read_text().startswith(head) else ""
+        path.write_text(head + text + "\n" + old)
+
+
+if __name__ == "__main__":
+    main()
