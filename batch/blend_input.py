@@ -7,7 +7,8 @@ def load_blend(path, names=None):
     """[(scene name, IR dict or SceneError)]."""
     import bpy
     path = Path(path).resolve()
-    if Path(bpy.data.filepath or "").resolve() != path if bpy.data.filepath else True:
+    already_open = bool(bpy.data.filepath) and Path(bpy.data.filepath).resolve() == path
+    if not already_open:
         bpy.ops.wm.open_mainfile(filepath=str(path), load_ui=False)
     from .. import register
     if not hasattr(bpy.types.Scene, "spectral_bench"):

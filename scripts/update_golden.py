@@ -1,4 +1,5 @@
-"""Regenerate golden/ir/<scene>.json from scenes.blend (an explicit request; review the diff).
+"""Regenerate golden/ir/<scene>.json from scenes.blend and golden/mitsuba/<scene>/ from those
+(an explicit request; review the diff).
 
     .venv/bin/python scripts/update_golden.py
 """
@@ -12,12 +13,15 @@ import pkg_bootstrap  # noqa: E402
 def main():
     pkg = pkg_bootstrap.package()
     from spectral_bench.batch import blend_input
-    from spectral_bench.exporters import ir_json
-    out = pkg_bootstrap.ROOT / "golden" / "ir"
+    import shutil
+    from spectral_bench.exporters import ir_json, mitsuba_writer
+    golden = pkg_bootstrap.ROOT / "golden"
     for name, result in blend_input.load_blend(pkg_bootstrap.ROOT / "scenes.blend"):
         if isinstance(result, Exception):
             raise SystemExit(f"{name}: {result}")
-        print("wrote", ir_json.write(result, out / f"{name}.json"))
+        print("wrote", ir_json.write(result, golden / "ir" / f"{name}.json"))
+        shutil.rmtree(golden / "mitsuba" / name, ignore_errors=True)
+        print("wrote", mitsuba_writer.write(result, golden / "mitsuba" / name))
 
 
 if __name__ == "__main__":

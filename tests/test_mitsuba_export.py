@@ -88,3 +88,17 @@ def test_emitter_radiance_is_one_at_560nm_times_scale(tmp_path):
     yb = np.interp(wl, cmfs.wavelengths, cmfs.values[:, 1], left=0, right=0)
     expected = 3.0 * np.sum(d65v * yb) / np.sum(yb)  # Mitsuba's Y of a flat spectrum 1 is 1
     assert y == pytest.approx(expected, rel=0.01), (y, expected)
+
+
+@pytest.mark.parametrize("name", REFLECTANCE)
+def test_writer_output_matches_golden_folder(golden, tmp_path, name):
+    """Any change of the Mitsuba writer shows as a reviewable diff of golden/mitsuba/
+    (regenerate with scripts/update_golden.py)."""
+    from conftest import ROOT
+    expected_dir = ROOT / "golden" / "mitsuba" / name
+    mitsuba_writer.write(golden[name], tmp_path / name)
+    written = sorted(p.relative_to(tmp_path / name) for p in (tmp_path / name).rglob("*") if p.is_file())
+    expected = sorted(p.relative_to(expected_dir) for p in expected_dir.rglob("*") if p.is_file())
+    assert written == expected
+    for rel in written:
+        assert (tmp_path / name / rel).read_text() == (expected_dir / rel).read_text(), rel
