@@ -200,7 +200,7 @@ class Run:
                               "mode": ref.provenance.get("mode")}
         entry["metrics"].update(compare.metrics(test, mean))
         zt = compare.z_test(test, mean, var_of_mean, sigma2, entry["spp"], alpha=self.opts["alpha"],
-                            block=self.opts["block"])
+                            block=self.opts["block"], min_samples=self.opts["min_samples"])
         entry["test"] = zt.as_dict()
         exr.write(res_dir / "reference.exr", mean)
         exr.write(res_dir / "diff_abs.exr", np.abs(test - mean))

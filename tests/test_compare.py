@@ -50,7 +50,7 @@ def test_noise_test_passes_unbiased_renders_at_its_nominal_rate():
     for _ in range(40):
         test, rm, rs, n, spp = _synthetic(rng)
         mean, vom, s2 = compare.reference_at(rm, rs, n, test.shape)
-        failures += not compare.z_test(test, mean, vom, s2, spp, alpha=0.05).passed
+        failures += not compare.z_test(test, mean, vom, s2, spp, alpha=0.05, block=4).passed
     # each trial fails with probability <= 5 %: P(more than 8 of 40) < 0.001
     assert failures <= 8, failures
 
@@ -59,7 +59,7 @@ def test_noise_test_fails_a_two_percent_bias():
     rng = np.random.default_rng(2)
     test, rm, rs, n, spp = _synthetic(rng, spp=256, bias=0.02)
     mean, vom, s2 = compare.reference_at(rm, rs, n, test.shape)
-    zt = compare.z_test(test, mean, vom, s2, spp)
+    zt = compare.z_test(test, mean, vom, s2, spp, block=4)
     assert not zt.passed and zt.p_min < zt.threshold
 
 
@@ -76,7 +76,7 @@ def test_noise_test_fails_nan():
     test, rm, rs, n, spp = _synthetic(rng)
     mean, vom, s2 = compare.reference_at(rm, rs, n, test.shape)
     test[0, 0, 0] = np.nan
-    assert not compare.z_test(test, mean, vom, s2, spp).passed
+    assert not compare.z_test(test, mean, vom, s2, spp, block=4).passed
 
 
 def test_flip_runs_isolated_and_bad_input_cannot_exit_the_caller(tmp_path):
@@ -92,3 +92,10 @@ def test_flip_runs_isolated_and_bad_input_cannot_exit_the_caller(tmp_path):
     exr.write(tmp_path / "nan.exr", np.full((24, 24, 3), np.nan, dtype=np.float32))
     value, err = flip_isolated.hdr_flip(tmp_path / "a.exr", tmp_path / "nan.exr", tmp_path / "f.exr")
     assert value is None and "NaN" in err
+
+
+def test_block_size_pools_enough_samples_for_heavy_tails():
+    assert compare.block_size(64, (512, 512)) == 16  # 16^2 * 64 = 16384
+    assert compare.block_size(256, (64, 64)) == 8
+    assert compare.block_size(1, (8, 8)) == 8  # never larger than the image
+    assert compare.block_size(1 << 20, (64, 64)) == 1

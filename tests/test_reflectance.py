@@ -8,7 +8,7 @@ import pytest
 from conftest import REFLECTANCE, ROOT, metrics, run_batch
 from spectral_bench.batch import backends, compare, exr, references
 
-SCALE, SPP = 0.125, 64
+SCALE, SPP = 0.125, 256
 
 
 @pytest.fixture(scope="module")
