@@ -17,7 +17,7 @@ FORMATS = ("mitsuba", "json")
 DEFAULTS = {
     "input": None, "case": None, "scene": None, "renderer": None, "exec": None, "spp": None, "scale": 1.0,
     "out": None, "export_only": False, "format": None, "log": None, "visualize": False, "settings": None,
-    "variant": None, "alpha": 0.01, "block": None, "min_samples": 16384, "timeout": 1800, "passes": 1, "seed": 0, "flip": True,
+    "variant": None, "alpha": 0.01, "block": None, "min_samples": 65536, "timeout": 1800, "passes": 1, "seed": 0, "flip": True,
     "references": None, "list": False,
 }
 
@@ -56,7 +56,7 @@ def parser():
     ap.add_argument("--variant", help="force a Mitsuba variant (default: cheapest that models the scene)")
     ap.add_argument("--alpha", type=float, help="significance level of the noise test (default 0.01)")
     ap.add_argument("--block", type=int, help="block side in pixels of the noise test (default: from --min-samples)")
-    ap.add_argument("--min-samples", type=int, help="samples pooled per block of the noise test (default 16384)")
+    ap.add_argument("--min-samples", type=int, help="samples pooled per block of the noise test (default 65536)")
     ap.add_argument("--timeout", type=float, help="seconds per render before it is stopped (default 1800)")
     ap.add_argument("--passes", type=int, help="independent passes per render (default 1)")
     ap.add_argument("--seed", type=int, help="first sampler seed (default 0)")

@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 import pkg_bootstrap  # noqa: E402
 
 
@@ -89,10 +90,8 @@ def main():
     ])
     print(text)
     if args.write:
-        path = Path(__file__).resolve().parent / "RESULTS.md"
-        head = "# Benchmark results\n\nRecorded by `benchmarks/bench_export_render.py --write`; newest first.\n\n"
-        old = path.read_text()[len(head):] if path.exists() and path.read_text().startswith(head) else ""
-        path.write_text(head + text + "\n" + old)
+        from record import prepend
+        prepend(Path(__file__).resolve().parent / "RESULTS.md", "# Benchmark results\n\nRecorded by `benchmarks/bench_export_render.py --write`; newest first.\n\n", text)
 
 
 if __name__ == "__main__":

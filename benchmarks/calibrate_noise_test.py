@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 import pkg_bootstrap  # noqa: E402
 
 SCENES = ["ggx_copper_50", "ggx_copper_70", "ggx_copper_80", "ggx_glass"]
@@ -65,13 +66,13 @@ def main():
     golden = Path(__file__).resolve().parents[1] / "golden" / "ir"
     backend = backends.get("mitsuba")
 
-    def judge(sc, name, seed, tmp, min_samples):
+    def judge(sc, name, seed, tmp, min_samples, tag=""):
         sc = copy.deepcopy(sc)
         sc["render"]["width"] = sc["render"]["height"] = args.size
         sc["needs"] = derived_needs(sc)
-        xml = backend.export(sc, Path(tmp) / f"{name}_{seed}")
+        xml = backend.export(sc, Path(tmp) / f"{name}{tag}_{seed}")
         mode, _ = backend.mode_for(sc)
-        out = Path(tmp) / f"{name}_{seed}.exr"
+        out = Path(tmp) / f"{name}{tag}_{seed}.exr"
         backend.render(xml, mode, args.spp, out, seed=10_000 + seed)
         t = exr.read_rgb(out)
         ref = references.load(name)
@@ -93,7 +94,7 @@ def main():
                     continue
                 wrong = copy.deepcopy(sc)
                 change(wrong)
-                zt = judge(wrong, name + "_wrong", 0, tmp, (16384,))[0]
+                zt = judge(wrong, name, 0, tmp, (compare.MIN_SAMPLES,), tag="_wrong")[0]
                 power.append(f"| {name} | {label} | {'fail (detected)' if not zt.passed else 'pass (missed)'} "
                              f"| {zt.z_max:.1f} |")
     text = "\n".join([
@@ -102,14 +103,12 @@ def main():
         "", "False alarms on unbiased renders:", "",
         "| scene | samples per block | block (px) | tests | failed | median p_min x tests |",
         "|---|---|---|---|---|---|", *rows,
-        "", "Power (16384 samples per block, one render each):", "",
+        "", f"Power ({compare.MIN_SAMPLES} samples per block, the default; one render each):", "",
         "| scene | wrong variant | verdict | max abs z |", "|---|---|---|---|", *power, ""])
     print(text)
     if args.write:
-        path = Path(__file__).resolve().parent / "CALIBRATION.md"
-        head = "# Calibration of the noise test\n\nRecorded by `benchmarks/calibrate_noise_test.py --write`.\n\n"
-        old = path.read_text()[len(head):] if path.exists() and path.read_text().startswith(head) else ""
-        path.write_text(head + text + "\n" + old)
+        from record import prepend
+        prepend(Path(__file__).resolve().parent / "CALIBRATION.md", "# Calibration of the noise test\n\nRecorded by `benchmarks/calibrate_noise_test.py --write`.\n\n", text)
 
 
 if __name__ == "__main__":

@@ -95,7 +95,7 @@ def test_flip_runs_isolated_and_bad_input_cannot_exit_the_caller(tmp_path):
 
 
 def test_block_size_pools_enough_samples_for_heavy_tails():
-    assert compare.block_size(64, (512, 512)) == 16  # 16^2 * 64 = 16384
-    assert compare.block_size(256, (64, 64)) == 8
+    assert compare.block_size(64, (512, 512)) == 32  # 32^2 * 64 = 65536
+    assert compare.block_size(256, (64, 64)) == 16
     assert compare.block_size(1, (8, 8)) == 8  # never larger than the image
     assert compare.block_size(1 << 20, (64, 64)) == 1
