@@ -3,11 +3,13 @@
 Kinds (the IR's JSON form, see schema/scene.schema.json):
   {"type": "constant", "value": v}
   {"type": "sampled", "wavelengths": [nm...], "values": [...]}   linear interpolation
-  {"type": "named", "name": "cie_d65", "scale": s}
+  {"type": "named", "name": "cie_d65", "scale": s}          illuminants (cie_*) and
+  {"type": "named", "name": "colorchecker_red"}             ColorChecker reflectances
   {"type": "blackbody", "temperature": K, "scale": s}
 
 Radiometric normalisation (identical in every writer): a named illuminant or a blackbody
 with scale s is s * S(l) / S(560 nm), i.e. 1.0 at 560 nm, in the renderer's radiance unit.
+Named reflectances (the ColorChecker patches, N. Ohta's data) are used as measured, times s.
 ART's raw CIE tables (D65 = 100 at 560 nm) therefore take s / 100; Mitsuba's own ``d65``
 plugin is not used (it is 1.0101 at 560 nm), the table is written out instead.
 
@@ -41,14 +43,30 @@ class SpectrumError(ValueError):
 
 
 @lru_cache(maxsize=1)
-def _illuminant_tables():
-    data = json.loads((DATA_DIR / "cie_illuminants.json").read_text())
-    return data["illuminants"]
+def _named_tables():
+    """{name: (table, normalised at 560 nm)} of every named spectrum."""
+    tables = {n: (t, True) for n, t in
+              json.loads((DATA_DIR / "cie_illuminants.json").read_text())["illuminants"].items()}
+    cc = json.loads((DATA_DIR / "colorchecker_n_ohta.json").read_text())
+    tables.update({n: (t, False) for n, t in cc["reflectances"].items()})
+    return tables
 
 
 def named_spectra():
     """Names accepted by {"type": "named"}."""
-    return sorted(_illuminant_tables())
+    return sorted(_named_tables())
+
+
+def colorchecker_patches():
+    """The 24 ColorChecker patch names in chart order (row by row, dark skin first)."""
+    return json.loads((DATA_DIR / "colorchecker_n_ohta.json").read_text())["order"]
+
+
+@lru_cache(maxsize=1)
+def cie_1931_cmfs():
+    """(wavelengths, x_bar, y_bar, z_bar) as arrays, 360-830 nm at 1 nm."""
+    d = json.loads((DATA_DIR / "cie_1931_2deg_cmfs.json").read_text())
+    return tuple(np.asarray(d[k], dtype=np.float64) for k in ("wavelengths", "x_bar", "y_bar", "z_bar"))
 
 
 def _planck(wl_nm, temperature):
@@ -72,12 +90,12 @@ def evaluate(spec, wavelengths):
     if kind == "sampled":
         return _interp_padded(wl, spec["wavelengths"], spec["values"])
     if kind == "named":
-        tables = _illuminant_tables()
+        tables = _named_tables()
         name = spec.get("name")
         if name not in tables:
             raise SpectrumError("name", f"unknown named spectrum {name!r} (known: {', '.join(sorted(tables))})")
-        t = tables[name]
-        ref = _interp_padded(NORMALISATION_NM, t["wavelengths"], t["values"])
+        t, normalised = tables[name]
+        ref = _interp_padded(NORMALISATION_NM, t["wavelengths"], t["values"]) if normalised else 1.0
         return spec.get("scale", 1.0) * _interp_padded(wl, t["wavelengths"], t["values"]) / ref
     if kind == "blackbody":
         temp = float(spec["temperature"])
@@ -92,7 +110,7 @@ def tabulate(spec, step=5.0):
         inner = [w for w in spec["wavelengths"] if LAMBDA_MIN < w < LAMBDA_MAX]
         grid = np.unique(np.concatenate([[LAMBDA_MIN], inner, [LAMBDA_MAX]]))
     elif spec.get("type") == "named":
-        t = _illuminant_tables()[spec["name"]]
+        t = _named_tables()[spec["name"]][0]
         inner = [w for w in t["wavelengths"] if LAMBDA_MIN < w < LAMBDA_MAX]
         grid = np.unique(np.concatenate([[LAMBDA_MIN], inner, [LAMBDA_MAX]]))
     return grid, evaluate(spec, grid)
@@ -129,7 +147,7 @@ def check(spec, where, allow_negative=False):
         if any(b <= a for a, b in zip(wls, wls[1:])):
             yield f"{where}.wavelengths", "must be strictly increasing"
     elif kind == "named":
-        if spec.get("name") not in _illuminant_tables():
+        if spec.get("name") not in _named_tables():
             yield f"{where}.name", f"unknown named spectrum {spec.get('name')!r} (known: {', '.join(named_spectra())})"
         s = spec.get("scale", 1.0)
         if bad(s) or s < 0:

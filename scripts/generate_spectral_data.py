@@ -1,31 +1,60 @@
-"""Regenerate exporters/data/cie_illuminants.json from colour-science.
+"""Regenerate the spectral data files in exporters/data/ from colour-science.
 
-Source: colour-science 0.4.6, ``colour.SDS_ILLUMINANTS`` (CIE 15:2004 / CIE S 014-2
-tables, 5 nm). Values are kept raw (CIE convention, 100 at 560 nm for the D series and A);
-the IR's normalisation (1 at 560 nm) is applied in exporters/spectra.py, not here.
+Sources (colour-science 0.4.6):
+- cie_illuminants.json: ``colour.SDS_ILLUMINANTS`` (CIE 15:2004 tables, 5 nm), raw (100 at
+  560 nm for the D series and A); the IR's normalisation (1 at 560 nm) is applied in
+  exporters/spectra.py, not here.
+- colorchecker_n_ohta.json: ``colour.SDS_COLOURCHECKERS["ColorChecker N Ohta"]``, the 24
+  ColorChecker patches' reflectances measured by N. Ohta (380-780 nm, 5 nm).
+- cie_1931_2deg_cmfs.json: ``colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"]``
+  (360-830 nm, 1 nm), used by the analytic probes.
 
     .venv/bin/python scripts/generate_spectral_data.py
 """
 import json
+import re
 from pathlib import Path
 
 import colour
 
-NAMES = ["A", "D50", "D55", "D65", "D75", "E", "FL2", "FL7", "FL11"]
+ILLUMINANTS = ["A", "D50", "D55", "D65", "D75", "E", "FL2", "FL7", "FL11"]
+DATA = Path(__file__).resolve().parents[1] / "exporters" / "data"
+
+
+def table(sd, digits=6):
+    return {"wavelengths": [float(w) for w in sd.wavelengths], "values": [round(float(v), digits) for v in sd.values]}
+
+
+def patch_name(label):
+    """'white 9.5 (.05 D)' -> 'colorchecker_white_9_5'."""
+    label = re.sub(r"\s*\(.*\)", "", label)
+    return "colorchecker_" + re.sub(r"[^a-z0-9]+", "_", label.lower()).strip("_")
+
+
+def write(name, data):
+    path = DATA / name
+    path.write_text(json.dumps(data, indent=1) + "\n")
+    print("wrote", path)
 
 
 def main():
-    out = {"source": f"colour-science {colour.__version__}, colour.SDS_ILLUMINANTS (CIE 15:2004 tables)",
-           "illuminants": {}}
-    for name in NAMES:
-        sd = colour.SDS_ILLUMINANTS[name]
-        out["illuminants"]["cie_" + name.lower()] = {
-            "wavelengths": [float(w) for w in sd.wavelengths],
-            "values": [round(float(v), 6) for v in sd.values],
-        }
-    path = Path(__file__).resolve().parents[1] / "exporters" / "data" / "cie_illuminants.json"
-    path.write_text(json.dumps(out, indent=1) + "\n")
-    print("wrote", path)
+    src = f"colour-science {colour.__version__}"
+    write("cie_illuminants.json", {
+        "source": f"{src}, colour.SDS_ILLUMINANTS (CIE 15:2004 tables)",
+        "illuminants": {"cie_" + n.lower(): table(colour.SDS_ILLUMINANTS[n]) for n in ILLUMINANTS}})
+    cc = colour.SDS_COLOURCHECKERS["ColorChecker N Ohta"]
+    write("colorchecker_n_ohta.json", {
+        "source": f"{src}, colour.SDS_COLOURCHECKERS['ColorChecker N Ohta'] (N. Ohta's measurements)",
+        "order": [patch_name(k) for k in cc],
+        "labels": {patch_name(k): k for k in cc},
+        "reflectances": {patch_name(k): table(sd) for k, sd in cc.items()}})
+    cmfs = colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"]
+    write("cie_1931_2deg_cmfs.json", {
+        "source": f"{src}, colour.MSDS_CMFS['CIE 1931 2 Degree Standard Observer']",
+        "wavelengths": [float(w) for w in cmfs.wavelengths],
+        "x_bar": [round(float(v), 8) for v in cmfs.values[:, 0]],
+        "y_bar": [round(float(v), 8) for v in cmfs.values[:, 1]],
+        "z_bar": [round(float(v), 8) for v in cmfs.values[:, 2]]})
 
 
 if __name__ == "__main__":
