@@ -85,8 +85,23 @@ class SPECTRAL_BENCH_PT_scene(_Base, bpy.types.Panel):
 
     def draw(self, context):
         a = context.scene.spectral_bench
-        for key in ("case", "description", "spp", "max_depth", "needs_polarization", "needs_fluorescence"):
+        for key in ("case", "description", "spp", "max_depth", "output", "needs_polarization", "needs_fluorescence"):
             self.layout.prop(a, key)
+
+
+class SPECTRAL_BENCH_PT_camera(_Base, bpy.types.Panel):
+    bl_label = "Spectral Bench"
+    bl_context = "data"
+
+    @classmethod
+    def poll(cls, context):
+        return isinstance(context.object and context.object.data, bpy.types.Camera)
+
+    def draw(self, context):
+        a = context.object.data.spectral_bench
+        self.layout.prop(a, "polarizer")
+        if a.polarizer:
+            self.layout.prop(a, "polarizer_angle")
 
 
 class SPECTRAL_BENCH_PT_object(_Base, bpy.types.Panel):
@@ -101,7 +116,7 @@ class SPECTRAL_BENCH_PT_object(_Base, bpy.types.Panel):
         self.layout.prop(context.object.spectral_bench, "shape")
 
 
-CLASSES = (SPECTRAL_BENCH_PT_material, SPECTRAL_BENCH_PT_light, SPECTRAL_BENCH_PT_world,
+CLASSES = (SPECTRAL_BENCH_PT_material, SPECTRAL_BENCH_PT_light, SPECTRAL_BENCH_PT_world, SPECTRAL_BENCH_PT_camera,
            SPECTRAL_BENCH_PT_scene, SPECTRAL_BENCH_PT_object)
 
 

@@ -77,6 +77,18 @@ SHAPES = [
 ]
 
 
+class CameraProps(bpy.types.PropertyGroup):
+    polarizer: BoolProperty(name="Linear Polariser", default=False,
+                            description="An ideal linear polariser in front of the lens")
+    polarizer_angle: FloatProperty(name="Transmission Axis (deg)", default=0.0, soft_min=-180.0, soft_max=180.0,
+                                   description="Counter-clockwise from image right as seen from the camera: "
+                                               "0 horizontal, 90 vertical")
+
+
+OUTPUTS = [("RGB", "RGB", "Linear sRGB radiance"),
+           ("STOKES", "Stokes", "RGB plus Stokes S0..S3 (S1 > 0 horizontal, S2 > 0 at +45 degrees)")]
+
+
 class ObjectProps(bpy.types.PropertyGroup):
     shape: EnumProperty(name="Shape", items=SHAPES, default="MESH")
 
@@ -86,13 +98,14 @@ class SceneProps(bpy.types.PropertyGroup):
     description: StringProperty(name="Description", default="")
     spp: IntProperty(name="Samples", default=64, soft_min=1)
     max_depth: IntProperty(name="Max Depth", default=64, soft_min=1)
+    output: EnumProperty(name="Output", items=OUTPUTS, default="RGB")
     needs_polarization: BoolProperty(name="Needs Polarisation", default=False)
     needs_fluorescence: BoolProperty(name="Needs Fluorescence", default=False)
 
 
-CLASSES = (SpectrumSample, SpectrumProps, MaterialProps, LightProps, WorldProps, ObjectProps, SceneProps)
+CLASSES = (SpectrumSample, SpectrumProps, MaterialProps, LightProps, WorldProps, CameraProps, ObjectProps, SceneProps)
 TARGETS = {bpy.types.Material: MaterialProps, bpy.types.Light: LightProps, bpy.types.World: WorldProps,
-           bpy.types.Object: ObjectProps, bpy.types.Scene: SceneProps}
+           bpy.types.Camera: CameraProps, bpy.types.Object: ObjectProps, bpy.types.Scene: SceneProps}
 
 
 def register():

@@ -36,3 +36,29 @@ def read_rgb(path, prefix=""):
         return np.stack([ch[prefix + c] for c in "RGB"], axis=-1)
     except KeyError as exc:
         raise ValueError(f"{path}: no channels {prefix}R,G,B (has {sorted(ch)})") from exc
+
+
+def _order(names):
+    """R, G, B first, then the rest by prefix and colour (S0.R, S0.G, S0.B, S1.R, ...)."""
+    head = [c for c in ("R", "G", "B", "Y") if c in names]
+    rank = {"R": 0, "G": 1, "B": 2}
+
+    def key(n):
+        prefix, _, colour = n.rpartition(".")
+        return (prefix, rank.get(colour, 3), colour) if prefix else (n, 0, "")
+    return head + sorted((n for n in names if n not in head), key=key)
+
+
+def read_image(path, skip_prefix="stderr."):
+    """(channel names, HxWxC float32) of every channel except those starting ``skip_prefix``."""
+    ch = read(path)
+    names = _order([n for n in ch if not n.startswith(skip_prefix)])
+    return names, np.stack([ch[n] for n in names], axis=-1)
+
+
+def write_image(path, names, img, extra=None):
+    """Write channels ``names`` of an HxWxC image (R, G, B as the RGB group) plus ``extra``."""
+    rgb = np.stack([img[..., names.index(c)] for c in "RGB"], axis=-1)
+    rest = {n: np.ascontiguousarray(img[..., i], dtype=np.float32) for i, n in enumerate(names) if n not in "RGB"}
+    rest.update(extra or {})
+    return write(path, rgb, rest)

@@ -52,17 +52,17 @@ def main(argv=None):
             image = Path(tmp) / "ref.exr"
             info = backend.render(xml, mode, spp, image, passes=args.passes, seed=args.seed, timeout=6 * 3600,
                                   log_path=Path(tmp) / "render.log")
-            ch = exr.read(image)
             import numpy as np
-            mean = np.stack([ch[c] for c in "RGB"], axis=-1)
-            stderr = np.stack([ch[f"stderr.{c}"] for c in "RGB"], axis=-1)
+            names, mean = exr.read_image(image)
+            ch = exr.read(image)
+            stderr = np.stack([ch[f"stderr.{n}"] for n in names], axis=-1)
             prov = {"backend": "mitsuba", "mode": mode, "spp": info["spp"], "passes": info["passes"],
                     "seed": args.seed, "resolution": info["resolution"], "time_s": round(info["time_s"], 2),
                     "wall_s": round(info["wall_s"], 2), "date": dt.datetime.now().isoformat(timespec="seconds"),
                     "versions": info["versions"],
                     "machine": f"{platform.machine()} {platform.system()}, {os.cpu_count()} cores",
                     "command": "batch/make_references.py " + " ".join(argv if argv is not None else sys.argv[1:])}
-            path = references.save(scene, mean, stderr, prov, args.out)
+            path = references.save(scene, names, mean, stderr, prov, args.out)
         print(f"{name}: {info['spp']} spp in {info['time_s']:.1f} s -> {path} "
               f"(mean stderr / mean = {float(stderr.mean() / max(mean.mean(), 1e-12)):.2e})")
     return 1 if failed else 0

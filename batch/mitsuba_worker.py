@@ -17,6 +17,16 @@ from pathlib import Path
 MAX_WAVEFRONT = 1 << 24
 
 
+def channel_names(scene, count):
+    """Channel names of the film's output (R, G, B or Y, then S0.R ... S3.B for Stokes)."""
+    bitmap = scene.sensors()[0].film().bitmap()
+    names = [bitmap.struct_()[i].name for i in range(bitmap.channel_count())]
+    names = [n for n in names if n not in ("A", "W")]
+    if len(names) != count:
+        raise RuntimeError(f"film channels {names} do not match the image's {count} channels")
+    return names
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser()
     ap.add_argument("--xml", required=True)
@@ -52,21 +62,25 @@ def main(argv=None):
             t = time.perf_counter()
             img = mi.render(scene, spp=per_pass // chunks, seed=seed)
             dr.eval(img)
-            arr = np.array(img, dtype=np.float64)[..., :3]
+            arr = np.array(img, dtype=np.float64)
             render_s += time.perf_counter() - t
             seed += 1
             acc = arr if acc is None else acc + arr
         images.append(acc / chunks)
+    names = channel_names(scene, images[0].shape[-1])
     stack = np.stack(images)
+    if names[0] == "Y":  # monochrome variants: luminance stands for R = G = B
+        stack = np.concatenate([np.repeat(stack[..., :1], 3, axis=-1), stack[..., 1:]], axis=-1)
+        names = ["R", "G", "B"] + names[1:]
     mean = stack.mean(axis=0)
     extra = {}
     if args.passes > 1:
         stderr = stack.std(axis=0, ddof=1) / math.sqrt(args.passes)
-        extra = {f"stderr.{c}": stderr[..., i].astype(np.float32) for i, c in enumerate("RGB")}
-    exr.write(args.out, mean, extra)
+        extra = {f"stderr.{n}": stderr[..., i].astype(np.float32) for i, n in enumerate(names)}
+    exr.write_image(args.out, names, mean, extra)
     result = {"variant": args.variant, "spp": per_pass * args.passes, "passes": args.passes,
               "seed": args.seed, "chunks_per_pass": chunks, "time_s": render_s, "wall_s": time.perf_counter() - t0,
-              "resolution": [int(mean.shape[1]), int(mean.shape[0])],
+              "resolution": [int(mean.shape[1]), int(mean.shape[0])], "channels": names,
               "versions": {"mitsuba": mi.__version__, "drjit": dr.__version__, "numpy": np.__version__,
                            "python": sys.version.split()[0]}}
     Path(args.result).write_text(json.dumps(result, indent=1))

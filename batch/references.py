@@ -1,5 +1,6 @@
-"""Reference images: references/<scene>.exr (mean R, G, B as float32; standard error of the
-mean per pixel as stderr.R/G/B) and references/<scene>.json (provenance).
+"""Reference images: references/<scene>.exr (the mean of every channel the scene outputs, R, G,
+B and, for Stokes scenes, S0.R ... S3.B; the standard error of that mean per pixel as
+stderr.<channel>) and references/<scene>.json (provenance).
 
 A reference records the fingerprint of the scene it was rendered from (the IR without the
 sample count); a changed scene makes it stale, and stale references are never used for a
@@ -33,8 +34,8 @@ def fingerprint(scene):
 
 
 class Reference:
-    def __init__(self, mean, stderr, provenance, path):
-        self.mean, self.stderr, self.provenance, self.path = mean, stderr, provenance, path
+    def __init__(self, names, mean, stderr, provenance, path):
+        self.names, self.mean, self.stderr, self.provenance, self.path = names, mean, stderr, provenance, path
 
     @property
     def spp(self):
@@ -47,10 +48,10 @@ def load(scene_name, directory=None):
     exr_path, meta_path = directory / f"{scene_name}.exr", directory / f"{scene_name}.json"
     if not exr_path.is_file() or not meta_path.is_file():
         return None
+    names, mean = exr.read_image(exr_path)
     ch = exr.read(exr_path)
-    mean = np.stack([ch[c] for c in "RGB"], axis=-1)
-    stderr = np.stack([ch[f"stderr.{c}"] for c in "RGB"], axis=-1)
-    return Reference(mean, stderr, json.loads(meta_path.read_text()), exr_path)
+    stderr = np.stack([ch[f"stderr.{n}"] for n in names], axis=-1)
+    return Reference(names, mean, stderr, json.loads(meta_path.read_text()), exr_path)
 
 
 def check_usable(ref, scene):
@@ -63,11 +64,11 @@ def check_usable(ref, scene):
     return None
 
 
-def save(scene, mean, stderr, provenance, directory=None):
+def save(scene, names, mean, stderr, provenance, directory=None):
     directory = Path(directory or REFERENCE_DIR)
     directory.mkdir(parents=True, exist_ok=True)
-    extra = {f"stderr.{c}": stderr[..., i].astype(np.float32) for i, c in enumerate("RGB")}
-    exr.write(directory / f"{scene['name']}.exr", mean, extra)
+    extra = {f"stderr.{n}": stderr[..., i].astype(np.float32) for i, n in enumerate(names)}
+    exr.write_image(directory / f"{scene['name']}.exr", names, mean, extra)
     meta = dict(provenance, scene=scene["name"], fingerprint=fingerprint(scene))
     (directory / f"{scene['name']}.json").write_text(json.dumps(meta, indent=1, sort_keys=True) + "\n")
     return directory / f"{scene['name']}.exr"

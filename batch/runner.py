@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ..exporters import ir_json
-from . import backends, compare, exr, flip_isolated, previews, references, scene_sources, summary
+from . import backends, compare, exr, flip_isolated, previews, probes, references, scene_sources, summary
 from .progress import Progress
 
 log = logging.getLogger("spectral_bench")
@@ -176,13 +176,24 @@ class Run:
             return entry
         entry.update(time_s=info["time_s"], wall_s=info["wall_s"], spp=info["spp"],
                      image=str(image.relative_to(self.out)), versions=info.get("versions"))
-        test = exr.read_rgb(image)
-        entry["sanity"] = compare.image_sanity(test)
-        previews.save_linear(res_dir / "render.png", test)
-        self.compare(entry, scene, test, res_dir)
+        names, test_all = exr.read_image(image)
+        entry["channels"] = names
+        entry["sanity"] = compare.image_sanity(test_all)
+        previews.save_linear(res_dir / "render.png", test_all[..., :3])
+        self.compare(entry, scene, names, test_all, res_dir)
+        entry["probes"] = probes.evaluate(sc, names, test_all, reference=self.reference_for(entry, scene))
+        bad = [p["name"] for p in entry["probes"] if p["pass"] is False]  # None: not measurable here
+        if bad and entry["status"] == "ok":
+            entry.update(status="failed", reason=f"analytic probes failed: {', '.join(bad[:6])}"
+                                                  + (f" and {len(bad) - 6} more" if len(bad) > 6 else ""))
         return entry
 
-    def compare(self, entry, scene, test, res_dir):
+    def reference_for(self, entry, scene):
+        ref = references.load(entry["scene"], self.opts["references"])
+        return ref if references.check_usable(ref, scene) is None else None
+
+    def compare(self, entry, scene, names, test_all, res_dir):
+        test = test_all[..., :3]
         ref = references.load(entry["scene"], self.opts["references"])
         unusable = references.check_usable(ref, scene)
         if ref is None:
@@ -191,26 +202,32 @@ class Run:
         if unusable:
             entry.update(status="failed", reason=unusable)
             return
+        if names != ref.names:
+            entry.update(status="failed", reason=f"render channels {names} differ from the reference's {ref.names}")
+            return
         try:
-            mean, var_of_mean, sigma2 = compare.reference_at(ref.mean, ref.stderr, ref.spp, test.shape)
+            mean_all, var_all, sigma2_all = compare.reference_at(ref.mean, ref.stderr, ref.spp, test_all.shape)
         except ValueError as exc:
             entry.update(status="failed", reason=f"cannot compare with the reference: {exc}")
             return
+        mean = mean_all[..., :3]
         entry["reference"] = {"path": str(ref.path), "spp": ref.spp, "backend": ref.provenance.get("backend"),
                               "mode": ref.provenance.get("mode")}
         entry["metrics"].update(compare.metrics(test, mean))
-        zt = compare.z_test(test, mean, var_of_mean, sigma2, entry["spp"], alpha=self.opts["alpha"],
+        # every channel is judged: R, G, B and, for Stokes output, S0..S3
+        zt = compare.z_test(test_all, mean_all, var_all, sigma2_all, entry["spp"], alpha=self.opts["alpha"],
                             block=self.opts["block"], min_samples=self.opts["min_samples"])
         entry["test"] = zt.as_dict()
         exr.write(res_dir / "reference.exr", mean)
         exr.write(res_dir / "diff_abs.exr", np.abs(test - mean))
         exr.write(res_dir / "diff_rel.exr", np.abs(test - mean) / (np.abs(mean) + compare.REL_EPS))
         zfull = np.kron(zt.zmap, np.ones((zt.block, zt.block, 1)))
-        exr.write(res_dir / "zscore.exr", zfull)
+        exr.write(res_dir / "zscore.exr", zfull[..., :3])
         previews.save_linear(res_dir / "reference.png", mean)
         previews.save_signed(res_dir / "diff.png", (test - mean).mean(axis=-1),
                              scale=max(float(np.percentile(np.abs(mean), 99)), 1e-6) * 0.25)
-        previews.save_signed(res_dir / "zscore.png", zfull.max(axis=-1) * (np.abs(zfull).max(axis=-1) > 0), scale=6)
+        worst = np.take_along_axis(zfull, np.abs(zfull).argmax(axis=-1)[..., None], axis=-1)[..., 0]
+        previews.save_signed(res_dir / "zscore.png", worst, scale=6)
         if self.opts["flip"]:
             flip, err = flip_isolated.hdr_flip(res_dir / "reference.exr", self.out / entry["image"], res_dir / "flip.exr")
             entry["metrics"]["flip"] = flip

@@ -134,7 +134,10 @@ def _camera(scene, problems):
     else:
         axis, sensor = "y", d.sensor_height
     fov = math.degrees(2 * math.atan(sensor / (2 * d.lens)))
-    return {"name": cam.name, "to_world": _matrix(_world(cam)), "fov": _clean(fov), "fov_axis": axis}
+    out = {"name": cam.name, "to_world": _matrix(_world(cam)), "fov": _clean(fov), "fov_axis": axis}
+    if d.spectral_bench.polarizer:
+        out["polarizer"] = {"angle": _clean(d.spectral_bench.polarizer_angle)}
+    return out
 
 
 def extract_scene(scene):
@@ -155,6 +158,8 @@ def extract_scene(scene):
     }
     if a.description:
         out["description"] = a.description
+    if a.output != "RGB":
+        out["render"]["output"] = a.output.lower()
     world = scene.world
     if world is not None and world.spectral_bench.enabled:
         out["environment"] = {"type": "uniform", "radiance": spectrum(world.spectral_bench.radiance)}

@@ -11,6 +11,11 @@ Conventions (every writer follows them):
 - Roughness ``alpha`` is the microfacet width (GGX/Beckmann alpha, Walter et al. 2007);
   alpha 0 is a smooth surface. Blender's "Roughness" r corresponds to alpha = r^2.
 - Spectra and their radiometric normalisation: see spectra.py.
+- Polarisation: ``camera.polarizer.angle`` is the transmission axis of an ideal linear
+  polariser in front of the lens, in degrees counter-clockwise from image right as seen from the
+  camera (0 = horizontal, 90 = vertical; ART's 0 degrees is horizontal too). ``render.output``
+  "stokes" adds S0..S3 in the same frame: S1 > 0 is horizontal, S2 > 0 is +45 degrees; a
+  polarisation direction at angle a has S1/S0 = cos 2a, S2/S0 = sin 2a (Mitsuba 3's frame, measured).
 - Pixel filter is a box: each pixel is the plain integral over its area, so pixels are
   independent and a reference downsamples exactly to any integer factor (see batch/compare.py).
 """
@@ -34,6 +39,8 @@ def derived_needs(scene):
     """Phenomena a scene needs from its content: a non-constant spectrum or a named conductor
     needs a spectral renderer. Explicit ``needs`` entries are kept on top of these."""
     needs = set(scene.get("needs", []))
+    if scene.get("camera", {}).get("polarizer") or scene.get("render", {}).get("output") == "stokes":
+        needs.add("polarization")
 
     def spectral(spec):
         return spec is not None and spec.get("type") != "constant"
@@ -43,8 +50,8 @@ def derived_needs(scene):
         needs.add("spectral")
     for obj in scene.get("objects", []):
         bsdf = obj.get("bsdf") or {}
-        if bsdf.get("type") == "conductor":
-            needs.add("spectral")
+        if bsdf.get("type") == "conductor" and "material" in bsdf:
+            needs.add("spectral")  # a named conductor is a measured eta/k table
         for key in ("reflectance", "eta", "k"):
             if spectral(bsdf.get(key)):
                 needs.add("spectral")

@@ -13,6 +13,7 @@ from . import ir, mesh_io, spectra
 # Blender/OpenGL cameras look down -Z with +Y up; Mitsuba's look down +Z with +X to the
 # image's left. Mitsuba to_world = IR to_world @ diag(-1, 1, -1).
 _CAMERA_FLIP = np.diag([-1.0, 1.0, -1.0, 1.0])
+POLARIZER_DISTANCE = 0.05  # scene units in front of the lens (the sensor's near clip is 0.01)
 
 
 def _matrix_text(m):
@@ -98,6 +99,21 @@ class _Writer:
             em = ET.SubElement(node, "emitter", type="area")
             self.spectrum(em, "radiance", obj["emitter"]["radiance"], f"{obj['name']}_radiance")
 
+    def polarizer(self, root, cam, r):
+        """The IR's ideal linear polariser as Mitsuba's ``polarizer`` BSDF on a rectangle just in
+        front of the lens, spanning the whole field of view. Its local x/y are the camera's
+        right/up and its normal faces the camera; in that frame Mitsuba's theta turns the
+        transmission axis clockwise as seen from the camera (measured), hence theta = -angle."""
+        d = POLARIZER_DISTANCE
+        half = d * np.tan(np.radians(cam["fov"]) / 2) * max(r["width"], r["height"]) / min(r["width"], r["height"])
+        size = 2.0 * half  # twice the field of view's half-extent, so no edge is in view
+        m = np.asarray(cam["to_world"], dtype=np.float64) @ np.array(
+            [[size, 0, 0, 0], [0, size, 0, 0], [0, 0, 1, -d], [0, 0, 0, 1]], dtype=np.float64)
+        node = ET.SubElement(root, "shape", type="rectangle", id="camera_polarizer")
+        _transform(node, m)
+        bsdf = ET.SubElement(node, "bsdf", type="polarizer")
+        ET.SubElement(bsdf, "spectrum", name="theta", value=repr(-float(cam["polarizer"]["angle"])))
+
     def write(self):
         sc, r = self.scene, self.scene["render"]
         root = ET.Element("scene", version="3.0.0")
@@ -105,7 +121,10 @@ class _Writer:
         ET.SubElement(root, "default", name="spp", value=str(r["spp"]))
         ET.SubElement(root, "default", name="seed", value="0")
         ET.SubElement(root, "default", name="max_depth", value=str(r.get("max_depth", 64)))
-        integ = ET.SubElement(root, "integrator", type="path")
+        parent = root
+        if r.get("output") == "stokes":
+            parent = ET.SubElement(root, "integrator", type="stokes")
+        integ = ET.SubElement(parent, "integrator", type="path")
         ET.SubElement(integ, "integer", name="max_depth", value="$max_depth")
         cam = sc["camera"]
         sensor = ET.SubElement(root, "sensor", type="perspective")
@@ -124,6 +143,8 @@ class _Writer:
         if env:
             em = ET.SubElement(root, "emitter", type="constant", id="environment")
             self.spectrum(em, "radiance", env["radiance"], "environment_radiance")
+        if cam.get("polarizer"):
+            self.polarizer(root, cam, r)
         for obj in sc["objects"]:
             self.shape(root, obj)
         ET.indent(root, space="  ")

@@ -67,6 +67,9 @@ def _value_problems(scene):
         for j, v in enumerate(row):
             if not _finite(v):
                 yield cam_name, f"to_world[{i}][{j}]", f"must be finite, got {v!r}"
+    pol = cam.get("polarizer")
+    if pol is not None and not _finite(pol["angle"]):
+        yield cam_name, "polarizer.angle", f"must be a finite angle in degrees, got {pol['angle']!r}"
     env = scene.get("environment")
     if env:
         for field, msg in spectra.check(env["radiance"], "radiance"):

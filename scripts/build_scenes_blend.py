@@ -47,6 +47,10 @@ def material(name, kind, **fields):
         if key == "reflectance":
             a.reflectance.kind, a.reflectance.value = "CONSTANT", value
             mat.diffuse_color = (value, value, value, 1.0)
+        elif key == "reflectance_named":
+            a.reflectance.kind, a.reflectance.named, a.reflectance.scale = "NAMED", value, 1.0
+        elif key in ("eta", "k"):
+            getattr(a, key).kind, getattr(a, key).value = "CONSTANT", value
         else:
             setattr(a, key, value)
     return mat
@@ -75,11 +79,14 @@ def add_area_light(scene, name, size, location, illuminant, scale):
     return obj
 
 
-def add_camera(scene, name, origin=(0, -4, 1), target=(0, 0, 0)):
+def add_camera(scene, name, origin=(0, -4, 1), target=(0, 0, 0), polarizer=None):
     cam = bpy.data.cameras.new(name)
     # The thesis cameras are Mitsuba's default: 50 mm on the 43.27 mm diagonal of 35 mm film,
     # which for a square image is a 30.594 mm side: 34.02 degrees horizontal field of view.
-    cam.lens, cam.sensor_width, cam.sensor_fit = 50.0, math.hypot(36.0, 24.0) / math.sqrt(2.0), "HORIZONTAL"
+    w, h = scene.render.resolution_x, scene.render.resolution_y
+    cam.lens, cam.sensor_width, cam.sensor_fit = 50.0, math.hypot(36.0, 24.0) * w / math.hypot(w, h), "HORIZONTAL"
+    if polarizer is not None:
+        cam.spectral_bench.polarizer, cam.spectral_bench.polarizer_angle = True, polarizer
     obj = bpy.data.objects.new(name, cam)
     obj.location = origin
     obj.rotation_euler = (Vector(target) - Vector(origin)).to_track_quat("-Z", "Y").to_euler()
@@ -88,13 +95,90 @@ def add_camera(scene, name, origin=(0, -4, 1), target=(0, 0, 0)):
     return obj
 
 
-def new_scene(name, case, spp, description):
+def new_scene(name, case, spp, description, resolution=(512, 512)):
     scene = bpy.data.scenes.new(name)
-    scene.render.resolution_x = scene.render.resolution_y = 512
+    scene.render.resolution_x, scene.render.resolution_y = resolution
     scene.render.resolution_percentage = 100
     a = scene.spectral_bench
     a.case, a.spp, a.max_depth, a.description = case, spp, 64, description
     return scene
+
+
+def uniform_world(name, kind, value):
+    world = bpy.data.worlds.new(name)
+    a = world.spectral_bench
+    a.enabled = True
+    if kind == "NAMED":
+        a.radiance.kind, a.radiance.named, a.radiance.scale = "NAMED", value, 1.0
+    else:
+        a.radiance.kind, a.radiance.value = "CONSTANT", value
+    return world
+
+
+def build_spectral_accuracy(square):
+    """Section 3.3.2: the 24-patch ColorChecker (N. Ohta's spectra), each patch a Lambertian
+    square, in front of a dark grey board, under a uniform CIE D65 or D50 environment."""
+    from spectral_bench.exporters import spectra
+    scenes = [new_scene(f"macbeth_chart_{ill}", "spectral_accuracy", 64,
+                        f"ColorChecker (N. Ohta's reflectances) under a uniform CIE {ill} environment",
+                        resolution=(620, 420)) for ill in ("D65", "D50")]
+    first = scenes[0]
+    board = add_object(first, "chart_board", square, material("board_0.042", "DIFFUSE", reflectance=0.042),
+                       "RECTANGLE", rotation=(math.radians(90), 0, 0))
+    board.scale = (7.0, 5.0, 1.0)
+    objects = [board]
+    for k, patch in enumerate(spectra.colorchecker_patches()):
+        row, col = divmod(k, 6)
+        mat = material(patch, "DIFFUSE", reflectance_named=patch)
+        # patches sit 1 mm in front of the board, so nothing is above their planes
+        objects.append(add_object(first, f"patch_{patch[len('colorchecker_'):]}", square, mat, "RECTANGLE",
+                                  location=(-5 + 2 * col, -0.001, 3 - 2 * row),
+                                  rotation=(math.radians(90), 0, 0), scale=0.95))
+    camera = add_camera(first, "chart_camera", origin=(0, -20, 0))
+    for ill, scene in zip(("D65", "D50"), scenes):
+        scene.world = uniform_world(f"uniform_{ill}", "NAMED", f"cie_{ill.lower()}")
+        if scene is not first:
+            for obj in objects + [camera]:
+                scene.collection.objects.link(obj)
+            scene.camera = camera
+
+
+def build_polarization(square, sphere):
+    """Section 3.3.3: Brewster reflection through a linear polariser, and Stokes spheres."""
+    from spectral_bench.exporters import spectra
+    brewster = math.degrees(math.atan(1.52))  # tan(theta_B) = n2 / n1, n1 = 1
+    glass = material("glass_1.52", "DIELECTRIC", int_ior=1.52, ext_ior=1.0, distribution="SMOOTH")
+    scenes = []
+    for angle in (0, 90):
+        scene = new_scene(f"polarizing_plane_{angle}", "polarization", 128,
+                          f"Smooth glass (n = 1.52) reflecting a D65 light at Brewster's angle ({brewster:.2f} deg) "
+                          f"into the camera through a linear polariser at {angle} degrees (0 = horizontal)")
+        scenes.append((angle, scene))
+    first = scenes[0][1]
+    plane = add_object(first, "glass_plane", square, glass, "RECTANGLE",
+                       rotation=(math.radians(90.0 - brewster), 0, 0))
+    light = add_area_light(first, "plane_light", 2.0, (0, 0, 2), "cie_d65", 4.0)
+    for angle, scene in scenes:
+        if scene is not first:
+            for obj in (plane, light):
+                scene.collection.objects.link(obj)
+        add_camera(scene, f"plane_camera_{angle}", origin=(0, -6, 0), polarizer=float(angle))
+
+    scene = new_scene("polarizing_spheres", "polarization", 128,
+                      "Two smooth glass spheres before a smooth conductor sphere (eta 0.27, k 2.78) under uniform "
+                      "light, all values at 550 nm; Stokes S0..S3 output")
+    scene.spectral_bench.output = "STOKES"
+    d65_550 = float(spectra.evaluate({"type": "named", "name": "cie_d65"}, [550.0])[0])
+    red_550 = float(spectra.evaluate({"type": "named", "name": "colorchecker_red"}, [550.0])[0])
+    scene.world = uniform_world("uniform_d65_at_550nm", "CONSTANT", round(d65_550, 6))
+    add_object(scene, "red_floor", square, material("red_at_550nm", "DIFFUSE", reflectance=round(red_550, 6)),
+               "RECTANGLE", location=(0, 5, -1), scale=15.0)
+    for side, x in (("left", -1.1), ("right", 1.1)):
+        add_object(scene, f"glass_sphere_{side}", sphere, glass, "SPHERE", location=(x, -1, 0))
+    metal = material("conductor_0.27_2.78", "CONDUCTOR", conductor_named=False, eta=0.27, k=2.78,
+                     distribution="SMOOTH")
+    add_object(scene, "conductor_sphere", sphere, metal, "SPHERE", location=(0, 1.5, 0.75), scale=1.5)
+    add_camera(scene, "spheres_camera", origin=(0, -7, 4))
 
 
 def build():
@@ -129,6 +213,8 @@ def build():
     # ill-conditioned; ours leaves a 0.25 gap.
     add_area_light(scene, "glass_light", 2.0, (0, 0, 1.25), "cie_d65", 5.0)
     add_camera(scene, "glass_camera")
+    build_spectral_accuracy(square)
+    build_polarization(square, sphere)
     for s in list(bpy.data.scenes):
         if not s.spectral_bench.case or s.name == "Scene":
             bpy.data.scenes.remove(s)

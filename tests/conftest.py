@@ -13,6 +13,9 @@ import pkg_bootstrap  # noqa: E402
 pkg_bootstrap.package()
 GOLDEN = ROOT / "golden" / "ir"
 REFLECTANCE = ["ggx_copper_50", "ggx_copper_60", "ggx_copper_70", "ggx_copper_80", "ggx_glass"]
+SPECTRAL_ACCURACY = ["macbeth_chart_D50", "macbeth_chart_D65"]
+POLARIZATION = ["polarizing_plane_0", "polarizing_plane_90", "polarizing_spheres"]
+ALL_SCENES = sorted(REFLECTANCE + SPECTRAL_ACCURACY + POLARIZATION)
 
 
 @pytest.fixture(scope="session")
@@ -38,3 +41,17 @@ def write_scene(tmp_path, scene, name=None):
     if name:
         sc["name"] = name
     return ir_json.write(sc, tmp_path / f"{sc['name']}.json")
+
+
+def render(scene, tmp_path, spp, size=None):
+    """Render an IR scene with the Mitsuba backend; returns (channel names, image)."""
+    from spectral_bench.batch import backends, exr
+    from spectral_bench.exporters import ir
+    sc = copy.deepcopy(scene)
+    if size:
+        sc["render"]["width"], sc["render"]["height"] = size
+    sc["needs"] = ir.derived_needs({k: v for k, v in sc.items() if k != "needs"})
+    backend = backends.get("mitsuba")
+    xml = backend.export(sc, Path(tmp_path) / "mitsuba")
+    backend.render(xml, backend.mode_for(sc)[0], spp, Path(tmp_path) / "render.exr")
+    return sc, *exr.read_image(Path(tmp_path) / "render.exr")

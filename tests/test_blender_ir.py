@@ -8,7 +8,7 @@ import textwrap
 
 import pytest
 
-from conftest import GOLDEN, REFLECTANCE, ROOT
+from conftest import ALL_SCENES, GOLDEN, REFLECTANCE, ROOT
 from spectral_bench.exporters import ir_json
 
 
@@ -32,20 +32,32 @@ def extracted():
     return bpy_script("print(json.dumps({n: (ir_json.dumps(r) if isinstance(r, dict) else str(r)) for n, r in results.items()}))")
 
 
-def test_scenes_blend_has_the_reflectance_case(extracted):
-    assert sorted(extracted) == REFLECTANCE
-    for name in REFLECTANCE:
-        assert json.loads(extracted[name])["case"] == "reflectance"
+def test_scenes_blend_has_every_case(extracted):
+    assert sorted(extracted) == ALL_SCENES
+    cases = {n: json.loads(extracted[n])["case"] for n in ALL_SCENES}
+    assert {n for n, c in cases.items() if c == "reflectance"} == set(REFLECTANCE)
+    assert cases["macbeth_chart_D65"] == "spectral_accuracy" and cases["polarizing_spheres"] == "polarization"
 
 
-@pytest.mark.parametrize("name", REFLECTANCE)
+def test_polarization_annotations_reach_the_ir(extracted):
+    plane = json.loads(extracted["polarizing_plane_90"])
+    assert plane["camera"]["polarizer"] == {"angle": 90.0}
+    assert "polarization" in plane["needs"] and "spectral" in plane["needs"]
+    spheres = json.loads(extracted["polarizing_spheres"])
+    assert spheres["render"]["output"] == "stokes" and spheres["needs"] == ["polarization"]
+    chart = json.loads(extracted["macbeth_chart_D50"])
+    assert chart["environment"]["radiance"] == {"type": "named", "name": "cie_d50", "scale": 1.0}
+    assert sum(1 for o in chart["objects"] if o["name"].startswith("patch_")) == 24
+
+
+@pytest.mark.parametrize("name", ALL_SCENES)
 def test_extraction_matches_golden_file(extracted, name):
     """A change to scenes.blend must show up as a reviewable diff of golden/ir/ (regenerate
     with scripts/update_golden.py)."""
     assert extracted[name] == (GOLDEN / f"{name}.json").read_text()
 
 
-@pytest.mark.parametrize("name", REFLECTANCE)
+@pytest.mark.parametrize("name", ALL_SCENES)
 def test_ir_json_ir_is_lossless(extracted, name, tmp_path):
     scene = json.loads(extracted[name])
     back = ir_json.load(ir_json.write(scene, tmp_path / f"{name}.json"))

@@ -4,7 +4,7 @@ import json
 
 import pytest
 
-from conftest import GOLDEN, REFLECTANCE, ROOT, metrics, run_batch
+from conftest import ALL_SCENES, GOLDEN, ROOT, metrics, run_batch
 from spectral_bench.batch import cli, runner
 
 ARGS = ["-c", "reflectance", "-s", "ggx_glass", "-s", "ggx_copper_60", "-r", "mitsuba", "--spp", "8",
@@ -61,12 +61,12 @@ def test_export_only_writes_every_format_per_scene(tmp_path):
     out = tmp_path / "exports"
     proc = run_batch("--export-only", "--format", "mitsuba", "--format", "json", "-o", out)
     assert proc.returncode == 0, proc.stderr[-2000:]
-    for name in REFLECTANCE:
+    for name in ALL_SCENES:
         assert (out / name / "mitsuba" / "scene.xml").is_file()
         exported = json.loads((out / name / "json" / f"{name}.json").read_text())
         assert exported == json.loads((GOLDEN / f"{name}.json").read_text())
     statuses = {(r["scene"], r["backend"]): r["status"] for r in metrics(out)["runs"]}
-    assert len(statuses) == 10 and set(statuses.values()) == {"ok"}
+    assert len(statuses) == 2 * len(ALL_SCENES) and set(statuses.values()) == {"ok"}
 
 
 def test_json_input_runs_like_the_blend(tmp_path):

@@ -35,7 +35,7 @@ def test_validate_build_install_enable_unregister(tmp_path):
         module = "bl_ext.user_default.spectral_bench"
         enabled = module in bpy.context.preferences.addons
         props = {{t: hasattr(getattr(bpy.types, t), "spectral_bench")
-                  for t in ("Material", "Light", "World", "Object", "Scene")}}
+                  for t in ("Material", "Light", "World", "Camera", "Object", "Scene")}}
         ops = hasattr(bpy.ops.spectral_bench, "export_json") and hasattr(bpy.ops.spectral_bench, "export_mitsuba")
         # the installed copy can export: annotate the default scene and write its JSON
         sc = bpy.context.scene
@@ -53,7 +53,7 @@ def test_validate_build_install_enable_unregister(tmp_path):
         mitsuba = bpy.ops.spectral_bench.export_mitsuba(filepath={str(tmp_path / "mitsuba_export")!r})
         addon_utils.disable(module, default_set=True)
         gone = {{t: hasattr(getattr(bpy.types, t), "spectral_bench")
-                 for t in ("Material", "Light", "World", "Object", "Scene")}}
+                 for t in ("Material", "Light", "World", "Camera", "Object", "Scene")}}
         gone_ops = hasattr(bpy.types, "SPECTRAL_BENCH_OT_export_json")
         print(json.dumps({{"validate": ok_validate, "build": ok_build, "zips": zips, "install": list(res),
                           "enabled": enabled, "props": props, "ops": ops, "exported": list(exported),

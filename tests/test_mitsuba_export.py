@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import REFLECTANCE, metrics, run_batch, write_scene
+from conftest import ALL_SCENES, metrics, run_batch, write_scene
 from spectral_bench.batch import exr, llvm
 from spectral_bench.exporters import ir, mitsuba_writer
 
@@ -22,17 +22,20 @@ def mitsuba(code, timeout=300):
     return proc.stdout.strip().splitlines()[-1]
 
 
-@pytest.mark.parametrize("name", REFLECTANCE)
+@pytest.mark.parametrize("name", ALL_SCENES)
 def test_export_loads_with_mi_load_file_and_renders(golden, tmp_path, name):
-    xml = mitsuba_writer.write(golden[name], tmp_path / name)
+    sc = golden[name]
+    variant = "scalar_spectral_polarized" if "polarization" in sc["needs"] else "scalar_spectral"
+    xml = mitsuba_writer.write(sc, tmp_path / name)
     out = mitsuba(f"""
         import mitsuba as mi, numpy as np
-        mi.set_variant("scalar_spectral")
+        mi.set_variant({variant!r})
         scene = mi.load_file({str(xml)!r})
         img = np.array(mi.render(scene, spp=1))
-        print(img.shape, float(img.mean()) > 0, bool(np.isfinite(img).all()))
+        print(img.shape[:2], float(img[..., :3].mean()) > 0, bool(np.isfinite(img).all()))
     """)
-    assert out == "(512, 512, 3) True True"
+    r = sc["render"]
+    assert out == f"({r['height']}, {r['width']}) True True"
 
 
 def test_mitsuba_command_line_renders_the_export(golden, tmp_path):
@@ -90,7 +93,7 @@ def test_emitter_radiance_is_one_at_560nm_times_scale(tmp_path):
     assert y == pytest.approx(expected, rel=0.01), (y, expected)
 
 
-@pytest.mark.parametrize("name", REFLECTANCE)
+@pytest.mark.parametrize("name", ALL_SCENES)
 def test_writer_output_matches_golden_folder(golden, tmp_path, name):
     """Any change of the Mitsuba writer shows as a reviewable diff of golden/mitsuba/
     (regenerate with scripts/update_golden.py)."""

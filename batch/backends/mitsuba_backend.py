@@ -11,6 +11,8 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
 from ...exporters import mitsuba_writer
 from .. import exr, llvm
 
@@ -50,9 +52,12 @@ class MitsubaBackend:
         if self.force_variant:
             return self.force_variant, None
         needs = set(scene.get("needs", []))
-        prefix = "llvm_ad_" if llvm.find()[0] else "scalar_"
+        llvm_ok = llvm.find()[0] is not None
+        prefix = "llvm_ad_" if llvm_ok else "scalar_"
         if "polarization" in needs:
-            return prefix + "spectral_polarized", None
+            if "spectral" in needs or not llvm_ok:  # Mitsuba ships no scalar_mono_polarized
+                return prefix + "spectral_polarized", None
+            return "llvm_ad_mono_polarized", None  # every spectrum is constant: one wavelength is exact
         if "spectral" in needs:
             return prefix + "spectral", None
         return prefix + "rgb", None
@@ -86,7 +91,10 @@ class MitsubaBackend:
     def _render_cli(self, xml_path, variant, spp, out_exr, seed, timeout, log_path):
         cmd = [self.executable, "-m", variant, f"-Dspp={spp}", f"-Dseed={seed}", "-o", str(out_exr), str(xml_path)]
         wall = self._run(cmd, timeout, log_path)
-        img = exr.read_rgb(out_exr)  # normalise channel layout to R, G, B
-        exr.write(out_exr, img)
+        names, img = exr.read_image(out_exr)  # normalise the channel layout
+        if names and names[0] == "Y":
+            img = np.concatenate([np.repeat(img[..., :1], 3, axis=-1), img[..., 1:]], axis=-1)
+            names = ["R", "G", "B"] + names[1:]
+        exr.write_image(out_exr, names, img)
         return {"variant": variant, "spp": spp, "passes": 1, "seed": seed, "time_s": wall, "wall_s": wall,
                 "resolution": [img.shape[1], img.shape[0]], "versions": {"mitsuba": "executable " + self.executable}}

@@ -1,0 +1,86 @@
+"""Camera rays and ray/shape intersections in numpy, for locating probe regions in an image.
+
+Only the IR's analytic shapes (rectangles, spheres) are intersected; meshes are ignored, so a
+probe is only derived for scenes made of them. Conventions are the IR's (exporters/ir.py).
+"""
+import numpy as np
+
+
+def camera_rays(camera, width, height, points="centers"):
+    """Origins (3,) and unit directions of rays through pixel centers (H, W, 3) or pixel
+    corners (H+1, W+1, 3). Pixel (0, 0) is the top-left one."""
+    m = np.asarray(camera["to_world"], dtype=np.float64)
+    t = np.tan(np.radians(camera["fov"]) / 2)
+    tx, ty = (t, t * height / width) if camera.get("fov_axis", "x") == "x" else (t * width / height, t)
+    if points == "centers":
+        xs, ys = (np.arange(width) + 0.5) / width, (np.arange(height) + 0.5) / height
+    else:
+        xs, ys = np.arange(width + 1) / width, np.arange(height + 1) / height
+    gx, gy = np.meshgrid((2 * xs - 1) * tx, (1 - 2 * ys) * ty)
+    local = np.stack([gx, gy, -np.ones_like(gx)], axis=-1)
+    d = local @ m[:3, :3].T
+    return m[:3, 3], d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+def hit_rectangle(shape, origin, dirs, margin=1.0):
+    """Distance t to the rectangle (inf where missed) for rays origin + t * dirs; ``margin``
+    < 1 shrinks the rectangle (0.7: its inner 70 %)."""
+    m = np.asarray(shape["to_world"], dtype=np.float64)
+    inv = np.linalg.inv(m)
+    o_local = (inv @ np.append(origin, 1.0))[:3] if np.ndim(origin) == 1 else (
+        origin @ inv[:3, :3].T + inv[:3, 3])
+    d_local = dirs @ inv[:3, :3].T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = -o_local[..., 2] / d_local[..., 2]
+    p = o_local + t[..., None] * d_local
+    inside = (np.abs(p[..., 0]) <= margin) & (np.abs(p[..., 1]) <= margin) & (t > 1e-9)
+    return np.where(inside, t, np.inf)
+
+
+def hit_sphere(shape, origin, dirs):
+    c = np.asarray(shape["center"], dtype=np.float64)
+    oc = origin - c
+    b = np.sum(dirs * oc, axis=-1)
+    disc = b * b - (np.sum(oc * oc, axis=-1) - shape["radius"] ** 2)
+    with np.errstate(invalid="ignore"):
+        s = np.sqrt(disc)
+    t0, t1 = -b - s, -b + s
+    t = np.where(t0 > 1e-9, t0, np.where(t1 > 1e-9, t1, np.inf))
+    return np.where(disc >= 0, t, np.inf)
+
+
+def hit(shape, origin, dirs, margin=1.0):
+    if shape["type"] == "rectangle":
+        return hit_rectangle(shape, origin, dirs, margin)
+    if shape["type"] == "sphere":
+        return hit_sphere(shape, origin, dirs)
+    return np.full(dirs.shape[:-1], np.inf)
+
+
+def nearest(objects, origin, dirs):
+    """(index of the nearest object or -1, distance) per ray."""
+    ts = np.stack([hit(o["shape"], origin, dirs) for o in objects], axis=0) if objects else np.full(
+        (1,) + dirs.shape[:-1], np.inf)
+    idx = np.argmin(ts, axis=0)
+    t = np.min(ts, axis=0)
+    return np.where(np.isfinite(t), idx, -1), t
+
+
+def rectangle_frame(shape):
+    """(center, unit normal, half extents along local x and y) of a rectangle."""
+    m = np.asarray(shape["to_world"], dtype=np.float64)
+    # the normal of a transformed plane is the inverse transpose applied to +Z
+    n = np.linalg.inv(m[:3, :3]).T @ np.array([0.0, 0.0, 1.0])
+    return m[:3, 3], n / np.linalg.norm(n), np.linalg.norm(m[:3, 0]), np.linalg.norm(m[:3, 1])
+
+
+def pixels_inside(camera, width, height, objects, index, margin=0.7):
+    """Mask (H, W) of pixels whose four corners see object ``index`` first, inside its inner
+    ``margin`` (for rectangles), so that the whole pixel shows that object."""
+    origin, dirs = camera_rays(camera, width, height, "corners")
+    who, _ = nearest(objects, origin, dirs)
+    ok = who == index
+    shape = objects[index]["shape"]
+    if shape["type"] == "rectangle":
+        ok &= np.isfinite(hit_rectangle(shape, origin, dirs, margin))
+    return ok[:-1, :-1] & ok[1:, :-1] & ok[:-1, 1:] & ok[1:, 1:]

@@ -1,0 +1,113 @@
+"""Polarisation case: Brewster reflection through a linear polariser (Fresnel probes, Malus'
+law, the angle convention) and Stokes output."""
+import copy
+
+import numpy as np
+import pytest
+
+from conftest import metrics, render, run_batch
+from spectral_bench.batch import probes
+from spectral_bench.exporters import ir
+
+SIZE = (128, 128)
+
+
+def _brewster(found):
+    return next(p for p in found if p["name"].startswith(("brewster", "reflection")))
+
+
+@pytest.fixture(scope="module")
+def polarization_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("pol") / "out"
+    proc = run_batch("-c", "polarization", "--scale", 0.25, "--alpha", 0.001, "-o", out)
+    return proc, out, {r["scene"]: r for r in metrics(out)["runs"]}
+
+
+def test_polarization_scenes_pass_probes_and_references(polarization_run):
+    proc, out, runs = polarization_run
+    assert sorted(runs) == ["polarizing_plane_0", "polarizing_plane_90", "polarizing_spheres"]
+    for name, run in runs.items():
+        assert run["status"] == "ok", (name, run["reason"], run["probes"])
+        assert run["probes"] and all(p["pass"] for p in run["probes"]), run["probes"]
+    assert runs["polarizing_plane_0"]["mode"].endswith("spectral_polarized")
+    assert runs["polarizing_spheres"]["mode"] in ("llvm_ad_mono_polarized", "scalar_spectral_polarized")
+    assert proc.returncode == 0
+
+
+def test_crossed_polariser_extinguishes_the_brewster_reflection(polarization_run):
+    _, _, runs = polarization_run
+    parallel = _brewster(runs["polarizing_plane_0"]["probes"])
+    crossed = _brewster(runs["polarizing_plane_90"]["probes"])
+    assert abs(parallel["incidence_deg"] - parallel["brewster_deg"]) < 1.0
+    # what is left is Rp away from the exact Brewster ray: about 1 % of the parallel image
+    assert np.mean(crossed["measured"]) < 0.02 * np.mean(parallel["measured"])
+    assert crossed["pass"] and parallel["pass"]
+
+
+def test_stokes_channels_are_named_and_physical(polarization_run):
+    _, out, runs = polarization_run
+    run = runs["polarizing_spheres"]
+    assert run["channels"] == ["R", "G", "B"] + [f"S{k}.{c}" for k in range(4) for c in "RGB"]
+    stokes = next(p for p in run["probes"] if p["name"].startswith("Stokes"))
+    assert stokes["pass"] is True and stokes["measured"] <= 1e-3
+
+
+def test_malus_law_at_45_degrees(golden, tmp_path):
+    sc = copy.deepcopy(golden["polarizing_plane_0"])
+    results = {}
+    for angle in (45.0, -45.0):
+        sc["camera"]["polarizer"]["angle"] = angle
+        scn, names, img = render(sc, tmp_path / str(angle), 256, SIZE)
+        p = _brewster(probes.evaluate(scn, names, img))
+        assert p["pass"], p
+        results[angle] = np.mean(p["measured"])
+    scn, names, img = render(golden["polarizing_plane_0"], tmp_path / "0", 256, SIZE)
+    parallel = np.mean(_brewster(probes.evaluate(scn, names, img))["measured"])
+    # half of the (almost fully s-polarised) reflection passes at +-45 degrees
+    assert results[45.0] == pytest.approx(results[-45.0], rel=0.03)
+    assert results[45.0] == pytest.approx(0.5 * parallel, rel=0.05)
+
+
+def _turned(scene, degrees):
+    """The plane and light turned about the camera's view axis (world +y here): the s direction
+    of the reflection then sits at ``degrees`` counter-clockwise from image right."""
+    sc = copy.deepcopy(scene)
+    a = np.radians(-degrees)  # a right-handed turn about +y by -d moves image right towards image up by d
+    rot = np.array([[np.cos(a), 0, np.sin(a), 0], [0, 1, 0, 0], [-np.sin(a), 0, np.cos(a), 0], [0, 0, 0, 1]])
+    for obj in sc["objects"]:
+        obj["shape"]["to_world"] = (rot @ np.asarray(obj["shape"]["to_world"])).tolist()
+    return sc
+
+
+def test_polariser_angle_convention_is_counter_clockwise_seen_from_the_camera(golden, tmp_path):
+    """With the reflection's s direction turned to +30 degrees, a polariser at +30 passes it and
+    one at -30 (60 degrees off) passes cos^2 60 = 1/4 of it: the writer maps the IR's angle
+    convention onto Mitsuba's polarizer correctly, and the probe agrees."""
+    base = _turned(golden["polarizing_plane_0"], 30.0)
+    measured = {}
+    for angle in (30.0, -30.0):
+        sc = copy.deepcopy(base)
+        sc["camera"]["polarizer"]["angle"] = angle
+        scn, names, img = render(sc, tmp_path / str(angle), 256, SIZE)
+        p = _brewster(probes.evaluate(scn, names, img))
+        assert p["pass"], p
+        measured[angle] = np.mean(p["measured"])
+    assert measured[-30.0] == pytest.approx(0.25 * measured[30.0], rel=0.1)
+
+
+def test_degree_of_polarisation_at_brewster_and_s1_sign(golden, tmp_path):
+    sc = copy.deepcopy(golden["polarizing_plane_0"])
+    del sc["camera"]["polarizer"]
+    sc["render"]["output"] = "stokes"
+    scn, names, img = render(sc, tmp_path, 256, SIZE)
+    assert "polarization" in ir.derived_needs(scn)
+    found = probes.evaluate(scn, names, img)
+    dop = next(p for p in found if p["name"].startswith("degree of polarisation"))
+    assert dop["pass"] and dop["measured"] > 0.95
+    refl = next(p for p in found if p["name"].startswith("reflection"))
+    assert refl["pass"]
+    # the s-polarised (horizontal) reflection has S1 > 0 in the IR's Stokes frame; the light seen
+    # directly at the top of the image is unpolarised
+    s1, s2 = img[..., names.index("S1.G")], img[..., names.index("S2.G")]
+    assert s1.sum() > 0 and abs(s2.sum()) < 0.05 * s1.sum()
+    assert abs(s1[:10].sum()) < 0.01 * s1.sum()
