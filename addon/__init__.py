@@ -1,7 +1,7 @@
 """Blender UI of the extension: annotation properties, operators, panels."""
-from . import operators, panels, properties
+from . import benchmark, operators, panels, properties
 
-_MODULES = (properties, operators, panels)
+_MODULES = (properties, benchmark, operators, panels)
 
 
 def register():

@@ -3,10 +3,12 @@ bpy.ops.spectral_bench.export_json / export_mitsuba). Logic lives in exporters/;
 from pathlib import Path
 
 import bpy
-from bpy.props import StringProperty
-from bpy_extras.io_utils import ExportHelper
+from bpy.props import BoolProperty, EnumProperty, StringProperty
+from bpy_extras.io_utils import ExportHelper, ImportHelper
 
+from ..batch import results
 from ..exporters import extract_blender, ir_json, mitsuba_writer, validate
+from . import benchmark
 
 
 def export_scene(scene, fmt, path):
@@ -51,12 +53,165 @@ class SPECTRAL_BENCH_OT_export_mitsuba(_ExportBase, bpy.types.Operator):
         return {"RUNNING_MODAL"}
 
 
+def _spectrum_target(context, path):
+    """The SpectrumProps at ``path`` (e.g. 'material.reflectance', 'light.radiance')."""
+    owner_name, _, field = path.partition(".")
+    owner = {"material": getattr(context, "material", None),
+             "light": context.object.data if context.object and context.object.type == "LIGHT" else None,
+             "world": context.scene.world}.get(owner_name)
+    if owner is None or not field:
+        raise ValueError(f"no spectrum at {path!r} in this context")
+    return getattr(owner.spectral_bench, field)
+
+
+def read_spectrum_file(path):
+    """[(wavelength nm, value)] from a two-column text file (.spd, .csv, .txt; '#' comments)."""
+    pairs = []
+    for n, line in enumerate(Path(path).read_text().splitlines(), 1):
+        line = line.split("#", 1)[0].replace(",", " ").replace(";", " ").strip()
+        if not line:
+            continue
+        parts = line.split()
+        try:
+            pairs.append((float(parts[0]), float(parts[1])))
+        except (IndexError, ValueError) as exc:
+            raise ValueError(f"{path}, line {n}: expected 'wavelength value', got {line!r}") from exc
+    if not pairs:
+        raise ValueError(f"{path}: no samples")
+    return pairs
+
+
+class SPECTRAL_BENCH_OT_load_spectrum(bpy.types.Operator, ImportHelper):
+    """Fill a sampled spectrum from a two-column file (wavelength in nm, value)"""
+    bl_idname = "spectral_bench.load_spectrum"
+    bl_label = "Load Spectrum File"
+    bl_options = {"UNDO"}
+    target: StringProperty(default="material.reflectance", options={"HIDDEN"})
+    filter_glob: StringProperty(default="*.spd;*.csv;*.txt", options={"HIDDEN"})
+
+    def execute(self, context):
+        try:
+            props = _spectrum_target(context, self.target)
+            pairs = read_spectrum_file(self.filepath)
+        except (OSError, ValueError) as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        props.kind = "SAMPLED"
+        props.samples.clear()
+        for w, v in pairs:
+            item = props.samples.add()
+            item.wavelength, item.value = w, v
+        self.report({"INFO"}, f"{len(pairs)} samples from {self.filepath}")
+        return {"FINISHED"}
+
+
+class SPECTRAL_BENCH_OT_spectrum_sample(bpy.types.Operator):
+    """Add or remove a row of a sampled spectrum's table"""
+    bl_idname = "spectral_bench.spectrum_sample"
+    bl_label = "Edit Spectrum Table"
+    bl_options = {"UNDO"}
+    target: StringProperty(default="material.reflectance", options={"HIDDEN"})
+    action: EnumProperty(items=[("ADD", "Add", ""), ("REMOVE", "Remove", "")])
+
+    def execute(self, context):
+        props = _spectrum_target(context, self.target)
+        if self.action == "ADD":
+            last = props.samples[-1].wavelength if len(props.samples) else 360.0
+            item = props.samples.add()
+            item.wavelength = last + 10.0
+        elif len(props.samples):
+            props.samples.remove(len(props.samples) - 1)
+        return {"FINISHED"}
+
+
+class SPECTRAL_BENCH_OT_run_benchmark(bpy.types.Operator):
+    """Render the benchmark scenes in the background with the chosen backends and compare them"""
+    bl_idname = "spectral_bench.run_benchmark"
+    bl_label = "Run Benchmark"
+    wait: BoolProperty(default=False, options={"HIDDEN", "SKIP_SAVE"},
+                       description="Block until the run ends (scripts)")
+    _timer = None
+
+    def execute(self, context):
+        try:
+            job = benchmark.start_run(context)
+        except RuntimeError as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        if self.wait:
+            job.wait()
+            benchmark.poll_run(context)
+        return {"FINISHED"}
+
+    def invoke(self, context, event):
+        if self.execute(context) != {"FINISHED"}:
+            return {"CANCELLED"}
+        wm = context.window_manager
+        self._timer = wm.event_timer_add(0.5, window=context.window)
+        wm.progress_begin(0, 100)
+        wm.modal_handler_add(self)
+        return {"RUNNING_MODAL"}
+
+    def modal(self, context, event):
+        if event.type != "TIMER":
+            return {"PASS_THROUGH"}
+        going = benchmark.poll_run(context)
+        job = benchmark._ACTIVE.get("job")
+        if job is not None and job.total:
+            context.window_manager.progress_update(int(100 * job.done_jobs() / job.total))
+        context.workspace.status_text_set(f"Spectral Bench: {benchmark.settings(context).status}")
+        for area in context.screen.areas:
+            area.tag_redraw()
+        if going:
+            return {"PASS_THROUGH"}
+        context.window_manager.event_timer_remove(self._timer)
+        context.window_manager.progress_end()
+        context.workspace.status_text_set(None)
+        return {"FINISHED"}
+
+
+class SPECTRAL_BENCH_OT_cancel_benchmark(bpy.types.Operator):
+    """Stop the running benchmark; finished results are kept"""
+    bl_idname = "spectral_bench.cancel_benchmark"
+    bl_label = "Cancel Benchmark"
+
+    def execute(self, context):
+        benchmark.cancel_run(context)
+        return {"FINISHED"}
+
+
+class SPECTRAL_BENCH_OT_load_result(bpy.types.Operator):
+    """Load a result image (render, reference or a diff) into an Image Editor"""
+    bl_idname = "spectral_bench.load_result"
+    bl_label = "Load Result Image"
+    scene: StringProperty()
+    backend: StringProperty(default="mitsuba")
+    kind: EnumProperty(items=[(k, k.replace("_", " ").title(), "") for k in results.IMAGE_KINDS])
+
+    def execute(self, context):
+        out_dir = bpy.path.abspath(benchmark.settings(context).output_dir)
+        try:
+            image = benchmark.load_result_image(out_dir, self.scene, self.backend, self.kind)
+        except (FileNotFoundError, RuntimeError) as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        screen = getattr(context, "screen", None)
+        for area in (screen.areas if screen else []):
+            if area.type == "IMAGE_EDITOR":
+                area.spaces.active.image = image
+                break
+        self.report({"INFO"}, f"loaded {image.name}")
+        return {"FINISHED"}
+
+
 def _menu(self, context):
     self.layout.operator(SPECTRAL_BENCH_OT_export_json.bl_idname, text="Spectral Bench JSON (.json)")
     self.layout.operator(SPECTRAL_BENCH_OT_export_mitsuba.bl_idname, text="Mitsuba 3 Scene Folder")
 
 
-CLASSES = (SPECTRAL_BENCH_OT_export_json, SPECTRAL_BENCH_OT_export_mitsuba)
+CLASSES = (SPECTRAL_BENCH_OT_export_json, SPECTRAL_BENCH_OT_export_mitsuba, SPECTRAL_BENCH_OT_load_spectrum,
+           SPECTRAL_BENCH_OT_spectrum_sample, SPECTRAL_BENCH_OT_run_benchmark, SPECTRAL_BENCH_OT_cancel_benchmark,
+           SPECTRAL_BENCH_OT_load_result)
 
 
 def register():

@@ -1,8 +1,18 @@
-"""Minimal annotation panels (Material, Light, World, Scene). Draw code only; no logic."""
+"""Panels: annotations (Material, Light, World, Camera, Object, Scene) with inline validation,
+and the benchmark panel (Properties > Scene). Draw code only: the logic is in validation.py,
+benchmark.py and batch/results.py, which tests call directly (draw() cannot run headless)."""
 import bpy
 
+from ..batch import results
+from . import benchmark, validation
 
-def _draw_spectrum(layout, props, label):
+
+def _draw_problems(layout, problems):
+    for msg in problems:
+        layout.label(text=msg, icon="ERROR")
+
+
+def _draw_spectrum(layout, props, label, target):
     box = layout.box()
     box.label(text=label)
     box.prop(props, "kind")
@@ -15,7 +25,15 @@ def _draw_spectrum(layout, props, label):
         box.prop(props, "temperature")
         box.prop(props, "scale")
     else:
-        box.label(text=f"{len(props.samples)} samples")
+        for item in props.samples:
+            row = box.row(align=True)
+            row.prop(item, "wavelength", text="nm")
+            row.prop(item, "value", text="")
+        row = box.row(align=True)
+        for action, icon in (("ADD", "ADD"), ("REMOVE", "REMOVE")):
+            op = row.operator("spectral_bench.spectrum_sample", text="", icon=icon)
+            op.target, op.action = target, action
+        row.operator("spectral_bench.load_spectrum", text="From File", icon="FILEBROWSER").target = target
 
 
 class _Base:
@@ -35,14 +53,14 @@ class SPECTRAL_BENCH_PT_material(_Base, bpy.types.Panel):
         a = context.material.spectral_bench
         self.layout.prop(a, "kind")
         if a.kind == "DIFFUSE":
-            _draw_spectrum(self.layout, a.reflectance, "Reflectance")
+            _draw_spectrum(self.layout, a.reflectance, "Reflectance", "material.reflectance")
         elif a.kind == "CONDUCTOR":
             self.layout.prop(a, "conductor_named")
             if a.conductor_named:
                 self.layout.prop(a, "conductor")
             else:
-                _draw_spectrum(self.layout, a.eta, "eta")
-                _draw_spectrum(self.layout, a.k, "k")
+                _draw_spectrum(self.layout, a.eta, "eta", "material.eta")
+                _draw_spectrum(self.layout, a.k, "k", "material.k")
         elif a.kind == "DIELECTRIC":
             self.layout.prop(a, "int_ior")
             self.layout.prop(a, "ext_ior")
@@ -50,6 +68,7 @@ class SPECTRAL_BENCH_PT_material(_Base, bpy.types.Panel):
             self.layout.prop(a, "distribution")
             if a.distribution != "SMOOTH":
                 self.layout.prop(a, "alpha")
+        _draw_problems(self.layout, validation.material_problems(context.material))
 
 
 class SPECTRAL_BENCH_PT_light(_Base, bpy.types.Panel):
@@ -61,7 +80,8 @@ class SPECTRAL_BENCH_PT_light(_Base, bpy.types.Panel):
         return isinstance(context.object and context.object.data, bpy.types.Light)
 
     def draw(self, context):
-        _draw_spectrum(self.layout, context.object.data.spectral_bench.radiance, "Radiance")
+        _draw_spectrum(self.layout, context.object.data.spectral_bench.radiance, "Radiance", "light.radiance")
+        _draw_problems(self.layout, validation.light_problems(context.object.data))
 
 
 class SPECTRAL_BENCH_PT_world(_Base, bpy.types.Panel):
@@ -76,7 +96,8 @@ class SPECTRAL_BENCH_PT_world(_Base, bpy.types.Panel):
         a = context.scene.world.spectral_bench
         self.layout.prop(a, "enabled")
         if a.enabled:
-            _draw_spectrum(self.layout, a.radiance, "Radiance")
+            _draw_spectrum(self.layout, a.radiance, "Radiance", "world.radiance")
+        _draw_problems(self.layout, validation.world_problems(context.scene.world))
 
 
 class SPECTRAL_BENCH_PT_scene(_Base, bpy.types.Panel):
@@ -116,8 +137,54 @@ class SPECTRAL_BENCH_PT_object(_Base, bpy.types.Panel):
         self.layout.prop(context.object.spectral_bench, "shape")
 
 
+class SPECTRAL_BENCH_PT_benchmark(_Base, bpy.types.Panel):
+    bl_label = "Spectral Benchmark"
+    bl_context = "scene"
+
+    def draw(self, context):
+        s = benchmark.settings(context)
+        layout = self.layout
+        col = layout.column(align=True)
+        for name, ok, why in benchmark.backend_states():
+            row = col.row()
+            row.enabled = ok
+            row.prop(s, f"use_{name}", text=name if ok else f"{name}: {why}")
+        layout.prop(s, "spp")
+        layout.prop(s, "scale")
+        layout.prop(s, "only_active")
+        layout.prop(s, "output_parent")
+        row = layout.row()
+        row.operator_context = "INVOKE_DEFAULT"
+        row.operator("spectral_bench.run_benchmark", icon="PLAY")
+        row.operator("spectral_bench.cancel_benchmark", icon="CANCEL")
+        if s.status:
+            layout.label(text=s.status)
+        layout.prop(s, "output_dir")
+        status = results.last_status(bpy.path.abspath(s.output_dir)) if s.output_dir else {}
+        for scene in sorted(status):
+            for backend, run in status[scene].items():
+                box = layout.box()
+                icon = {"ok": "CHECKMARK", "failed": "ERROR"}.get(run["status"], "INFO")
+                box.label(text=f"{scene} / {backend}: {run['status']}", icon=icon)
+                if run.get("reason"):
+                    box.label(text=run["reason"][:120])
+                m = run.get("metrics") or {}
+                if m.get("rmse") is not None:
+                    box.label(text="RMSE {rmse:.3g}  relMSE {relmse:.3g}  MAPE {mape:.3g}".format(**m)
+                              + (f"  FLIP {m['flip']:.3g}" if m.get("flip") is not None else ""))
+                for p in run.get("probes", [])[:30]:
+                    err = "" if p["error"] is None else f"{p['error']:.3g} {p['unit']}"
+                    mark = {True: "CHECKMARK", False: "ERROR"}.get(p["pass"], "QUESTION")
+                    box.label(text=f"{p['name']}: {err}", icon=mark)
+                row = box.row(align=True)
+                for kind in results.IMAGE_KINDS:
+                    if results.image_path(bpy.path.abspath(s.output_dir), scene, backend, kind):
+                        op = row.operator("spectral_bench.load_result", text=kind.replace("_", " "))
+                        op.scene, op.backend, op.kind = scene, backend, kind
+
+
 CLASSES = (SPECTRAL_BENCH_PT_material, SPECTRAL_BENCH_PT_light, SPECTRAL_BENCH_PT_world, SPECTRAL_BENCH_PT_camera,
-           SPECTRAL_BENCH_PT_scene, SPECTRAL_BENCH_PT_object)
+           SPECTRAL_BENCH_PT_scene, SPECTRAL_BENCH_PT_object, SPECTRAL_BENCH_PT_benchmark)
 
 
 def register():

@@ -12,13 +12,13 @@ from pathlib import Path
 
 from .backends import BACKENDS
 
-FORMATS = ("mitsuba", "json")
+FORMATS = ("mitsuba", "art", "json")
 
 DEFAULTS = {
     "input": None, "case": None, "scene": None, "renderer": None, "exec": None, "spp": None, "scale": 1.0,
     "out": None, "export_only": False, "format": None, "log": None, "visualize": False, "settings": None,
     "variant": None, "alpha": 0.01, "block": None, "min_samples": 65536, "timeout": 1800, "passes": 1, "seed": 0, "flip": True,
-    "references": None, "list": False,
+    "references": None, "list": False, "art_ggx": False,
 }
 
 
@@ -63,6 +63,8 @@ def parser():
     ap.add_argument("--no-flip", dest="flip", action="store_false", help="skip HDR-FLIP")
     ap.add_argument("--references", metavar="DIR", help="reference folder (default: references/)")
     ap.add_argument("--list", action="store_true", help="list the jobs and exit")
+    ap.add_argument("--art-ggx", action="store_true",
+                    help="write GGX_MICROFACET_DISTRIBUTION_CONST for an ART build that has GGX (upstream has Blinn only)")
     return ap
 
 

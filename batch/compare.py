@@ -97,16 +97,20 @@ class ZTest:
                 "z_max": self.z_max, "fraction_abs_z_over_3": self.frac_over_3, "pass": self.passed}
 
 
-def z_test(test, ref_mean, ref_var_of_mean, sigma2, spp, alpha=0.01, block=None, min_samples=MIN_SAMPLES):
+def z_test(test, ref_mean, ref_var_of_mean, sigma2, spp, alpha=0.01, block=None, min_samples=MIN_SAMPLES,
+           test_var_of_mean=None):
     """Block Z-test of ``test`` (s = spp samples per pixel) against the reference at the same
-    resolution; ``block`` None sizes blocks by ``min_samples``. A variance floor (1e-4 of the
-    image's mean level, squared) keeps exactly black regions from dividing by zero: any visible
-    light where the reference has none fails."""
+    resolution; ``block`` None sizes blocks by ``min_samples``. The render's variance is the
+    reference's per-sample variance over s, unless the render brings its own (per-pixel variance
+    of its mean from independent passes: another renderer's noise is its own). A variance floor
+    (1e-4 of the image's mean level, squared) keeps exactly black regions from dividing by zero:
+    any visible light where the reference has none fails."""
     block = block or block_size(spp, test.shape, min_samples)
     block = max(1, min(block, test.shape[0], test.shape[1]))
     n = block * block
     d = _block_sum(test.astype(np.float64) - ref_mean, block) / n
-    var = (_block_sum(sigma2, block) / spp + _block_sum(ref_var_of_mean, block)) / n**2
+    own = _block_sum(test_var_of_mean, block) if test_var_of_mean is not None else _block_sum(sigma2, block) / spp
+    var = (own + _block_sum(ref_var_of_mean, block)) / n**2
     floor = (1e-4 * max(float(np.mean(np.abs(ref_mean))), 1e-12)) ** 2
     z = d / np.sqrt(var + floor)
     p = np.vectorize(lambda x: math.erfc(abs(x) / math.sqrt(2)))(z) if z.size else np.ones(0)

@@ -17,6 +17,16 @@ from pathlib import Path
 MAX_WAVEFRONT = 1 << 24
 
 
+def flat_spectrum_rgb():
+    """Linear sRGB of the flat spectrum whose luminance is 1."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    import pkg_bootstrap
+    pkg_bootstrap.package()
+    from spectral_bench.batch import colorimetry
+    rgb = colorimetry.xyz_to_srgb(colorimetry.spectrum_xyz({"type": "constant", "value": 1.0}))
+    return rgb / colorimetry.spectrum_xyz({"type": "constant", "value": 1.0})[1]
+
+
 def channel_names(scene, count):
     """Channel names of the film's output (R, G, B or Y, then S0.R ... S3.B for Stokes)."""
     bitmap = scene.sensors()[0].film().bitmap()
@@ -69,9 +79,16 @@ def main(argv=None):
         images.append(acc / chunks)
     names = channel_names(scene, images[0].shape[-1])
     stack = np.stack(images)
-    if names[0] == "Y":  # monochrome variants: luminance stands for R = G = B
-        stack = np.concatenate([np.repeat(stack[..., :1], 3, axis=-1), stack[..., 1:]], axis=-1)
+    if names[0] == "Y":
+        # Monochrome variants are chosen only when every spectrum is constant, so the radiance at
+        # every pixel is a flat spectrum times the luminance Y: its RGB is Y times the RGB of the
+        # flat spectrum of Y = 1 (equal-energy white is not D65 white). Stokes channels alike.
+        tint = flat_spectrum_rgb()
+        stack = np.concatenate([stack[..., :1] * tint, stack[..., 1:]], axis=-1)
         names = ["R", "G", "B"] + names[1:]
+        for i, n in enumerate(names):
+            if "." in n:
+                stack[..., i] *= tint["RGB".index(n[-1])]
     mean = stack.mean(axis=0)
     extra = {}
     if args.passes > 1:

@@ -172,7 +172,9 @@ def brewster(scene, names, image):
             tol = np.sqrt(se**2 + (REL_SLACK * np.abs(exp_mean)) ** 2) + 1e-12
             z = np.abs(resid.mean(axis=0)) / tol
             out.append(_probe(name, exp_mean, meas_mean, float(z.max()), "sigma", bool(z.max() <= Z_MAX),
-                              pixels=int(mask.sum()), incidence_deg=float(np.degrees(np.arccos(cos_i[mask].mean()))),
+                              pixels=int(mask.sum()),
+                              incidence_deg=[float(np.degrees(np.arccos(cos_i[mask].max()))),
+                                             float(np.degrees(np.arccos(cos_i[mask].min())))],
                               brewster_deg=brewster_deg))
             if stokes and not pol:
                 s = [image[mask][:, names.index(f"S{k}.G")] for k in range(4)]

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..exporters import ir_json
+from ..exporters import art_writer, ir_json
 from . import backends, compare, exr, flip_isolated, previews, probes, references, scene_sources, summary
 from .progress import Progress
 
@@ -53,6 +53,8 @@ def make_backend(name, opts):
     kwargs = {"executable": execs.get(name) or (execs.get("*") if len(backend_names(opts)) == 1 else None)}
     if name == "mitsuba":
         kwargs["force_variant"] = opts["variant"]
+    if name == "art":
+        kwargs["ggx"] = bool(opts["art_ggx"])
     return backends.get(name, **kwargs)
 
 
@@ -106,7 +108,7 @@ class Run:
 
     # -- export only ------------------------------------------------------------------------
     def export_only(self, scenes):
-        formats = self.opts["format"] or ["mitsuba", "json"]
+        formats = self.opts["format"] or ["mitsuba", "art", "json"]
         progress = Progress(len(scenes) * len(formats))
         for name, scene in scenes:
             for fmt in formats:
@@ -117,9 +119,17 @@ class Run:
                     sc = for_run(scene, self.opts)
                     target = self.out / name / fmt
                     try:
-                        path = (ir_json.write(sc, target / f"{name}.json") if fmt == "json"
-                                else backends.get("mitsuba").export(sc, target))
-                        self.add(_entry(name, sc, fmt, mode="export", image=None,
+                        reason = ""
+                        if fmt == "json":
+                            path = ir_json.write(sc, target / f"{name}.json")
+                        elif fmt == "art":
+                            path, missing = art_writer.write(sc, target, ggx=bool(self.opts["art_ggx"]))
+                            reason = "; ".join(f"{o}.{f}: {m}" for o, f, m in missing)
+                        else:
+                            path = backends.get("mitsuba").export(sc, target)
+                        # an export that leaves something out says so: "unsupported", not "ok"
+                        self.add(_entry(name, sc, fmt, mode="export", image=None, status="unsupported" if reason else "ok",
+                                        reason=(f"ART cannot express: {reason}" if reason else ""),
                                         export=str(path.relative_to(self.out))))
                     except Exception as exc:  # noqa: BLE001 - one bad export must not stop the batch
                         self.add(_entry(name, sc, fmt, mode="export", status="failed", reason=f"export failed: {exc}"))
@@ -171,7 +181,7 @@ class Run:
         try:
             info = backend.render(xml, mode, r["spp"], image, passes=self.opts["passes"], seed=self.opts["seed"],
                                   timeout=self.opts["timeout"], log_path=res_dir / "render.log")
-        except backends.mitsuba_backend.BackendFailure as exc:
+        except backends.BackendFailure as exc:
             entry.update(status="failed", reason=f"render failed: {exc}")
             return entry
         entry.update(time_s=info["time_s"], wall_s=info["wall_s"], spp=info["spp"],
@@ -180,7 +190,10 @@ class Run:
         entry["channels"] = names
         entry["sanity"] = compare.image_sanity(test_all)
         previews.save_linear(res_dir / "render.png", test_all[..., :3])
-        self.compare(entry, scene, names, test_all, res_dir)
+        stderr = exr.read(image)
+        test_var = (np.stack([stderr[f"stderr.{n}"] for n in names], axis=-1).astype(np.float64) ** 2
+                    if all(f"stderr.{n}" in stderr for n in names) else None)
+        self.compare(entry, scene, names, test_all, res_dir, test_var)
         entry["probes"] = probes.evaluate(sc, names, test_all, reference=self.reference_for(entry, scene))
         bad = [p["name"] for p in entry["probes"] if p["pass"] is False]  # None: not measurable here
         if bad and entry["status"] == "ok":
@@ -192,7 +205,7 @@ class Run:
         ref = references.load(entry["scene"], self.opts["references"])
         return ref if references.check_usable(ref, scene) is None else None
 
-    def compare(self, entry, scene, names, test_all, res_dir):
+    def compare(self, entry, scene, names, test_all, res_dir, test_var=None):
         test = test_all[..., :3]
         ref = references.load(entry["scene"], self.opts["references"])
         unusable = references.check_usable(ref, scene)
@@ -216,7 +229,7 @@ class Run:
         entry["metrics"].update(compare.metrics(test, mean))
         # every channel is judged: R, G, B and, for Stokes output, S0..S3
         zt = compare.z_test(test_all, mean_all, var_all, sigma2_all, entry["spp"], alpha=self.opts["alpha"],
-                            block=self.opts["block"], min_samples=self.opts["min_samples"])
+                            block=self.opts["block"], min_samples=self.opts["min_samples"], test_var_of_mean=test_var)
         entry["test"] = zt.as_dict()
         exr.write(res_dir / "reference.exr", mean)
         exr.write(res_dir / "diff_abs.exr", np.abs(test - mean))

@@ -45,7 +45,7 @@ def spectrum(props):
     return {"type": "blackbody", "temperature": float(props.temperature), "scale": float(props.scale)}
 
 
-def _bsdf(mat):
+def material_bsdf(mat):
     a = mat.spectral_bench
     if a.kind == "DIFFUSE":
         return {"type": "diffuse", "reflectance": spectrum(a.reflectance)}
@@ -96,7 +96,7 @@ def _mesh_object(obj, depsgraph, problems):
         if not faces:
             problems.append((name, "data", "mesh has no faces (missing mesh)"))
         shape = {"type": "mesh", "to_world": _matrix(mw), "vertices": verts, "faces": faces}
-    return {"name": name, "shape": shape, "bsdf": _bsdf(mat), "emitter": None}
+    return {"name": name, "shape": shape, "bsdf": material_bsdf(mat), "emitter": None}
 
 
 def _light_object(obj, problems):

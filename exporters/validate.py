@@ -83,7 +83,7 @@ def _value_problems(scene):
         yield from ((name, f, m) for f, m in _shape_problems(obj["shape"], scene.get("_base_dir")))
         bsdf = obj.get("bsdf")
         if bsdf:
-            yield from ((name, "bsdf." + f, m) for f, m in _bsdf_problems(bsdf))
+            yield from ((name, "bsdf." + f, m) for f, m in bsdf_problems(bsdf))
         em = obj.get("emitter")
         if em:
             yield from ((name, "emitter." + f, m) for f, m in spectra.check(em["radiance"], "radiance"))
@@ -119,7 +119,7 @@ def _shape_problems(shape, base_dir):
                 yield "shape.vertices", "must be finite"
 
 
-def _bsdf_problems(bsdf):
+def bsdf_problems(bsdf):
     kind = bsdf["type"]
     if kind == "diffuse":
         yield from spectra.check(bsdf["reflectance"], "reflectance")

@@ -157,7 +157,11 @@ def build_polarization(square, sphere):
     first = scenes[0][1]
     plane = add_object(first, "glass_plane", square, glass, "RECTANGLE",
                        rotation=(math.radians(90.0 - brewster), 0, 0))
-    light = add_area_light(first, "plane_light", 2.0, (0, 0, 2), "cie_d65", 4.0)
+    # the camera's central ray meets the plane (normal 90 - theta_B off the vertical) at the
+    # origin at Brewster's angle and leaves 2 theta_B - 90 degrees off the vertical: centre the
+    # light on that ray at height 2
+    light_y = 2.0 * math.tan(math.radians(2 * brewster - 90.0))
+    light = add_area_light(first, "plane_light", 2.0, (0, light_y, 2), "cie_d65", 4.0)
     for angle, scene in scenes:
         if scene is not first:
             for obj in (plane, light):

@@ -55,3 +55,22 @@ def render(scene, tmp_path, spp, size=None):
     xml = backend.export(sc, Path(tmp_path) / "mitsuba")
     backend.render(xml, backend.mode_for(sc)[0], spp, Path(tmp_path) / "render.exr")
     return sc, *exr.read_image(Path(tmp_path) / "render.exr")
+
+
+def run_bpy(body, timeout=600, env=None):
+    """Run ``body`` in a child Python with bpy, scenes.blend open and the extension registered
+    (bpy has one global state per process); returns the JSON its last printed line holds."""
+    import os
+    import textwrap
+    code = textwrap.dedent(f"""
+        import json, sys
+        sys.path.insert(0, {str(ROOT)!r})
+        import pkg_bootstrap; pkg_bootstrap.package()
+        import bpy
+        from spectral_bench.batch import blend_input
+        blend_input.load_blend({str(ROOT / 'scenes.blend')!r})
+    """) + textwrap.dedent(body)
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=timeout,
+                          env=dict(os.environ, **(env or {})))
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-3000:]
+    return json.loads(proc.stdout.strip().splitlines()[-1])

@@ -1,8 +1,9 @@
 """Renderer backends. Each one exports an IR scene to its format, picks the cheapest mode that
 models what the scene needs (or says plainly that it cannot), and renders to EXR."""
-from .mitsuba_backend import MitsubaBackend
+from .art_backend import ArtBackend
+from .mitsuba_backend import BackendFailure, MitsubaBackend
 
-BACKENDS = {"mitsuba": MitsubaBackend}
+BACKENDS = {"mitsuba": MitsubaBackend, "art": ArtBackend}
 
 
 def get(name, **options):

@@ -1,0 +1,29 @@
+"""Inline validation of annotations for the panels: the IR's own checks, as messages.
+
+A panel shows these under the fields instead of letting an export raise later."""
+from ..exporters import extract_blender, spectra, validate
+
+
+def material_problems(mat):
+    a = mat.spectral_bench
+    if a.kind == "NONE":
+        return ["Not annotated: set a Model, or the exporter reports this material"]
+    if a.kind == "CONDUCTOR" and a.conductor_named and a.conductor not in spectra.NAMED_CONDUCTORS:
+        return [f"Unknown conductor {a.conductor!r}"]
+    bsdf = extract_blender.material_bsdf(mat)
+    return [f"{field}: {msg}" for field, msg in validate.bsdf_problems(bsdf)]
+
+
+def spectrum_problems(props, label):
+    return [f"{label}.{field}: {msg}" for field, msg in spectra.check(extract_blender.spectrum(props), label)]
+
+
+def light_problems(light):
+    if light.type != "AREA" or light.shape not in ("SQUARE", "RECTANGLE"):
+        return ["Only square or rectangular area lights are exported"]
+    return spectrum_problems(light.spectral_bench.radiance, "radiance")
+
+
+def world_problems(world):
+    a = world.spectral_bench
+    return spectrum_problems(a.radiance, "radiance") if a.enabled else []

@@ -1,0 +1,145 @@
+"""ART backend: runs the user's ``artist`` (ART 2.1.2) on a copy of the exported folder.
+
+artist compiles the .arm with gcc at render time, edits it in place and writes its outputs
+beside it, so every render works on a copy. It needs ART_RESOURCE_PATH and ART_LIBRARY_PATH
+(and the library on LD_LIBRARY_PATH); when they are unset they are derived from the
+executable's install prefix (<prefix>/bin/artist, <prefix>/lib). Options used:
+``-b`` (no viewer), ``-wp d65`` (linear sRGB with a D65 white, as Mitsuba's film), ``-s46e``
+(46 spectral samples at 10 nm instead of the default 8), ``-seed`` (reproducible passes), ``-p``
+when the scene needs polarisation. ART's EXR is linear float RGBA; a Stokes scene is written as
+ART's spectral EXR (S0..S3 per band, signs kept), converted here to R, G, B and S0.R ... S3.B
+with the CIE 1931 CMFs.
+"""
+import math
+import os
+import re
+import shutil
+import subprocess
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ...exporters import art_writer, spectra
+from .. import colorimetry, exr
+from .mitsuba_backend import BackendFailure
+
+NATIVE = {"spectral", "polarization"}
+
+
+def find_artist(executable=None):
+    if executable:
+        return Path(executable) if Path(executable).is_file() else None
+    found = shutil.which("artist")
+    return Path(found) if found else None
+
+
+def artist_env(artist):
+    env = dict(os.environ)
+    prefix = Path(artist).resolve().parent.parent
+    env.setdefault("ART_LIBRARY_PATH", str(prefix / "lib"))
+    env.setdefault("ART_RESOURCE_PATH", str(prefix / "lib" / "ART_Resources"))
+    env["LD_LIBRARY_PATH"] = os.pathsep.join(p for p in (env["ART_LIBRARY_PATH"], env.get("LD_LIBRARY_PATH")) if p)
+    return env
+
+
+def stokes_to_rgb(channels):
+    """R, G, B and S0.R ... S3.B from ART's spectral EXR channels 'S<k>.<nm>,<frac>nm'."""
+    bands = {}
+    for name, arr in channels.items():
+        m = re.match(r"S([0-3])\.(\d+)[,.](\d+)nm$", name)
+        if m:
+            bands.setdefault(int(m.group(1)), {})[float(f"{m.group(2)}.{m.group(3)}")] = arr
+    if sorted(bands) != [0, 1, 2, 3]:
+        raise BackendFailure(f"ART's spectral EXR has no S0..S3 bands (channels: {sorted(channels)[:8]}...)")
+    wls = np.array(sorted(bands[0]))
+    cmf_wl, x_bar, y_bar, z_bar = spectra.cie_1931_cmfs()
+    xb, yb, zb = (np.interp(wls, cmf_wl, c, 0, 0) for c in (x_bar, y_bar, z_bar))
+    step = np.gradient(wls) if len(wls) > 1 else np.ones(1)
+    norm = np.trapz(y_bar, cmf_wl)  # Y of a flat spectrum 1 is 1, as in colorimetry.xyz
+    out_names, planes = [], []
+    for k in range(4):
+        stack = np.stack([bands[k][w] for w in wls], axis=-1).astype(np.float64)  # H x W x bands
+        xyz = np.stack([stack @ (xb * step), stack @ (yb * step), stack @ (zb * step)], axis=-1) / norm
+        rgb = colorimetry.xyz_to_srgb(xyz)
+        planes += [rgb[..., i] for i in range(3)]
+        out_names += [f"S{k}.{c}" for c in "RGB"]
+    names = ["R", "G", "B"] + out_names
+    img = np.stack(planes[:3] + planes, axis=-1)
+    return names, img
+
+
+class ArtBackend:
+    name = "art"
+    formats = ("art",)
+
+    def __init__(self, executable=None, ggx=False):
+        self.executable, self.ggx = executable, ggx
+        self.artist = find_artist(executable)
+
+    def availability(self):
+        if self.artist is None:
+            where = self.executable or "PATH"
+            return False, (f"artist (ART 2.1.2) not found in {where}: give it with -e art=PATH, "
+                           "the settings file's exec, or PATH")
+        return True, ""
+
+    def mode_for(self, scene):
+        missing = sorted(set(scene.get("needs", [])) - NATIVE)
+        if missing:
+            return None, f"the ART writer does not map {', '.join(missing)} yet"
+        problems = art_writer.unsupported(scene, ggx=self.ggx)
+        if problems:
+            return None, "ART cannot express: " + "; ".join(f"{o}.{f}: {m}" for o, f, m in problems)
+        return ("spectral46_polarized" if "polarization" in scene.get("needs", []) else "spectral46"), None
+
+    def export(self, scene, out_dir):
+        return art_writer.write(scene, out_dir, ggx=self.ggx)[0]
+
+    def _render_once(self, arm, mode, spp, seed, timeout, log):
+        run_dir = arm.parent.parent / f"run_seed{seed}"
+        shutil.rmtree(run_dir, ignore_errors=True)
+        shutil.copytree(arm.parent, run_dir)
+        cmd = [str(self.artist), "scene.arm", "-b", "-j", str(os.cpu_count() or 1), f"-DSAMPLES={spp}",
+               "-wp", "d65", "-s46e", "-seed", str(seed + 1), "-f"]
+        if mode.endswith("polarized"):
+            cmd.append("-p")
+        t0 = time.perf_counter()
+        try:
+            proc = subprocess.run(cmd, cwd=run_dir, capture_output=True, text=True, timeout=timeout,
+                                  env=artist_env(self.artist))
+        except subprocess.TimeoutExpired as exc:
+            raise BackendFailure(f"artist timed out after {timeout} s") from exc
+        wall = time.perf_counter() - t0
+        log.write(f"$ (cd {run_dir}; {' '.join(cmd)})\n{proc.stdout}\n{proc.stderr}\n")
+        if proc.returncode != 0 or not (run_dir / "scene.exr").is_file():
+            tail = [l for l in proc.stderr.splitlines() if "Error" in l or "Reason" in l or "error:" in l][-3:]
+            raise BackendFailure(f"artist exited with {proc.returncode}: {' | '.join(tail)[-600:]}")
+        ch = exr.read(run_dir / "scene.exr")
+        if "S0.G" in ch or not any(k.startswith("S0.") for k in ch):
+            names = ["R", "G", "B"]
+            img = np.stack([ch[c] for c in "RGB"], axis=-1)
+        else:
+            names, img = stokes_to_rgb(ch)
+        shutil.rmtree(run_dir, ignore_errors=True)
+        return names, img.astype(np.float64), wall
+
+    def render(self, arm_path, mode, spp, out_exr, passes=1, seed=0, timeout=1800, log_path=None):
+        arm = Path(arm_path)
+        per_pass = math.ceil(spp / passes)
+        images, total = [], 0.0
+        with open(log_path or os.devnull, "w") as log:
+            for k in range(passes):
+                names, img, wall = self._render_once(arm, mode, per_pass, seed + k, timeout, log)
+                images.append(img)
+                total += wall
+        stack = np.stack(images)
+        extra = {}
+        if passes > 1:
+            stderr = stack.std(axis=0, ddof=1) / math.sqrt(passes)
+            extra = {f"stderr.{n}": stderr[..., i].astype(np.float32) for i, n in enumerate(names)}
+        exr.write_image(out_exr, names, stack.mean(axis=0), extra)
+        versions = {"art": f"artist {self.artist}"}
+        return {"variant": mode, "spp": per_pass * passes, "passes": passes, "seed": seed, "time_s": total,
+                "wall_s": total, "resolution": [int(stack.shape[2]), int(stack.shape[1])], "channels": names,
+                "versions": versions}

@@ -1,0 +1,39 @@
+"""Reading a batch runner's output folder (metrics.json and its images): shared by the
+Blender panel and anything else that inspects results, whoever started the run."""
+import json
+from pathlib import Path
+
+IMAGE_KINDS = {"render": "render.exr", "reference": "reference.exr", "diff_abs": "diff_abs.exr",
+               "diff_rel": "diff_rel.exr", "flip": "flip.exr", "zscore": "zscore.exr"}
+
+
+def load(out_dir):
+    """The metrics.json of an output folder, or None if there is none (yet)."""
+    path = Path(out_dir) / "metrics.json"
+    if not path.is_file():
+        return None
+    try:
+        return json.loads(path.read_text())
+    except ValueError:
+        return None  # being replaced right now; the next read gets it
+
+
+def latest_output(parent):
+    """The newest outputs-* folder with a metrics.json under ``parent``, or None."""
+    found = sorted(p for p in Path(parent).glob("outputs-*") if (p / "metrics.json").is_file())
+    return found[-1] if found else None
+
+
+def last_status(out_dir):
+    """{scene: {backend: run entry}} of an output folder (latest entry wins)."""
+    data = load(out_dir) or {"runs": []}
+    status = {}
+    for run in data["runs"]:
+        status.setdefault(run["scene"], {})[run["backend"]] = run
+    return status
+
+
+def image_path(out_dir, scene, backend, kind):
+    """Path of one result image, or None if that run did not write it."""
+    path = Path(out_dir) / scene / "results" / backend / IMAGE_KINDS[kind]
+    return path if path.is_file() else None

@@ -1,0 +1,226 @@
+"""ART (Advanced Rendering Toolkit 2.1.2) writer: IR scene -> folder with a self-contained
+scene.arm and, for meshes, meshes/*.ply (ART has no OBJ loader).
+
+Geometry is written in world coordinates (rectangles as quadrangles of their four corners,
+meshes pre-transformed), so no ART transform conventions are involved; spheres use ART's unit
+SPHERE scaled and translated. ART's camera has no up vector: it derives one from world +Z, which
+is the IR's up, so cameras must have no roll (reported otherwise).
+
+Radiometry: named CIE illuminants use ART's own tables, which are raw CIE data (D65 = 100 at
+560 nm), so the IR's scale s (1.0 at 560 nm) is written as s / 100. Every other non-constant
+spectrum is written as a point-sampled spectrum with the IR's values. ART's film then gives the
+same absolute radiance as Mitsuba's with ``-wp d65`` (linear sRGB with a D65 white; ART's
+default white point is D50). Measured: the ColorChecker under ART's D65 table renders within
+0.3 dE00 of the analytic probe with ``-s46e``; the same D65 written as a sampled (or regular)
+spectrum came out 10 % darker under ``-s46e`` (identical under the default 8 samples), so
+illuminants with an ART table use it.
+
+What ART cannot express is returned per object and field, never silently replaced:
+upstream ART has no GGX or Beckmann microfacets (Blinn only), named conductors only for Ag, Al,
+Au, Cu and Se, and its outside medium is vacuum.
+"""
+from pathlib import Path
+
+import numpy as np
+
+from . import ir, mesh_io, spectra
+
+# ART's own CIE illuminant tables are raw CIE data (D65 = 100 at 560 nm): the IR's scale s
+# (1.0 at 560 nm) becomes s / 100 on them
+ART_ILLUMINANTS = {"cie_a": "CIE_ILLUMINANT_A", "cie_d50": "CIE_ILLUMINANT_D50", "cie_d55": "CIE_ILLUMINANT_D55",
+                   "cie_d65": "CIE_ILLUMINANT_D65", "cie_d75": "CIE_ILLUMINANT_D75", "cie_fl2": "CIE_ILLUMINANT_FL2",
+                   "cie_fl7": "CIE_ILLUMINANT_FL7", "cie_fl11": "CIE_ILLUMINANT_FL11"}
+ART_TABLE_AT_560NM = 100.0
+ART_CONDUCTORS = {"Ag": "SILVER_MATERIAL", "Al": "ALUMINIUM_MATERIAL", "Au": "GOLD_MATERIAL",
+                  "Cu": "COPPER_MATERIAL", "Se": "SELENIUM_MATERIAL"}
+
+
+def _num(x):
+    return repr(round(float(x), 9))
+
+
+def _pnt(p):
+    return f"PNT3D({_num(p[0])}, {_num(p[1])}, {_num(p[2])})"
+
+
+class _Writer:
+    def __init__(self, scene, out_dir, ggx=False):
+        self.scene, self.out, self.ggx = scene, Path(out_dir), ggx
+        self.unsupported = []  # (object, field, message)
+        self.lines = []
+
+    def emission(self, spec):
+        """(colour, brightness) of an emitted spectrum."""
+        if spec.get("type") == "named" and spec["name"] in ART_ILLUMINANTS:
+            return ART_ILLUMINANTS[spec["name"]], spec.get("scale", 1.0) / ART_TABLE_AT_560NM
+        return self.colour(spec), 1.0
+
+    def colour(self, spec):
+        if spectra.is_constant(spec):
+            return f"CONST_COLOUR_GREY({_num(spec['value'])})"
+        wl, vals = spectra.tabulate(spec)
+        pts = [f"PNT2D({w:g} NM, {_num(v)})" for w, v in zip(wl, vals)]
+        rows = ",\n            ".join(", ".join(pts[i:i + 6]) for i in range(0, len(pts), 6))
+        return f"CONST_COLOUR_PSSPECTRUM(1.0,\n            {rows},\n            PSS_END)"
+
+    def surface(self, obj):
+        """ART material expression of an object's BSDF (None when unsupported)."""
+        b, name = obj["bsdf"], obj["name"]
+        if b["type"] == "diffuse":
+            return f"LAMBERT_REFLECTOR({self.colour(b['reflectance'])})"
+        rough = b.get("roughness")
+        surface = "SMOOTH_FRESNEL_SURFACE"
+        if rough is not None and rough["alpha"] > 0:
+            if rough["distribution"] == "ggx" and self.ggx:
+                surface = f"TORRANCE_SPARROW_SURFACE(GGX_MICROFACET_DISTRIBUTION_CONST({_num(rough['alpha'])}))"
+            else:
+                self.unsupported.append((name, "bsdf.roughness.distribution",
+                                         f"{rough['distribution']} microfacets: upstream ART has Blinn only "
+                                         "(use --art-ggx with an ART build that has GGX_MICROFACET_DISTRIBUTION_CONST)"))
+                return None
+        if b["type"] == "conductor":
+            if "material" in b:
+                if b["material"] not in ART_CONDUCTORS:
+                    self.unsupported.append((name, "bsdf.material",
+                                             f"ART has no named conductor {b['material']!r} "
+                                             f"(has {', '.join(sorted(ART_CONDUCTORS))})"))
+                    return None
+                material = ART_CONDUCTORS[b["material"]]
+            else:
+                material = f"STANDARD_MATERIAL({self.colour(b['eta'])}, {self.colour(b['k'])})"
+        else:
+            ext = b.get("ext_ior", ir.AIR_IOR)
+            if abs(ext - 1.0) > 1e-3:
+                self.unsupported.append((name, "bsdf.ext_ior", f"ART's outside medium is vacuum; got {ext}"))
+                return None
+            material = f"STANDARD_MATERIAL(CONST_COLOUR_GREY({_num(b['int_ior'])}), CONST_COLOUR_GREY(0.0))"
+            if obj["shape"]["type"] != "rectangle":
+                # a dielectric solid takes its surface and its interior medium as two attributes;
+                # SUPPLY_MATERIAL rendered ART's glass spheres dark (measured), while a lone
+                # quadrangle, which bounds no solid, needs it (the thesis' scenes do the same)
+                return f"{surface} : {material}"
+        return f"SUPPLY_MATERIAL({surface}, {material})"
+
+    def shape(self, k, obj, material):
+        s, var = obj["shape"], f"obj{k}"
+        self.lines.append(f"    // {obj['name']}")
+        if s["type"] == "rectangle":
+            m = np.asarray(s["to_world"], dtype=np.float64)
+            corners = [m @ np.array([x, y, 0.0, 1.0]) for x, y in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
+            self.lines.append(f"    Pnt3D * {var}_points = ALLOC_ARRAY(Pnt3D, 5);")
+            for i, c in enumerate(corners):
+                self.lines.append(f"    {var}_points[{i}] = {_pnt(c[:3])};")
+            self.lines += [f"    {var}_points[4] = PNT3D_HUGE;",
+                           f"    ArObj {var} = [ QUADRANGLE(0, 1, 2, 3) apply",
+                           f"        : arnvertexset(art_gv, {var}_points, NULL, NULL, NULL, NULL)",
+                           f"        : {material} ];"]
+        elif s["type"] == "sphere":
+            c = s["center"]
+            self.lines.append(f"    ArObj {var} = [ SPHERE apply : {material} : USCALE({_num(s['radius'])})"
+                              f" : TRANSLATION({_num(c[0])}, {_num(c[1])}, {_num(c[2])}) ];")
+        else:
+            verts, faces = mesh_io.load_mesh(s, self.scene.get("_base_dir"))
+            v = np.asarray(verts, dtype=np.float64)
+            if "to_world" in s:
+                m = np.asarray(s["to_world"], dtype=np.float64)
+                v = v @ m[:3, :3].T + m[:3, 3]
+            rel = f"meshes/{obj['name']}.ply"
+            mesh_io.write_ply(self.out / rel, v, faces)
+            self.lines.append(f'    ArObj {var} = [ PLY_MESH("{rel}") apply : {material} ];')
+        return var
+
+    def camera(self):
+        cam, r = self.scene["camera"], self.scene["render"]
+        m = np.asarray(cam["to_world"], dtype=np.float64)
+        eye, forward, up = m[:3, 3], -m[:3, 2] / np.linalg.norm(m[:3, 2]), m[:3, 1] / np.linalg.norm(m[:3, 1])
+        horizontal = np.cross(forward, np.array([0.0, 0.0, 1.0]))
+        if np.linalg.norm(horizontal) < 1e-3:
+            self.unsupported.append((cam.get("name", "camera"), "to_world", "ART cannot look straight along the vertical"))
+        else:
+            expected_up = np.cross(horizontal / np.linalg.norm(horizontal), forward)
+            if expected_up @ up < 1 - 1e-6:
+                self.unsupported.append((cam.get("name", "camera"), "to_world",
+                                         "camera roll: ART takes its up vector from world +Z"))
+        w, h = r["width"], r["height"]
+        t = np.tan(np.radians(cam["fov"]) / 2)
+        t_diag = t * np.hypot(w, h) / (w if cam.get("fov_axis", "x") == "x" else h)
+        zoom = 1.0 / (2.0 * t_diag)  # ArnCamera: tan(half diagonal field of view) = 1 / (2 zoom)
+        return (f"[ CAMERA imageSize: IVEC2D({w}, {h}) ray: RAY3D({_pnt(eye)}, "
+                f"VEC3D({_num(forward[0])}, {_num(forward[1])}, {_num(forward[2])})) zoom: {_num(zoom)} ]")
+
+    def actions(self):
+        sc, r = self.scene, self.scene["render"]
+        # the pixel sampler needs a light source collection even when only the environment emits
+        acts = ["CREATE_STANDARD_RAYCASTING_ACCELERATION_STRUCTURE",
+                "[ LIGHTSOURCE_COLLECTOR sampler2D: STANDARD_SAMPLER_2D resolution: 5 type: arlightsourcetype_area ]"]
+        acts.append("[ STOCHASTIC_PIXEL_SAMPLER\n"
+                    "            sampleProvider: [ PATHTRACER rayCaster: STANDARD_RAYCASTER "
+                    f"maximalRecursion: {r.get('max_depth', 64)} ]\n"
+                    "            sampleSplattingKernel: BOX_KERNEL\n"
+                    "            samplesPerPixel: SAMPLES\n"
+                    "            randomValueGeneration: PSEUDORANDOM_SEQUENCE ]")
+        pol = sc["camera"].get("polarizer")
+        if pol:
+            # ART's filter angle: transmission axis, 0 = horizontal, counter-clockwise as seen
+            # from the camera (the IR's convention; tests/test_art.py checks it when ART is present)
+            acts.append(f"[ LINEAR_POLARISATION_FILTER angle: {_num(pol['angle'])} DEGREES strength: 1.0 ]")
+        if r.get("output") == "stokes":
+            acts.append("[ IMAGECONVERSION_ARTRAW_TO_SPECTRAL_EXR removeSource: NO ]")
+        else:
+            acts += ["[ IMAGECONVERSION_ARTRAW_TO_ARTCSP removeSource: NO ]",
+                     "[ IMAGECONVERSION_ARTCSP_TO_EXR removeSource: YES ]"]
+        return ",\n        ".join(acts + ["ACTION_SEQUENCE_END"])
+
+    def write(self):
+        sc = self.scene
+        self.lines = [f"// {sc['name']} ({sc.get('case')}), written from the scene IR v{ir.VERSION} by spectral_bench",
+                      f"#ifndef SAMPLES\n#define SAMPLES {sc['render']['spp']}\n#endif", "",
+                      "ARM_MAIN_FUNCTION(scene)", "{"]
+        names = []
+        for k, obj in enumerate(sc["objects"]):
+            if obj.get("emitter"):
+                colour, brightness = self.emission(obj["emitter"]["radiance"])
+                material = f"LAMBERT_EMITTER({colour}, {_num(brightness)})"
+                if obj.get("bsdf"):
+                    self.unsupported.append((obj["name"], "bsdf", "an emitter with a BSDF (ART emitters reflect nothing)"))
+            else:
+                material = self.surface(obj)
+            if material is None:
+                continue
+            names.append(self.shape(k, obj, material))
+        env = sc.get("environment")
+        env_line = None
+        if env:
+            colour, brightness = self.emission(env["radiance"])
+            env_line = f"UNIFORM_ENVIRONMENT_MATERIAL({colour}, {_num(brightness)})"
+        self.lines += ["", f"    id geometry = UNION({', '.join(names)}, UNION_END);",
+                       f"    id camera = {self.camera()};",
+                       f"    id actions = ACTION_SEQUENCE(\n        {self.actions()}\n        );",
+                       "    return [ SCENE", "        sceneGeometry: geometry"]
+        if env_line:
+            self.lines.append(f"        environmentMaterial: {env_line}")
+        self.lines += ["        camera: camera", "        actionSequence: actions", "        ];", "}", ""]
+        self.out.mkdir(parents=True, exist_ok=True)
+        path = self.out / "scene.arm"
+        path.write_text("\n".join(self.lines))
+        return path
+
+
+def unsupported(scene, ggx=False):
+    """[(object, field, message)] of what ART cannot express in ``scene``, without writing."""
+    w = _Writer(scene, Path("."), ggx=ggx)
+    for obj in scene["objects"]:
+        if obj.get("emitter"):
+            if obj.get("bsdf"):
+                w.unsupported.append((obj["name"], "bsdf", "an emitter with a BSDF (ART emitters reflect nothing)"))
+        else:
+            w.surface(obj)
+    w.camera()
+    return w.unsupported
+
+
+def write(scene, out_dir, ggx=False):
+    """Write ``scene``; returns (path of scene.arm, [(object, field, message) ART cannot express])."""
+    w = _Writer(scene, out_dir, ggx=ggx)
+    path = w.write()
+    return path, w.unsupported
