@@ -7,7 +7,7 @@ from bpy.props import BoolProperty, EnumProperty, StringProperty
 from bpy_extras.io_utils import ExportHelper, ImportHelper
 
 from ..batch import results
-from ..exporters import extract_blender, ir_json, mitsuba_writer, validate
+from ..exporters import art_writer, extract_blender, ir_json, mitsuba_writer, validate
 from . import benchmark
 
 
@@ -16,6 +16,10 @@ def export_scene(scene, fmt, path):
     data = extract_blender.extract_scene(scene)
     if fmt == "json":
         return ir_json.write(data, path)
+    if fmt == "art":
+        out, missing = art_writer.write(data, Path(path))
+        export_scene.last_unsupported = missing
+        return out
     return mitsuba_writer.write(data, Path(path))
 
 
@@ -28,6 +32,8 @@ class _ExportBase:
         except validate.SceneError as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
+        for obj, field, msg in getattr(export_scene, "last_unsupported", []) if self.fmt == "art" else []:
+            self.report({"WARNING"}, f"ART cannot express {obj}.{field}: {msg} (left out)")
         self.report({"INFO"}, f"wrote {out}")
         return {"FINISHED"}
 
@@ -47,6 +53,19 @@ class SPECTRAL_BENCH_OT_export_mitsuba(_ExportBase, bpy.types.Operator):
     bl_label = "Export Mitsuba 3 Scene Folder"
     filepath: StringProperty(subtype="DIR_PATH")
     fmt = "mitsuba"
+
+    def invoke(self, context, event):
+        context.window_manager.fileselect_add(self)
+        return {"RUNNING_MODAL"}
+
+
+class SPECTRAL_BENCH_OT_export_art(_ExportBase, bpy.types.Operator):
+    """Export the active scene as an ART 2.1.2 folder (scene.arm, PLY meshes); what ART cannot
+    express is reported, not substituted"""
+    bl_idname = "spectral_bench.export_art"
+    bl_label = "Export ART Scene Folder"
+    filepath: StringProperty(subtype="DIR_PATH")
+    fmt = "art"
 
     def invoke(self, context, event):
         context.window_manager.fileselect_add(self)
@@ -207,9 +226,11 @@ class SPECTRAL_BENCH_OT_load_result(bpy.types.Operator):
 def _menu(self, context):
     self.layout.operator(SPECTRAL_BENCH_OT_export_json.bl_idname, text="Spectral Bench JSON (.json)")
     self.layout.operator(SPECTRAL_BENCH_OT_export_mitsuba.bl_idname, text="Mitsuba 3 Scene Folder")
+    self.layout.operator(SPECTRAL_BENCH_OT_export_art.bl_idname, text="ART Scene Folder (.arm)")
 
 
-CLASSES = (SPECTRAL_BENCH_OT_export_json, SPECTRAL_BENCH_OT_export_mitsuba, SPECTRAL_BENCH_OT_load_spectrum,
+CLASSES = (SPECTRAL_BENCH_OT_export_json, SPECTRAL_BENCH_OT_export_mitsuba, SPECTRAL_BENCH_OT_export_art,
+           SPECTRAL_BENCH_OT_load_spectrum,
            SPECTRAL_BENCH_OT_spectrum_sample, SPECTRAL_BENCH_OT_run_benchmark, SPECTRAL_BENCH_OT_cancel_benchmark,
            SPECTRAL_BENCH_OT_load_result)
 

@@ -32,7 +32,7 @@ def hit_rectangle(shape, origin, dirs, margin=1.0):
     d_local = dirs @ inv[:3, :3].T
     with np.errstate(divide="ignore", invalid="ignore"):
         t = -o_local[..., 2] / d_local[..., 2]
-    p = o_local + t[..., None] * d_local
+    p = o_local + np.where(np.isfinite(t), t, 0.0)[..., None] * d_local
     inside = (np.abs(p[..., 0]) <= margin) & (np.abs(p[..., 1]) <= margin) & (t > 1e-9)
     return np.where(inside, t, np.inf)
 

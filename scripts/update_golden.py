@@ -1,5 +1,5 @@
-"""Regenerate golden/ir/<scene>.json from scenes.blend and golden/mitsuba/<scene>/ from those
-(an explicit request; review the diff).
+"""Regenerate golden/ir/<scene>.json from scenes.blend, and golden/mitsuba/<scene>/ and
+golden/art/<scene>/ from those (an explicit request; review the diff).
 
     .venv/bin/python scripts/update_golden.py
 """
@@ -14,7 +14,7 @@ def main():
     pkg = pkg_bootstrap.package()
     from spectral_bench.batch import blend_input
     import shutil
-    from spectral_bench.exporters import ir_json, mitsuba_writer
+    from spectral_bench.exporters import art_writer, ir_json, mitsuba_writer
     golden = pkg_bootstrap.ROOT / "golden"
     for name, result in blend_input.load_blend(pkg_bootstrap.ROOT / "scenes.blend"):
         if isinstance(result, Exception):
@@ -22,6 +22,8 @@ def main():
         print("wrote", ir_json.write(result, golden / "ir" / f"{name}.json"))
         shutil.rmtree(golden / "mitsuba" / name, ignore_errors=True)
         print("wrote", mitsuba_writer.write(result, golden / "mitsuba" / name))
+        shutil.rmtree(golden / "art" / name, ignore_errors=True)
+        print("wrote", art_writer.write(result, golden / "art" / name)[0])
 
 
 if __name__ == "__main__":

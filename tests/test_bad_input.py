@@ -77,7 +77,7 @@ def test_batch_goes_on_after_bad_scenes_and_exit_status_says_so(golden, tmp_path
         sc["name"] = f"bad_{how}"
         bad_paths.append(ir_json.write(sc, tmp_path / f"bad_{how}.json"))
     out = tmp_path / "out"
-    proc = run_batch("-i", bad_paths[0], good, bad_paths[1], "--scale", 0.125, "--spp", 16, "--no-flip", "-o", out)
+    proc = run_batch("-r", "mitsuba", "-i", bad_paths[0], good, bad_paths[1], "--scale", 0.125, "--spp", 16, "--no-flip", "-o", out)
     assert proc.returncode == 1, proc.stderr[-2000:]
     runs = {r["scene"]: r for r in metrics(out)["runs"]}
     assert runs["ggx_glass"]["status"] == "ok", runs["ggx_glass"]

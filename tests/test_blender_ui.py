@@ -126,3 +126,19 @@ def test_register_unregister_leaves_no_trace():
     """)
     assert out["gone"] == {"props": [], "wm": False, "ops": []}
     assert out["back"]
+
+
+def test_file_export_operators_write_loadable_folders(tmp_path):
+    out = run_bpy(f"""
+        res = {{}}
+        with bpy.context.temp_override(scene=bpy.data.scenes["ggx_copper_70"]):
+            res["art"] = list(bpy.ops.spectral_bench.export_art(filepath={str(tmp_path / 'art')!r}))
+            res["mitsuba"] = list(bpy.ops.spectral_bench.export_mitsuba(filepath={str(tmp_path / 'mi')!r}))
+            res["json"] = list(bpy.ops.spectral_bench.export_json(filepath={str(tmp_path / 'ir.json')!r}))
+        print(json.dumps(res))
+    """)
+    assert out == {"art": ["FINISHED"], "mitsuba": ["FINISHED"], "json": ["FINISHED"]}
+    assert "ARM_MAIN_FUNCTION(scene)" in (tmp_path / "art" / "scene.arm").read_text()
+    assert (tmp_path / "mi" / "scene.xml").is_file()
+    from spectral_bench.exporters import ir_json
+    assert ir_json.load(tmp_path / "ir.json")["name"] == "ggx_copper_70"

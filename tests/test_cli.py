@@ -71,7 +71,7 @@ def test_export_only_writes_every_format_per_scene(tmp_path):
 
 def test_json_input_runs_like_the_blend(tmp_path):
     out = tmp_path / "o"
-    proc = run_batch("-i", GOLDEN / "ggx_copper_80.json", "--scale", "0.125", "--spp", "16", "--no-flip", "-o", out)
+    proc = run_batch("-r", "mitsuba", "-i", GOLDEN / "ggx_copper_80.json", "--scale", "0.125", "--spp", "16", "--no-flip", "-o", out)
     runs = metrics(out)["runs"]
     assert [r["scene"] for r in runs] == ["ggx_copper_80"] and runs[0]["status"] in ("ok", "failed")
     assert runs[0]["resolution"] == [64, 64] and runs[0]["spp"] == 16

@@ -54,7 +54,7 @@ def test_mitsuba_command_line_renders_the_export(golden, tmp_path):
 def test_batch_exec_option_uses_the_mitsuba_executable(golden, tmp_path):
     exe = Path(sys.executable).with_name("mitsuba")
     out = tmp_path / "out"
-    proc = run_batch("-i", write_scene(tmp_path, golden["ggx_copper_80"]), "-e", f"mitsuba={exe}",
+    proc = run_batch("-r", "mitsuba", "-i", write_scene(tmp_path, golden["ggx_copper_80"]), "-e", f"mitsuba={exe}",
                      "--scale", 0.0625, "--spp", 4, "--no-flip", "--variant", "scalar_spectral", "-o", out)
     run = metrics(out)["runs"][0]
     assert run["versions"]["mitsuba"].startswith("executable"), run

@@ -19,7 +19,7 @@ def _brewster(found):
 @pytest.fixture(scope="module")
 def polarization_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("pol") / "out"
-    proc = run_batch("-c", "polarization", "--scale", 0.25, "--alpha", 0.001, "-o", out)
+    proc = run_batch("-r", "mitsuba", "-c", "polarization", "--scale", 0.25, "--alpha", 0.001, "-o", out)
     return proc, out, {r["scene"]: r for r in metrics(out)["runs"]}
 
 

@@ -16,7 +16,7 @@ def batch_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("reflectance") / "out"
     # alpha 0.001: five scenes judged at once keep the chance of a false alarm near 0.5 % per run
     # (renders are seeded, so a run repeats; benchmarks/CALIBRATION.md has the measured rates)
-    proc = run_batch("-c", "reflectance", "--scale", SCALE, "--spp", SPP, "--alpha", 0.001, "-o", out)
+    proc = run_batch("-r", "mitsuba", "-c", "reflectance", "--scale", SCALE, "--spp", SPP, "--alpha", 0.001, "-o", out)
     return proc, out, {r["scene"]: r for r in metrics(out)["runs"]}
 
 

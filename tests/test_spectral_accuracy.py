@@ -48,7 +48,7 @@ def test_white_patch_under_d65_is_neutral_in_the_probe():
 @pytest.fixture(scope="module")
 def chart_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("charts") / "out"
-    proc = run_batch("-c", "spectral_accuracy", "--scale", 0.5, "--spp", 64, "--alpha", 0.001, "-o", out)
+    proc = run_batch("-r", "mitsuba", "-c", "spectral_accuracy", "--scale", 0.5, "--spp", 64, "--alpha", 0.001, "-o", out)
     return proc, out, {r["scene"]: r for r in metrics(out)["runs"]}
 
 
