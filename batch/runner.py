@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ..exporters import art_writer, ir_json
-from . import backends, compare, exr, flip_isolated, previews, probes, references, scene_sources, summary
+from . import backends, compare, exr, flip_isolated, previews, probes, references, scene_sources, summary, sweep
 from .progress import Progress
 
 log = logging.getLogger("spectral_bench")
@@ -90,11 +90,14 @@ class Run:
         self.opts = opts
         self.out = output_dir(opts)
         self.runs = []
+        self.sweeps = []
         self.started = _dt.datetime.now().isoformat(timespec="seconds")
 
     def save(self):
         data = {"started": self.started, "options": {k: v for k, v in self.opts.items() if k != "exec"},
                 "runs": self.runs}
+        if self.sweeps:
+            data["sweeps"] = self.sweeps
         tmp = self.out / "metrics.json.tmp"
         tmp.write_text(json.dumps(data, indent=1, default=str) + "\n")
         tmp.replace(self.out / "metrics.json")
@@ -162,7 +165,61 @@ class Run:
                 except Exception as exc:  # noqa: BLE001 - one crashed job must not stop the batch
                     log.exception("job %s / %s crashed", name, bname)
                     self.add(_entry(name, scene, bname, status="failed", reason=f"internal error: {exc!r}"))
+                if self.opts["sweep"]:
+                    self.sweep_one(name, scene, backend)
                 progress.step(f"{name} ({bname})")
+        if self.opts["sweep"]:
+            self.finish_sweeps()
+
+    def sweep_one(self, name, scene, backend):
+        """Render ``scene`` over the ladder for each mode of ``backend``; errors against the reference."""
+        ladder = self.opts["ladder"] or list(sweep.DEFAULT_LADDER)
+        sc = for_run(scene, dict(self.opts, spp=None))
+        modes, why = sweep.sweep_modes(backend, sc, self.opts["sweep_modes"])
+        ref = references.load(name, self.opts["references"])
+        unusable = references.check_usable(ref, scene)
+        if not modes or unusable:
+            self.sweeps.append({"scene": name, "backend": backend.name, "mode": None, "points": [],
+                                "reason": why or unusable})
+            return
+        folder = self.out / name / "sweeps"
+        scene_dir = backend.export(sc, folder / "export" / backend.name)
+        for mode in modes:
+            line = {"scene": name, "backend": backend.name, "mode": mode, "points": [], "reason": ""}
+            try:
+                for spp in ladder:
+                    image = folder / f"{backend.name}-{mode}" / f"spp{spp}.exr"
+                    image.parent.mkdir(parents=True, exist_ok=True)
+                    info = backend.render(scene_dir, mode, spp, image, seed=self.opts["seed"],
+                                          timeout=self.opts["timeout"])
+                    names, img = exr.read_image(image)
+                    mean, var, sigma2 = compare.reference_at(ref.mean, ref.stderr, ref.spp, img.shape)
+                    point = {"spp": info["spp"], "time_s": info["time_s"], "wall_s": info["wall_s"]}
+                    point.update(compare.metrics(img[..., :3], mean[..., :3]))
+                    line["points"].append(point)
+                line.update(sweep.analyse(line["points"], sigma2[..., :3], var[..., :3]))
+            except Exception as exc:  # noqa: BLE001 - a failing mode must not stop the sweep
+                line["reason"] = f"sweep failed: {exc}"
+            self.sweeps.append(line)
+            self.save()
+
+    def finish_sweeps(self):
+        out = self.out / "sweeps"
+        out.mkdir(exist_ok=True)
+        for name in sorted({l["scene"] for l in self.sweeps}):
+            lines = [l for l in self.sweeps if l["scene"] == name and l["points"] and "slope" in l]
+            if not lines:
+                continue
+            ref = references.load(name, self.opts["references"])
+            floor = lines[0].get("noise_floor_rmse")
+            sweep.chart(out / name, name, lines, floor)
+            for l in lines:
+                l["chart"] = f"sweeps/{name}.png"
+            table = sweep.equal_time_and_error(lines)
+            if table:
+                for l in lines:
+                    l["equal"] = table
+        self.save()
 
     def render_one(self, name, scene, backend):
         sc = for_run(scene, self.opts)
@@ -268,7 +325,7 @@ def run(opts):
         batch.export_only(scenes)
     else:
         batch.render_all(scenes)
-    text = summary.write(batch.out, batch.runs, time.perf_counter() - t0)
+    text = summary.write(batch.out, batch.runs, time.perf_counter() - t0, batch.sweeps)
     print(text)
     failed = [r for r in batch.runs if r["status"] == "failed"]
     return 1 if failed else 0

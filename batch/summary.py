@@ -30,12 +30,34 @@ def counts(runs):
     return out
 
 
-def write(out_dir, runs, elapsed_s):
+def sweeps_table(sweeps):
+    if not sweeps:
+        return ""
+    rows = ["", "## Speed against accuracy (sweeps)", "",
+            "| scene | backend | mode | spp ladder | time (s) | RMSE | slope | converges | RMSE at equal time | time at equal error (s) |",
+            "|---|---|---|---|---|---|---|---|---|---|"]
+    for l in sweeps:
+        if not l.get("points"):
+            rows.append(f"| {l['scene']} | {l['backend']} | {l.get('mode') or ''} | | | | | | | {l.get('reason', '')} |")
+            continue
+        eq = next((r for r in (l.get("equal") or {}).get("rows", []) if r["mode"] == l["mode"]
+                   and r["backend"] == l["backend"]), {})
+        pts = l["points"]
+        spps = ", ".join(str(p["spp"]) for p in pts)
+        times = ", ".join("{:.2f}".format(p["time_s"]) for p in pts)
+        errs = ", ".join("{:.3g}".format(p["rmse"]) for p in pts)
+        rows.append(f"| {l['scene']} | {l['backend']} | {l['mode']} | {spps} | {times} | {errs} "
+                    f"| {_num(l.get('slope'), '{:.2f}')} | {'yes' if l.get('converges') else 'NO: ' + l.get('flag', l.get('reason', ''))} "
+                    f"| {_num(eq.get('rmse_at_equal_time'))} | {_num(eq.get('time_at_equal_error'), '{:.3g}')} |")
+    return "\n".join(rows) + "\n"
+
+
+def write(out_dir, runs, elapsed_s, sweeps=None):
     c = counts(runs)
     head = ", ".join(f"{n} {s}" for s, n in sorted(c.items(), key=lambda kv: ORDER.get(kv[0], 9)))
     text = (f"# Spectral benchmark results\n\n{len(runs)} jobs in {elapsed_s:.1f} s: {head or 'nothing ran'}.\n\n"
             "A render passes when it agrees with its reference within the reference's noise (block Z-test, "
             "Sidak-corrected). Images and diffs: `<scene>/results/<backend>/`; all numbers: `metrics.json`.\n\n"
-            + table(runs) + "\n")
+            + table(runs) + "\n" + sweeps_table(sweeps))
     Path(out_dir, "summary.md").write_text(text)
     return text

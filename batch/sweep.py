@@ -1,0 +1,119 @@
+"""Speed against accuracy: render each scene over a ladder of sample counts per backend mode,
+measure wall time and error against the reference, and chart error against time (log-log).
+
+For an unbiased method the expected squared error at s spp is predictable from the reference
+alone: E[RMSE^2] = mean(sigma^2) / s + mean(var_ref), with sigma^2 the reference's per-sample
+variance and var_ref the variance of its own mean (its noise floor). A line is flagged
+"does not converge to the reference" (a bias: a wrong implementation or a wrong scene) when its
+measured RMSE^2 at the top of the ladder exceeds that prediction by more than FLAG_RATIO, or when
+its last segment falls more slowly than predicted by more than SLOPE_SLACK (the slope test also
+catches a method less noisy than the reference, whose bias the variance prediction would hide:
+measured on macbeth_chart_D65 in Mitsuba's RGB mode, slope -0.25 against -0.49 predicted).
+The fitted slope of log RMSE against log spp is reported too (-0.5 while noise dominates).
+"""
+import math
+
+import numpy as np
+
+from . import compare, exr
+
+DEFAULT_LADDER = (4, 16, 64, 256)
+FLAG_RATIO = 2.0  # measured / predicted RMSE^2 at the top rung
+SLOPE_SLACK = 0.1  # measured minus predicted log-log slope over the last two rungs
+
+
+def predicted_rmse(sigma2, var_of_mean, spp):
+    return float(np.sqrt(np.mean(sigma2) / spp + np.mean(var_of_mean)))
+
+
+def fit_slope(spps, errors):
+    x, y = np.log(np.asarray(spps, float)), np.log(np.maximum(np.asarray(errors, float), 1e-30))
+    return float(np.polyfit(x, y, 1)[0]) if len(x) > 1 else float("nan")
+
+
+def analyse(points, sigma2, var_of_mean):
+    """Add predictions, the slope and the convergence flag to one line's points."""
+    for p in points:
+        p["predicted_rmse"] = predicted_rmse(sigma2, var_of_mean, p["spp"])
+    top = points[-1]
+    ratio = (top["rmse"] / top["predicted_rmse"]) ** 2
+    tail = points[-2:]
+    tail_slope = fit_slope([p["spp"] for p in tail], [p["rmse"] for p in tail])
+    tail_expected = fit_slope([p["spp"] for p in tail], [p["predicted_rmse"] for p in tail])
+    flags = []
+    if ratio > FLAG_RATIO:
+        flags.append(f"RMSE^2 at {top['spp']} spp is {ratio:.1f}x the noise-only prediction")
+    if len(points) > 1 and tail_slope > tail_expected + SLOPE_SLACK:
+        flags.append(f"last segment falls with slope {tail_slope:.2f}, {tail_expected:.2f} expected")
+    return {"slope": fit_slope([p["spp"] for p in points], [p["rmse"] for p in points]),
+            "tail_slope": tail_slope, "tail_slope_expected": tail_expected,
+            "noise_floor_rmse": float(np.sqrt(np.mean(var_of_mean))),
+            "top_ratio": ratio, "converges": not flags,
+            "flag": "does not converge to the reference: " + "; ".join(flags) if flags else ""}
+
+
+def _interp_loglog(xs, ys, x):
+    xs, ys = np.log(np.asarray(xs, float)), np.log(np.asarray(ys, float))
+    order = np.argsort(xs)
+    xs, ys = xs[order], ys[order]
+    if not xs[0] <= math.log(x) <= xs[-1]:
+        return None
+    return float(np.exp(np.interp(math.log(x), xs, ys)))
+
+
+def equal_time_and_error(lines):
+    """Equal-time table (error each line reaches at the longest time every line covers) and
+    equal-error table (time each line needs for the smallest error every line reaches)."""
+    usable = [l for l in lines if len(l["points"]) > 1]
+    if len(usable) < 1:
+        return None
+    t_common = min(max(p["time_s"] for p in l["points"]) for l in usable)
+    e_common = max(min(p["rmse"] for p in l["points"]) for l in usable)
+    rows = []
+    for l in usable:
+        ts, es = [p["time_s"] for p in l["points"]], [p["rmse"] for p in l["points"]]
+        # error falls with time: interpolate along the line's own (time, error) points
+        rows.append({"backend": l["backend"], "mode": l["mode"],
+                     "rmse_at_equal_time": _interp_loglog(ts, es, t_common),
+                     "time_at_equal_error": _interp_loglog(es[::-1], ts[::-1], e_common)})
+    return {"time_s": t_common, "rmse": e_common, "rows": rows}
+
+
+def chart(path_stem, scene, lines, floor=None):
+    """error against time, log-log, one line per backend/mode; PNG and SVG."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(5.5, 4))
+    for l in lines:
+        ts = [p["time_s"] for p in l["points"]]
+        es = [p["rmse"] for p in l["points"]]
+        label = f"{l['backend']} {l['mode']} (slope {l['slope']:.2f}{', NOT CONVERGING' if not l['converges'] else ''})"
+        ax.loglog(ts, es, "o-", label=label)
+        for p in l["points"]:
+            ax.annotate(str(p["spp"]), (p["time_s"], p["rmse"]), fontsize=7, xytext=(3, 3), textcoords="offset points")
+    if floor:
+        ax.axhline(floor, color="grey", ls="--", lw=1, label="reference noise floor")
+    ax.set_xlabel("render time (s)")
+    ax.set_ylabel("RMSE against the reference")
+    ax.set_title(scene)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(f"{path_stem}.png", dpi=110)
+    fig.savefig(f"{path_stem}.svg")
+    plt.close(fig)
+
+
+def sweep_modes(backend, scene, requested=None):
+    """The modes a sweep compares for one backend: the chosen one and, for Mitsuba's LLVM
+    variants, the scalar variant of the same kind (unless ``requested`` lists them)."""
+    mode, why = backend.mode_for(scene)
+    if mode is None:
+        return [], why
+    if requested:
+        return list(requested), None
+    modes = [mode]
+    if mode.startswith("llvm_ad_") and "mono" not in mode:
+        modes.append("scalar_" + mode[len("llvm_ad_"):])
+    return modes, None
