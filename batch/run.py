@@ -50,7 +50,7 @@ def main(argv=None):
         import webbrowser
         out = max(Path(".").glob("outputs-*"), default=None) if not opts["out"] else Path(opts["out"])
         if out:
-            webbrowser.open((out / "summary.md").resolve().as_uri())
+            webbrowser.open((out / "report.html").resolve().as_uri())
     return code
 
 

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ..exporters import art_writer, ir_json
-from . import backends, compare, exr, flip_isolated, previews, probes, references, scene_sources, summary, sweep
+from . import backends, compare, exr, flip_isolated, previews, probes, references, report, scene_sources, summary, sweep
 from .progress import Progress
 
 log = logging.getLogger("spectral_bench")
@@ -326,6 +326,7 @@ def run(opts):
     else:
         batch.render_all(scenes)
     text = summary.write(batch.out, batch.runs, time.perf_counter() - t0, batch.sweeps)
+    report.write(batch.out)
     print(text)
     failed = [r for r in batch.runs if r["status"] == "failed"]
     return 1 if failed else 0

@@ -1,0 +1,49 @@
+"""The static HTML report, opened in headless Chromium (no server): images and charts load,
+and switching views works."""
+import re
+import shutil
+import subprocess
+
+import pytest
+
+from conftest import metrics, run_batch
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+pytestmark = pytest.mark.skipif(not CHROMIUM, reason="no chromium: report not checked in a browser "
+                                                      "(scripts/setup.sh installs it as root)")
+
+
+def dump_dom(url):
+    proc = subprocess.run([CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--virtual-time-budget=5000",
+                           "--dump-dom", url], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-1000:]
+    return proc.stdout
+
+
+@pytest.fixture(scope="module")
+def report(tmp_path_factory):
+    out = tmp_path_factory.mktemp("report") / "out"
+    run_batch("-r", "mitsuba", "-s", "polarizing_plane_0", "-s", "ggx_copper_80", "--scale", 0.125,
+              "--sweep", "--ladder", "4,16", "-o", out)
+    return out
+
+
+def test_report_images_and_charts_load(report):
+    dom = dump_dom((report / "report.html").as_uri())
+    images = int(re.search(r'data-images="(\d+)"', dom).group(1))
+    loaded = int(re.search(r'data-loaded="(\d+)"', dom).group(1))
+    runs = metrics(report)["runs"]
+    assert images == loaded and images >= 2 * 5 + 2  # five views per scene plus two charts
+    assert dom.count("class=\"chart\"") == 2
+    for run in runs:
+        assert run["scene"] in dom
+
+
+def test_switching_views(report):
+    dom = dump_dom((report / "report.html").as_uri() + "#view=ggx_copper_80--mitsuba-box:difference")
+    box = re.search(r'<div class="viewer" id="ggx_copper_80--mitsuba-box" data-active="([^"]+)"', dom)
+    assert box and box.group(1) == "difference"
+    tags = re.findall(r'<img class="view"[^>]*src="ggx_copper_80[^>]*>', dom)
+    shown = [(re.search(r'data-view="([^"]+)"', t).group(1), "display: none" in t) for t in tags]
+    visible = [v for v, hidden in shown if not hidden]
+    assert visible == ["difference"], shown
