@@ -18,7 +18,7 @@ DEFAULTS = {
     "input": None, "case": None, "scene": None, "renderer": None, "exec": None, "spp": None, "scale": 1.0,
     "out": None, "export_only": False, "format": None, "log": None, "visualize": False, "settings": None,
     "variant": None, "alpha": 0.01, "block": None, "min_samples": 65536, "timeout": 1800, "passes": 1, "seed": 0, "flip": True,
-    "references": None, "list": False, "art_ggx": False, "sweep": False, "ladder": None, "sweep_modes": None,
+    "references": None, "list": False, "art_ggx": False, "sweep": False, "ladder": None, "sweep_modes": None, "stability": False,
 }
 
 
@@ -69,6 +69,8 @@ def parser():
                     help="sample counts of the sweep (default 4,16,64,256)")
     ap.add_argument("--sweep-modes", type=lambda t: t.split(","), metavar="MODE,...",
                     help="backend modes to sweep (e.g. llvm_ad_spectral,scalar_spectral,llvm_ad_rgb)")
+    ap.add_argument("--stability", action="store_true",
+                    help="also run the stability case (grazing GGX, roughness and IOR furnaces, Malus)")
     ap.add_argument("--art-ggx", action="store_true",
                     help="write GGX_MICROFACET_DISTRIBUTION_CONST for an ART build that has GGX (upstream has Blinn only)")
     return ap

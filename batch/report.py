@@ -102,6 +102,19 @@ def write(out_dir):
         summary_md = (out / "summary.md").read_text() if (out / "summary.md").exists() else ""
         if "## Speed against accuracy" in summary_md:
             parts.append("<pre>" + html.escape(summary_md.split("## Speed against accuracy (sweeps)")[1]) + "</pre>")
+    stab = data.get("stability") or []
+    if stab:
+        parts.append("<h2>Stability</h2>")
+        for name in sorted({r["sweep"] for r in stab}):
+            if (out / "stability" / f"{name}.png").is_file():
+                parts.append(f"<h3>{html.escape(name)}</h3><img class='strip' src='stability/{name}.png' alt='{name}' "
+                             "style='image-rendering:pixelated;width:90%'>")
+            cells = "".join(f"<tr class='{r['status']}'><td>{r.get('value', '')}</td><td>{r.get('backend', '')}</td>"
+                            f"<td>{r['status']}</td><td>{_fmt(r.get('mean'))}</td>"
+                            f"<td>{html.escape('; '.join(r.get('problems') or []) or r.get('reason', ''))}</td></tr>"
+                            for r in stab if r["sweep"] == name)
+            parts.append("<table><tr><th>value</th><th>backend</th><th>status</th><th>mean</th><th>problems</th></tr>"
+                         f"{cells}</table>")
     parts.append("<h2>Images</h2>")
     parts += [_viewer(out, r) for r in runs if r.get("image")]
     parts.append("</body></html>")

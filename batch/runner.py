@@ -98,6 +98,8 @@ class Run:
                 "runs": self.runs}
         if self.sweeps:
             data["sweeps"] = self.sweeps
+        if getattr(self, "stability", None):
+            data["stability"] = self.stability
         tmp = self.out / "metrics.json.tmp"
         tmp.write_text(json.dumps(data, indent=1, default=str) + "\n")
         tmp.replace(self.out / "metrics.json")
@@ -170,6 +172,21 @@ class Run:
                 progress.step(f"{name} ({bname})")
         if self.opts["sweep"]:
             self.finish_sweeps()
+        if self.opts["stability"]:
+            self.run_stability(scenes, made)
+
+    def run_stability(self, scenes, made):
+        from . import stability
+        golden = {n: s for n, s in scenes if isinstance(s, dict)}
+        if not {"ggx_copper_80", "polarizing_plane_0"} <= set(golden):
+            self.stability = [{"sweep": "all", "status": "skipped",
+                               "problems": ["needs ggx_copper_80 and polarizing_plane_0 in the input"]}]
+            return
+        self.stability = []
+        for backend in made.values():
+            if backend.availability()[0]:
+                self.stability += stability.run(backend, golden, self.out / "stability", timeout=self.opts["timeout"])
+        self.save()
 
     def sweep_one(self, name, scene, backend):
         """Render ``scene`` over the ladder for each mode of ``backend``; errors against the reference."""
@@ -325,8 +342,9 @@ def run(opts):
         batch.export_only(scenes)
     else:
         batch.render_all(scenes)
-    text = summary.write(batch.out, batch.runs, time.perf_counter() - t0, batch.sweeps)
+    text = summary.write(batch.out, batch.runs, time.perf_counter() - t0, batch.sweeps,
+                         getattr(batch, "stability", None))
     report.write(batch.out)
     print(text)
-    failed = [r for r in batch.runs if r["status"] == "failed"]
+    failed = [r for r in batch.runs + getattr(batch, "stability", []) if r["status"] == "failed"]
     return 1 if failed else 0

@@ -52,12 +52,22 @@ def sweeps_table(sweeps):
     return "\n".join(rows) + "\n"
 
 
-def write(out_dir, runs, elapsed_s, sweeps=None):
+def stability_table(rows):
+    if not rows:
+        return ""
+    out = ["", "## Stability", "", "| sweep | value | backend | mode | status | mean | problems |", "|---|---|---|---|---|---|---|"]
+    for r in rows:
+        out.append(f"| {r['sweep']} | {r.get('value', '')} | {r.get('backend', '')} | {r.get('mode') or ''} | {r['status']} "
+                   f"| {_num(r.get('mean'))} | {'; '.join(r.get('problems') or []) or r.get('reason', '')} |")
+    return "\n".join(out) + "\n"
+
+
+def write(out_dir, runs, elapsed_s, sweeps=None, stability=None):
     c = counts(runs)
     head = ", ".join(f"{n} {s}" for s, n in sorted(c.items(), key=lambda kv: ORDER.get(kv[0], 9)))
     text = (f"# Spectral benchmark results\n\n{len(runs)} jobs in {elapsed_s:.1f} s: {head or 'nothing ran'}.\n\n"
             "A render passes when it agrees with its reference within the reference's noise (block Z-test, "
             "Sidak-corrected). Images and diffs: `<scene>/results/<backend>/`; all numbers: `metrics.json`.\n\n"
-            + table(runs) + "\n" + sweeps_table(sweeps))
+            + table(runs) + "\n" + sweeps_table(sweeps) + stability_table(stability))
     Path(out_dir, "summary.md").write_text(text)
     return text

@@ -1,0 +1,44 @@
+"""Stability case: every sweep value rendered and checked; the checks themselves catch NaN,
+energy gain and a broken lossless furnace."""
+import copy
+
+import numpy as np
+import pytest
+
+from conftest import metrics, render, run_batch
+from spectral_bench.batch import stability
+
+
+@pytest.fixture(scope="module")
+def stability_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("stab") / "out"
+    proc = run_batch("-r", "mitsuba", "-s", "ggx_copper_80", "-s", "polarizing_plane_0", "--scale", 0.125,
+                     "--stability", "--no-flip", "-o", out, timeout=1200)
+    return proc, out, metrics(out)
+
+
+def test_every_sweep_value_is_rendered_and_stable(stability_run):
+    proc, out, data = stability_run
+    rows = data["stability"]
+    sweeps = {r["sweep"] for r in rows}
+    assert sweeps == {"ggx_grazing", "roughness_furnace", "ior_furnace", "polarizer_malus"}
+    assert len([r for r in rows if r["sweep"] == "ggx_grazing"]) == 10
+    bad = [r for r in rows if r["status"] != "ok"]
+    assert not bad, bad
+    assert all((out / "stability" / f"{s}.png").is_file() for s in sweeps)
+    furnace = {r["value"]: r["mean"] for r in rows if r["sweep"] == "roughness_furnace"}
+    assert furnace[0.001] == pytest.approx(1.0, abs=0.01)  # the smooth limit is lossless
+    assert furnace[1.0] < furnace[0.1] < 1.0  # single-scattering GGX loses energy as alpha grows
+    assert "Stability" in (out / "report.html").read_text()
+    assert proc.returncode == 0
+
+
+def test_checks_catch_energy_gain_and_nan(tmp_path):
+    sc = stability._furnace_sphere({"type": "diffuse", "reflectance": {"type": "constant", "value": 1.3}})
+    scn, names, img = render(sc, tmp_path, 64)
+    problems = stability.check("roughness_furnace", 0.0, scn, names, img)
+    assert any("energy gain" in p for p in problems), problems
+    img2 = img.copy()
+    img2[3, 3, 0] = np.nan
+    assert any("NaN" in p for p in stability.check("ggx_grazing", 80, scn, names, img2))
+    assert any("lossless" in p for p in stability.check("ior_furnace", 1.5, scn, names, img))
