@@ -223,6 +223,28 @@ class SPECTRAL_BENCH_OT_load_result(bpy.types.Operator):
         return {"FINISHED"}
 
 
+class SPECTRAL_BENCH_OT_load_chart(bpy.types.Operator):
+    """Load the error-against-time chart of a sweep into an Image Editor"""
+    bl_idname = "spectral_bench.load_chart"
+    bl_label = "Load Sweep Chart"
+    scene: StringProperty()
+
+    def execute(self, context):
+        out_dir = bpy.path.abspath(benchmark.settings(context).output_dir)
+        path = results.chart_path(out_dir, self.scene)
+        if path is None:
+            self.report({"ERROR"}, f"no sweep chart for {self.scene} in {out_dir}")
+            return {"CANCELLED"}
+        image = bpy.data.images.load(str(path), check_existing=True)
+        image.name = f"{self.scene} sweep chart"
+        screen = getattr(context, "screen", None)
+        for area in (screen.areas if screen else []):
+            if area.type == "IMAGE_EDITOR":
+                area.spaces.active.image = image
+                break
+        return {"FINISHED"}
+
+
 def _menu(self, context):
     self.layout.operator(SPECTRAL_BENCH_OT_export_json.bl_idname, text="Spectral Bench JSON (.json)")
     self.layout.operator(SPECTRAL_BENCH_OT_export_mitsuba.bl_idname, text="Mitsuba 3 Scene Folder")
@@ -232,7 +254,7 @@ def _menu(self, context):
 CLASSES = (SPECTRAL_BENCH_OT_export_json, SPECTRAL_BENCH_OT_export_mitsuba, SPECTRAL_BENCH_OT_export_art,
            SPECTRAL_BENCH_OT_load_spectrum,
            SPECTRAL_BENCH_OT_spectrum_sample, SPECTRAL_BENCH_OT_run_benchmark, SPECTRAL_BENCH_OT_cancel_benchmark,
-           SPECTRAL_BENCH_OT_load_result)
+           SPECTRAL_BENCH_OT_load_result, SPECTRAL_BENCH_OT_load_chart)
 
 
 def register():

@@ -176,6 +176,8 @@ class SPECTRAL_BENCH_PT_benchmark(_Base, bpy.types.Panel):
                     err = "" if p["error"] is None else f"{p['error']:.3g} {p['unit']}"
                     mark = {True: "CHECKMARK", False: "ERROR"}.get(p["pass"], "QUESTION")
                     box.label(text=f"{p['name']}: {err}", icon=mark)
+                if results.chart_path(bpy.path.abspath(s.output_dir), scene):
+                    box.operator("spectral_bench.load_chart", text="Error against time").scene = scene
                 row = box.row(align=True)
                 for kind in results.IMAGE_KINDS:
                     if results.image_path(bpy.path.abspath(s.output_dir), scene, backend, kind):

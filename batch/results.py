@@ -37,3 +37,9 @@ def image_path(out_dir, scene, backend, kind):
     """Path of one result image, or None if that run did not write it."""
     path = Path(out_dir) / scene / "results" / backend / IMAGE_KINDS[kind]
     return path if path.is_file() else None
+
+
+def chart_path(out_dir, scene):
+    """The error-against-time chart of a sweep over ``scene``, or None."""
+    path = Path(out_dir) / "sweeps" / f"{scene}.png"
+    return path if path.is_file() else None

@@ -142,3 +142,20 @@ def test_file_export_operators_write_loadable_folders(tmp_path):
     assert (tmp_path / "mi" / "scene.xml").is_file()
     from spectral_bench.exporters import ir_json
     assert ir_json.load(tmp_path / "ir.json")["name"] == "ggx_copper_70"
+
+
+def test_sweep_chart_loads_into_an_image(tmp_path):
+    import subprocess, sys
+    from conftest import ROOT
+    out = tmp_path / "o"
+    subprocess.run([sys.executable, str(ROOT / "batch" / "run.py"), "-r", "mitsuba", "-s", "ggx_copper_80", "--scale",
+                    "0.0625", "--sweep", "--ladder", "4,16", "--no-flip", "-o", str(out)], check=False, timeout=600,
+                   capture_output=True)
+    res = run_bpy(f"""
+        s = bpy.context.window_manager.spectral_bench_run
+        s.output_dir = {str(out)!r}
+        r = bpy.ops.spectral_bench.load_chart(scene="ggx_copper_80")
+        img = bpy.data.images["ggx_copper_80 sweep chart"]
+        print(json.dumps({{"r": list(r), "size": list(img.size)}}))
+    """)
+    assert res["r"] == ["FINISHED"] and res["size"][0] > 100
