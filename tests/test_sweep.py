@@ -13,10 +13,15 @@ def test_prediction_and_slope_arithmetic():
     assert sweep.predicted_rmse(sigma2, var, 8) == pytest.approx(0.5)
     pts = [{"spp": s, "rmse": 1 / np.sqrt(s)} for s in (4, 16, 64)]
     assert sweep.fit_slope([p["spp"] for p in pts], [p["rmse"] for p in pts]) == pytest.approx(-0.5)
-    biased = [{"spp": s, "rmse": np.sqrt(2.0 / s + 0.5 ** 2)} for s in (4, 64, 1024)]
-    assert not sweep.analyse(biased, sigma2, var)["converges"]
+    biased = [{"spp": s, "rmse": np.sqrt(2.0 / s + 0.05 ** 2)} for s in (4, 64, 1024)]
+    verdict = sweep.analyse(biased, sigma2, var)
+    assert not verdict["converges"] and verdict["error_floor_rmse"] == pytest.approx(0.05, rel=0.05)
     unbiased = [{"spp": s, "rmse": np.sqrt(2.0 / s)} for s in (4, 64, 1024)]
     assert sweep.analyse(unbiased, sigma2, var)["converges"]
+    # a noisier renderer (8x the reference's variance) without bias still converges
+    noisier = [{"spp": s, "rmse": np.sqrt(16.0 / s)} for s in (4, 64, 1024)]
+    assert sweep.analyse(noisier, sigma2, var)["converges"]
+    assert sweep.fit_noise_model([4, 64, 1024], [np.sqrt(2.0 / s + 0.01) for s in (4, 64, 1024)]) == pytest.approx((2.0, 0.01), rel=1e-6)
 
 
 @pytest.fixture(scope="module")
