@@ -47,29 +47,28 @@ class SPECTRAL_BENCH_OT_export_json(_ExportBase, bpy.types.Operator, ExportHelpe
     fmt = "json"
 
 
-class SPECTRAL_BENCH_OT_export_mitsuba(_ExportBase, bpy.types.Operator):
-    """Export the active scene as a Mitsuba 3 folder (scene.xml, meshes, spectra)"""
-    bl_idname = "spectral_bench.export_mitsuba"
-    bl_label = "Export Mitsuba 3 Scene Folder"
+class _FolderExportBase(_ExportBase):
+    """An export that writes a folder: the file browser picks a directory."""
     filepath: StringProperty(subtype="DIR_PATH")
-    fmt = "mitsuba"
 
     def invoke(self, context, event):
         context.window_manager.fileselect_add(self)
         return {"RUNNING_MODAL"}
 
 
-class SPECTRAL_BENCH_OT_export_art(_ExportBase, bpy.types.Operator):
+class SPECTRAL_BENCH_OT_export_mitsuba(_FolderExportBase, bpy.types.Operator):
+    """Export the active scene as a Mitsuba 3 folder (scene.xml, meshes, spectra)"""
+    bl_idname = "spectral_bench.export_mitsuba"
+    bl_label = "Export Mitsuba 3 Scene Folder"
+    fmt = "mitsuba"
+
+
+class SPECTRAL_BENCH_OT_export_art(_FolderExportBase, bpy.types.Operator):
     """Export the active scene as an ART 2.1.2 folder (scene.arm, PLY meshes); what ART cannot
     express is reported, not substituted"""
     bl_idname = "spectral_bench.export_art"
     bl_label = "Export ART Scene Folder"
-    filepath: StringProperty(subtype="DIR_PATH")
     fmt = "art"
-
-    def invoke(self, context, event):
-        context.window_manager.fileselect_add(self)
-        return {"RUNNING_MODAL"}
 
 
 def _spectrum_target(context, path):
@@ -199,6 +198,15 @@ class SPECTRAL_BENCH_OT_cancel_benchmark(bpy.types.Operator):
         return {"FINISHED"}
 
 
+def _show_in_image_editor(context, image):
+    """Show ``image`` in the first Image Editor of the screen, if there is one (none headless)."""
+    screen = getattr(context, "screen", None)
+    for area in (screen.areas if screen else []):
+        if area.type == "IMAGE_EDITOR":
+            area.spaces.active.image = image
+            return
+
+
 class SPECTRAL_BENCH_OT_load_result(bpy.types.Operator):
     """Load a result image (render, reference or a diff) into an Image Editor"""
     bl_idname = "spectral_bench.load_result"
@@ -214,11 +222,7 @@ class SPECTRAL_BENCH_OT_load_result(bpy.types.Operator):
         except (FileNotFoundError, RuntimeError) as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
-        screen = getattr(context, "screen", None)
-        for area in (screen.areas if screen else []):
-            if area.type == "IMAGE_EDITOR":
-                area.spaces.active.image = image
-                break
+        _show_in_image_editor(context, image)
         self.report({"INFO"}, f"loaded {image.name}")
         return {"FINISHED"}
 
@@ -237,11 +241,7 @@ class SPECTRAL_BENCH_OT_load_chart(bpy.types.Operator):
             return {"CANCELLED"}
         image = bpy.data.images.load(str(path), check_existing=True)
         image.name = f"{self.scene} sweep chart"
-        screen = getattr(context, "screen", None)
-        for area in (screen.areas if screen else []):
-            if area.type == "IMAGE_EDITOR":
-                area.spaces.active.image = image
-                break
+        _show_in_image_editor(context, image)
         return {"FINISHED"}
 
 
