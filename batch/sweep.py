@@ -132,6 +132,7 @@ def sweep_modes(backend, scene, requested=None):
     if requested:
         return list(requested), None
     modes = [mode]
-    if mode.startswith("llvm_ad_") and "mono" not in mode:
-        modes.append("scalar_" + mode[len("llvm_ad_"):])
+    if mode.startswith("llvm_ad_"):
+        from .backends.mitsuba_backend import scalar_twin
+        modes.append(scalar_twin(mode))
     return modes, None

@@ -62,16 +62,17 @@ def main():
             sc = runner.for_run(sc, {"spp": None, "scale": args.scale})
             xml = backend.export(sc, Path(tmp) / name)
             mode, _ = backend.mode_for(sc)
-            kind = mode.split("_", 2)[-1] if mode.startswith("llvm") else mode.split("_", 1)[-1]
+            from spectral_bench.batch.backends.mitsuba_backend import scalar_twin
+            scalar, fast = scalar_twin(mode), mode
             times = {}
-            for variant in (f"scalar_{kind}", f"llvm_ad_{kind}"):
+            for variant in (scalar, fast):
                 runs = [backend.render(xml, variant, sc["render"]["spp"], Path(tmp) / f"{name}_{variant}.exr")
                         for _ in range(args.repeat)]
                 times[variant] = (statistics.median(r["time_s"] for r in runs),
                                   statistics.median(r["wall_s"] for r in runs))
-            s, l = times[f"scalar_{kind}"], times[f"llvm_ad_{kind}"]
+            s, l = times[scalar], times[fast]
             rows.append(f"| {name} | {sc['render']['width']}x{sc['render']['height']} | {sc['render']['spp']} "
-                        f"| {s[0]:.2f} ({s[1]:.2f}) | {l[0]:.2f} ({l[1]:.2f}) | {s[0] / l[0]:.1f}x |")
+                        f"| {scalar} {s[0]:.2f} ({s[1]:.2f}) | {fast} {l[0]:.2f} ({l[1]:.2f}) | {s[0] / l[0]:.1f}x |")
 
     n = len(scenes)
     text = "\n".join([

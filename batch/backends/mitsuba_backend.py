@@ -24,6 +24,13 @@ class BackendFailure(RuntimeError):
     pass
 
 
+def scalar_twin(variant):
+    """The scalar variant that models the same as an llvm_ad_* one (Mitsuba ships no scalar_mono*:
+    its spectral twin is exact for the constant spectra a mono variant is chosen for)."""
+    kind = variant.split("_", 2)[-1] if variant.startswith("llvm_ad_") else variant.split("_", 1)[-1]
+    return "scalar_" + kind.replace("mono", "spectral")
+
+
 class MitsubaBackend:
     name = "mitsuba"
     formats = ("mitsuba",)
