@@ -6,9 +6,13 @@ a closed form, independently of any renderer (plain numpy; colour-science for CI
   the expected colour (white: the perfect diffuser under L); and for a constant reflector under
   CIE D65 the chroma C*ab, which must be ~0 (neutral, since sRGB's white is D65).
 - Smooth dielectric reflecting an area light (unpolarised) into the camera: the reflected
-  radiance is L * (Rs cos^2(theta - psi) + Rp sin^2(theta - psi)) / 2 through an ideal linear
-  polariser at theta, where psi is the image angle of the s direction (Fresnel equations, Hecht,
-  Optics, eq. 4.42-4.43); at Brewster's angle Rp = 0, so a crossed polariser extinguishes it.
+  radiance is L * (Rs cos^2 phi + Rp sin^2 phi) / 2 through an ideal linear polariser, where phi
+  is the angle between the reflection's s direction and the polariser's transmission axis in the
+  plane across the ray (Fresnel equations, Hecht, Optics, eq. 4.42-4.43). The polariser is a sheet
+  across the lens: its axis, at theta from image right in the sheet, is projected across each
+  ray (an oblique ray sees it slightly turned: measured, this is what Mitsuba's sheet polariser
+  does, and at 512x512 it is visible against the region's standard error). At Brewster's angle
+  Rp = 0, so a crossed polariser extinguishes the reflection.
   Without a polariser and with Stokes output, the degree of polarisation is (Rs - Rp)/(Rs + Rp).
 - Stokes output: S0 >= sqrt(S1^2 + S2^2 + S3^2) at every pixel, up to noise.
 
@@ -106,7 +110,8 @@ def fresnel_dielectric(cos_i, eta):
 
 
 def _reflection_geometry(scene, di, li, w, h, points):
-    """Per ray: (valid mask, cos_i, psi) for camera rays reflecting off object di into light li."""
+    """Per ray: (valid mask, cos_i, psi(theta), eta) for camera rays reflecting off object di into
+    light li; psi(theta) is the angle between s and a sheet polariser's axis at theta."""
     cam, objs = scene["camera"], scene["objects"]
     m = np.asarray(cam["to_world"], dtype=np.float64)
     origin, dirs = raycast.camera_rays(cam, w, h, points)
@@ -130,7 +135,13 @@ def _reflection_geometry(scene, di, li, w, h, points):
     valid = on & (who_r == li) & inner & faces & (who_t == -1) & (cos_i > 0)
     s = np.cross(dirs, n)
     s /= np.maximum(np.linalg.norm(s, axis=-1, keepdims=True), 1e-12)
-    psi = np.arctan2(s @ m[:3, 1], s @ m[:3, 0])
+    right, up = m[:3, 0] / np.linalg.norm(m[:3, 0]), m[:3, 1] / np.linalg.norm(m[:3, 1])
+
+    def psi(theta):
+        axis = np.cos(theta) * right + np.sin(theta) * up
+        across = axis - (dirs @ axis)[..., None] * dirs  # the axis as seen across each ray
+        across /= np.maximum(np.linalg.norm(across, axis=-1, keepdims=True), 1e-12)
+        return np.arccos(np.clip(np.abs(np.sum(across * s, axis=-1)), 0.0, 1.0))
     return valid, cos_i, psi, eta
 
 
@@ -155,8 +166,8 @@ def brewster(scene, names, image):
             label = f"{objs[di]['name']} reflecting {objs[li]['name']}"
             brewster_deg = float(np.degrees(np.arctan(eta)))
             if pol:
-                theta = np.radians(pol["angle"])
-                factor = (rs * np.cos(theta - psi) ** 2 + rp * np.sin(theta - psi) ** 2) / 2
+                phi = psi(np.radians(pol["angle"]))
+                factor = (rs * np.cos(phi) ** 2 + rp * np.sin(phi) ** 2) / 2
                 name = f"brewster {label}, polariser {pol['angle']:g} deg"
             else:
                 factor = (rs + rp) / 2
