@@ -71,13 +71,19 @@ class SPECTRAL_BENCH_PT_material(_Base, bpy.types.Panel):
         _draw_problems(self.layout, validation.material_problems(context.material))
 
 
-class SPECTRAL_BENCH_PT_light(_Base, bpy.types.Panel):
+class _ObjectDataBase(_Base):
+    """A panel in Object Data properties for one kind of data (``data_type``)."""
     bl_label = "Spectral Bench"
     bl_context = "data"
+    data_type = None
 
     @classmethod
     def poll(cls, context):
-        return isinstance(context.object and context.object.data, bpy.types.Light)
+        return isinstance(context.object and context.object.data, cls.data_type)
+
+
+class SPECTRAL_BENCH_PT_light(_ObjectDataBase, bpy.types.Panel):
+    data_type = bpy.types.Light
 
     def draw(self, context):
         _draw_spectrum(self.layout, context.object.data.spectral_bench.radiance, "Radiance", "light.radiance")
@@ -110,13 +116,8 @@ class SPECTRAL_BENCH_PT_scene(_Base, bpy.types.Panel):
             self.layout.prop(a, key)
 
 
-class SPECTRAL_BENCH_PT_camera(_Base, bpy.types.Panel):
-    bl_label = "Spectral Bench"
-    bl_context = "data"
-
-    @classmethod
-    def poll(cls, context):
-        return isinstance(context.object and context.object.data, bpy.types.Camera)
+class SPECTRAL_BENCH_PT_camera(_ObjectDataBase, bpy.types.Panel):
+    data_type = bpy.types.Camera
 
     def draw(self, context):
         a = context.object.data.spectral_bench
