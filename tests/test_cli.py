@@ -77,3 +77,12 @@ def test_json_input_runs_like_the_blend(tmp_path):
     assert runs[0]["resolution"] == [64, 64] and runs[0]["spp"] == 16
     assert (out / "summary.md").read_text().count("ggx_copper_80") == 1
     assert proc.returncode == (0 if runs[0]["status"] == "ok" else 1)
+
+
+def test_log_option_writes_the_log_to_a_file(tmp_path):
+    log = tmp_path / "run.log"
+    out = tmp_path / "o"
+    proc = run_batch("-s", "ggx_glass", "--export-only", "--format", "json", "-l", log, "-o", out)
+    assert proc.returncode == 0, proc.stderr[-1000:]
+    text = log.read_text()
+    assert f"writing to {out}" in text and "ggx_glass" in text
