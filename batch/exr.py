@@ -51,9 +51,19 @@ def _order(names):
 
 def read_image(path, skip_prefix="stderr."):
     """(channel names, HxWxC float32) of every channel except those starting ``skip_prefix``."""
+    names, img, _ = read_image_and_stderr(path)
+    return names, img
+
+
+def read_image_and_stderr(path):
+    """(names, HxWxC image, HxWxC standard error or None) from one read: the stderr.<name>
+    channels that independent passes write beside the mean."""
     ch = read(path)
-    names = _order([n for n in ch if not n.startswith(skip_prefix)])
-    return names, np.stack([ch[n] for n in names], axis=-1)
+    names = _order([n for n in ch if not n.startswith("stderr.")])
+    img = np.stack([ch[n] for n in names], axis=-1)
+    if not all(f"stderr.{n}" in ch for n in names):
+        return names, img, None
+    return names, img, np.stack([ch[f"stderr.{n}"] for n in names], axis=-1)
 
 
 def write_image(path, names, img, extra=None):

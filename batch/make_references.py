@@ -52,10 +52,7 @@ def main(argv=None):
             image = Path(tmp) / "ref.exr"
             info = backend.render(xml, mode, spp, image, passes=args.passes, seed=args.seed, timeout=6 * 3600,
                                   log_path=Path(tmp) / "render.log")
-            import numpy as np
-            names, mean = exr.read_image(image)
-            ch = exr.read(image)
-            stderr = np.stack([ch[f"stderr.{n}"] for n in names], axis=-1)
+            names, mean, stderr = exr.read_image_and_stderr(image)
             prov = {"backend": "mitsuba", "mode": mode, "spp": info["spp"], "passes": info["passes"],
                     "seed": args.seed, "resolution": info["resolution"], "time_s": round(info["time_s"], 2),
                     "wall_s": round(info["wall_s"], 2), "date": dt.datetime.now().isoformat(timespec="seconds"),

@@ -48,9 +48,9 @@ def load(scene_name, directory=None):
     exr_path, meta_path = directory / f"{scene_name}.exr", directory / f"{scene_name}.json"
     if not exr_path.is_file() or not meta_path.is_file():
         return None
-    names, mean = exr.read_image(exr_path)
-    ch = exr.read(exr_path)
-    stderr = np.stack([ch[f"stderr.{n}"] for n in names], axis=-1)
+    names, mean, stderr = exr.read_image_and_stderr(exr_path)
+    if stderr is None:
+        raise ValueError(f"{exr_path} has no stderr.<channel> noise channels: not a reference")
     return Reference(names, mean, stderr, json.loads(meta_path.read_text()), exr_path)
 
 

@@ -55,9 +55,4 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    code = main()
-    try:
-        import bpy  # noqa: F401  - under Blender, sys.exit is how -P scripts set the exit status
-    except ImportError:
-        pass
-    sys.exit(code)
+    sys.exit(main())  # under Blender too, sys.exit is how a -P script sets the exit status

@@ -227,7 +227,6 @@ class Run:
             lines = [l for l in self.sweeps if l["scene"] == name and l["points"] and "slope" in l]
             if not lines:
                 continue
-            ref = references.load(name, self.opts["references"])
             floor = lines[0].get("noise_floor_rmse")
             sweep.chart(out / name, name, lines, floor)
             for l in lines:
@@ -260,28 +259,23 @@ class Run:
             return entry
         entry.update(time_s=info["time_s"], wall_s=info["wall_s"], spp=info["spp"],
                      image=str(image.relative_to(self.out)), versions=info.get("versions"))
-        names, test_all = exr.read_image(image)
+        names, test_all, stderr = exr.read_image_and_stderr(image)
         entry["channels"] = names
         entry["sanity"] = compare.image_sanity(test_all)
         previews.save_linear(res_dir / "render.png", test_all[..., :3])
-        stderr = exr.read(image)
-        test_var = (np.stack([stderr[f"stderr.{n}"] for n in names], axis=-1).astype(np.float64) ** 2
-                    if all(f"stderr.{n}" in stderr for n in names) else None)
-        self.compare(entry, scene, names, test_all, res_dir, test_var)
-        entry["probes"] = probes.evaluate(sc, names, test_all, reference=self.reference_for(entry, scene))
+        test_var = None if stderr is None else stderr.astype(np.float64) ** 2
+        ref = references.load(name, self.opts["references"])
+        usable = ref is not None and references.check_usable(ref, scene) is None
+        self.compare(entry, scene, ref, names, test_all, res_dir, test_var)
+        entry["probes"] = probes.evaluate(sc, names, test_all, reference=ref if usable else None)
         bad = [p["name"] for p in entry["probes"] if p["pass"] is False]  # None: not measurable here
         if bad and entry["status"] == "ok":
             entry.update(status="failed", reason=f"analytic probes failed: {', '.join(bad[:6])}"
                                                   + (f" and {len(bad) - 6} more" if len(bad) > 6 else ""))
         return entry
 
-    def reference_for(self, entry, scene):
-        ref = references.load(entry["scene"], self.opts["references"])
-        return ref if references.check_usable(ref, scene) is None else None
-
-    def compare(self, entry, scene, names, test_all, res_dir, test_var=None):
+    def compare(self, entry, scene, ref, names, test_all, res_dir, test_var=None):
         test = test_all[..., :3]
-        ref = references.load(entry["scene"], self.opts["references"])
         unusable = references.check_usable(ref, scene)
         if ref is None:
             entry["reason"] = "no reference: rendered, not compared"

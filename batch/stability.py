@@ -122,9 +122,7 @@ def run(backend, golden, out_dir, passes=4, seed=0, timeout=600):
                 path = backend.export(sc, folder / "scene")
                 backend.render(path, mode, sc["render"]["spp"], folder / "render.exr", passes=passes, seed=seed,
                                timeout=timeout)
-                names, img = exr.read_image(folder / "render.exr")
-                ch = exr.read(folder / "render.exr")
-                stderr = np.stack([ch[f"stderr.{n}"] for n in names], axis=-1) if passes > 1 else None
+                names, img, stderr = exr.read_image_and_stderr(folder / "render.exr")
                 row["problems"] = check(name, value, sc, names, img, stderr)
                 row["status"] = "failed" if row["problems"] else "ok"
                 row["mean"] = float(img[..., :3].mean())

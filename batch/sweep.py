@@ -16,7 +16,6 @@ import math
 
 import numpy as np
 
-from . import compare, exr
 
 DEFAULT_LADDER = (4, 16, 64, 256)
 BIAS_SHARE = 0.5  # excess (bias^2) allowed as a share of the top rung's own noise V/s

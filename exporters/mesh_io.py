@@ -1,5 +1,4 @@
 """Triangle meshes to and from files: binary PLY (written for Mitsuba and ART), PLY/OBJ read."""
-import struct
 from pathlib import Path
 
 import numpy as np

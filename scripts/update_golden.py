@@ -11,7 +11,7 @@ import pkg_bootstrap  # noqa: E402
 
 
 def main():
-    pkg = pkg_bootstrap.package()
+    pkg_bootstrap.package()
     from spectral_bench.batch import blend_input
     import shutil
     from spectral_bench.exporters import art_writer, ir_json, mitsuba_writer

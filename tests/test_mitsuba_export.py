@@ -1,7 +1,6 @@
 """Exported Mitsuba folders load in Mitsuba unchanged and render; the radiometry follows the IR."""
 import copy
 import os
-import shutil
 import subprocess
 import sys
 import textwrap

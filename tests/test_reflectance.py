@@ -5,7 +5,7 @@ import copy
 
 import pytest
 
-from conftest import REFLECTANCE, ROOT, metrics, run_batch
+from conftest import REFLECTANCE, metrics, run_batch
 from spectral_bench.batch import backends, compare, exr, references
 
 SCALE, SPP = 0.125, 256

@@ -1,6 +1,5 @@
 """Stability case: every sweep value rendered and checked; the checks themselves catch NaN,
 energy gain and a broken lossless furnace."""
-import copy
 
 import numpy as np
 import pytest
