@@ -13,7 +13,9 @@ from pathlib import Path
 import bpy
 from bpy.props import BoolProperty, FloatProperty, IntProperty, StringProperty
 
-from ..batch import background_job, backends, results
+from ..batch import backends
+from ..batch.jobs import background as background_job
+from ..batch.report import results
 from ..exporters import extract_blender, ir_json, validate
 
 _ACTIVE = {}  # "job": the BackgroundRun in progress (Python objects cannot live in properties)

@@ -6,7 +6,7 @@ import bpy
 from bpy.props import BoolProperty, EnumProperty, StringProperty
 from bpy_extras.io_utils import ExportHelper, ImportHelper
 
-from ..batch import results
+from ..batch.report import results
 from ..exporters import art_writer, extract_blender, ir_json, mitsuba_writer, validate
 from . import benchmark
 

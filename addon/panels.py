@@ -1,9 +1,9 @@
 """Panels: annotations (Material, Light, World, Camera, Object, Scene) with inline validation,
 and the benchmark panel (Properties > Scene). Draw code only: the logic is in validation.py,
-benchmark.py and batch/results.py, which tests call directly (draw() cannot run headless)."""
+benchmark.py and batch/report/results.py, which tests call directly (draw() cannot run headless)."""
 import bpy
 
-from ..batch import results
+from ..batch.report import results
 from . import benchmark, validation
 
 

@@ -21,7 +21,8 @@ import pkg_bootstrap  # noqa: E402
 
 def main(argv=None):
     pkg_bootstrap.package()
-    from spectral_bench.batch import backends, exr, references, scene_sources
+    from spectral_bench.batch import backends, exr, scene_sources
+    from spectral_bench.batch.verdict import references
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("-i", "--input", nargs="+", default=[str(scene_sources.DEFAULT_BLEND)])

@@ -29,7 +29,8 @@ def setup_logging(log_file=None):
 
 def main(argv=None):
     pkg_bootstrap.package()
-    from spectral_bench.batch import cli, runner
+    from spectral_bench.batch import cli
+    from spectral_bench.batch.jobs import runner
     try:
         opts = cli.parse(cli.split_argv(sys.argv if argv is None else argv))
     except cli.SettingsError as exc:

@@ -33,7 +33,8 @@ def cpu_model():
 
 def main():
     pkg_bootstrap.package()
-    from spectral_bench.batch import backends, runner, scene_sources
+    from spectral_bench.batch import backends, scene_sources
+    from spectral_bench.batch.jobs import runner
     from spectral_bench.exporters import ir_json, mitsuba_writer
 
     ap = argparse.ArgumentParser()

@@ -52,7 +52,8 @@ def variants():
 
 def main():
     pkg_bootstrap.package()
-    from spectral_bench.batch import backends, compare, exr, references
+    from spectral_bench.batch import backends, exr
+    from spectral_bench.batch.verdict import compare, references
     from spectral_bench.exporters import ir_json
     from spectral_bench.exporters.ir import derived_needs
 

@@ -17,7 +17,7 @@ Conventions (every writer follows them):
   "stokes" adds S0..S3 in the same frame: S1 > 0 is horizontal, S2 > 0 is +45 degrees; a
   polarisation direction at angle a has S1/S0 = cos 2a, S2/S0 = sin 2a (Mitsuba 3's frame, measured).
 - Pixel filter is a box: each pixel is the plain integral over its area, so pixels are
-  independent and a reference downsamples exactly to any integer factor (see batch/compare.py).
+  independent and a reference downsamples exactly to any integer factor (see batch/verdict/compare.py).
 """
 import copy
 

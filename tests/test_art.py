@@ -11,7 +11,8 @@ import shutil
 import pytest
 
 from conftest import ALL_SCENES, ROOT, metrics, run_batch, write_scene
-from spectral_bench.batch import backends, exr, probes
+from spectral_bench.batch import backends, exr
+from spectral_bench.batch.verdict import probes
 from spectral_bench.exporters import art_writer
 
 ARTIST = os.environ.get("ART_ARTIST") or shutil.which("artist")

@@ -89,7 +89,7 @@ def test_cancel_stops_the_run_and_keeps_finished_results(tmp_path):
     out = run_bpy(f"""
         import time
         from spectral_bench.addon import benchmark
-        from spectral_bench.batch import results
+        from spectral_bench.batch.report import results
         s = bpy.context.window_manager.spectral_bench_run
         s.spp, s.scale, s.output_parent = 16, 0.125, {str(tmp_path)!r}
         bpy.ops.spectral_bench.run_benchmark()   # returns at once; the run goes on in the background

@@ -5,7 +5,8 @@ import json
 import pytest
 
 from conftest import ALL_SCENES, GOLDEN, ROOT, metrics, run_batch
-from spectral_bench.batch import cli, runner
+from spectral_bench.batch import cli
+from spectral_bench.batch.jobs import runner
 
 ARGS = ["-c", "reflectance", "-s", "ggx_glass", "-s", "ggx_copper_60", "-r", "mitsuba", "--spp", "8",
         "--scale", "0.25"]

@@ -3,7 +3,8 @@ whose statistics are known exactly."""
 import numpy as np
 import pytest
 
-from spectral_bench.batch import compare, exr, flip_isolated
+from spectral_bench.batch.verdict import compare, flip_isolated
+from spectral_bench.batch import exr
 
 
 def test_metrics_on_known_values():

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from conftest import ALL_SCENES, metrics, run_batch, write_scene
-from spectral_bench.batch import exr, llvm
+from spectral_bench.batch import exr
+from spectral_bench.batch.backends import llvm
 from spectral_bench.exporters import ir, mitsuba_writer
 
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from conftest import metrics, render, run_batch
-from spectral_bench.batch import probes
+from spectral_bench.batch.verdict import probes
 from spectral_bench.exporters import ir
 
 SIZE = (128, 128)

@@ -6,7 +6,8 @@ import copy
 import pytest
 
 from conftest import REFLECTANCE, metrics, run_batch
-from spectral_bench.batch import backends, compare, exr, references
+from spectral_bench.batch import backends, exr
+from spectral_bench.batch.verdict import compare, references
 
 SCALE, SPP = 0.125, 256
 

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from conftest import metrics, render, run_batch
-from spectral_bench.batch import stability
+from spectral_bench.batch.studies import stability
 
 
 @pytest.fixture(scope="module")

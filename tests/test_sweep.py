@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from conftest import metrics, run_batch
-from spectral_bench.batch import sweep
+from spectral_bench.batch.studies import sweep
 
 
 def test_prediction_and_slope_arithmetic():

@@ -20,8 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ...exporters import art_writer, spectra
-from .. import colorimetry, exr
+from ...exporters import art_writer, colorimetry, spectra
+from .. import exr
 from .mitsuba_backend import BackendFailure
 
 NATIVE = {"spectral", "polarization"}

@@ -1,6 +1,6 @@
 """Mitsuba 3 backend: renders the exported scene.xml in a child process.
 
-Default route: batch/mitsuba_worker.py with the mitsuba Python package (independent passes,
+Default route: batch/backends/mitsuba_worker.py with the mitsuba Python package (independent passes,
 render time measured inside). With ``-e mitsuba=PATH`` the user's ``mitsuba`` executable
 renders instead (``mitsuba -m VARIANT -Dspp=N -Dseed=S -o out.exr scene.xml``).
 """
@@ -14,9 +14,10 @@ from pathlib import Path
 import numpy as np
 
 from ...exporters import mitsuba_writer
-from .. import exr, llvm
+from .. import exr
+from . import llvm
 
-WORKER = Path(__file__).resolve().parents[1] / "mitsuba_worker.py"
+WORKER = Path(__file__).resolve().parent / "mitsuba_worker.py"
 NATIVE = {"spectral", "polarization"}
 
 

@@ -17,8 +17,9 @@ import copy
 
 import numpy as np
 
-from ..exporters import ir
-from . import compare, exr, probes
+from ...exporters import ir
+from ..verdict import compare, probes
+from .. import exr
 
 Z = 5.0  # the furnace sphere's mean may exceed 1 by this many standard errors before it counts as gain
 
@@ -97,7 +98,7 @@ def check(sweep, value, scene, names, img, stderr=None):
 
 def strip_image(path, images):
     """The sweep's renders side by side (sRGB previews), labelled by order."""
-    from .previews import srgb_encode
+    from ..report.previews import srgb_encode
     from PIL import Image
     h = max(i.shape[0] for _, i in images)
     tiles = [np.pad(srgb_encode(i[..., :3]), ((0, h - i.shape[0]), (0, 2), (0, 0))) for _, i in images]

@@ -6,7 +6,7 @@ CIEDE2000 come from colour-science.
 """
 import numpy as np
 
-from ..exporters import spectra
+from . import spectra
 
 
 def xyz(values_at_cmf_wavelengths):

@@ -13,8 +13,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..exporters import art_writer, ir_json
-from . import backends, compare, exr, flip_isolated, previews, probes, references, report, scene_sources, summary, sweep
+from ...exporters import art_writer, ir_json
+from .. import backends, exr, scene_sources
+from ..verdict import compare, flip_isolated, probes, references
+from ..report import html as report, previews, summary
+from ..studies import sweep
 from .progress import Progress
 
 log = logging.getLogger("spectral_bench")
@@ -39,7 +42,7 @@ def select(results, opts):
               if (not names or n in names) and (not cases or scene_sources.case_of(r) in cases
                                                   or isinstance(r, Exception))]
     for missing in sorted(set(names or []) - {n for n, _ in results}):
-        from ..exporters.validate import SceneError
+        from ...exporters.validate import SceneError
         chosen.append((missing, SceneError(missing, [("scene", "name", "no scene of this name in the input")])))
     return chosen
 
@@ -176,7 +179,7 @@ class Run:
             self.run_stability(scenes, made)
 
     def run_stability(self, scenes, made):
-        from . import stability
+        from ..studies import stability
         golden = {n: s for n, s in scenes if isinstance(s, dict)}
         if not {"ggx_copper_80", "polarizing_plane_0"} <= set(golden):
             self.stability = [{"sweep": "all", "status": "skipped",

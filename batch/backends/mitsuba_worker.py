@@ -1,6 +1,6 @@
 """Render a Mitsuba 3 scene folder in independent passes (run as a child process).
 
-    python batch/mitsuba_worker.py --xml scene.xml --variant llvm_ad_spectral --spp 64 \
+    python batch/backends/mitsuba_worker.py --xml scene.xml --variant llvm_ad_spectral --spp 64 \
         --passes 1 --seed 0 --out render.exr --result result.json
 
 Writes the mean image (R, G, B) and, with two or more passes, the standard error of that mean
@@ -19,10 +19,10 @@ MAX_WAVEFRONT = 1 << 24
 
 def flat_spectrum_rgb():
     """Linear sRGB of the flat spectrum whose luminance is 1."""
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
     import pkg_bootstrap
     pkg_bootstrap.package()
-    from spectral_bench.batch import colorimetry
+    from spectral_bench.exporters import colorimetry
     rgb = colorimetry.xyz_to_srgb(colorimetry.spectrum_xyz({"type": "constant", "value": 1.0}))
     return rgb / colorimetry.spectrum_xyz({"type": "constant", "value": 1.0})[1]
 
@@ -48,7 +48,7 @@ def main(argv=None):
     ap.add_argument("--result", required=True)
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
     import pkg_bootstrap
     pkg_bootstrap.package()
     from spectral_bench.batch import exr

@@ -4,7 +4,7 @@ flip_evaluator calls sys.exit on bad arguments; a child process keeps that from 
 the batch runner or Blender. Inputs are checked first: finite, and negative values (out-of-gamut
 linear RGB) clamped to 0, since FLIP requires non-negative input.
 
-    python batch/flip_isolated.py reference.exr test.exr flipmap.exr   -> prints {"flip": mean}
+    python batch/verdict/flip_isolated.py reference.exr test.exr flipmap.exr   -> prints {"flip": mean}
 """
 import json
 import subprocess
@@ -38,7 +38,7 @@ def hdr_flip(ref_path, test_path, map_path, timeout=600):
 
 
 def _main(ref_path, test_path, map_path):
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
     import pkg_bootstrap
     pkg_bootstrap.package()
     from spectral_bench.batch import exr

@@ -13,10 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..exporters import ir_json
-from . import exr
+from ...exporters import ir_json
+from .. import exr
 
-REFERENCE_DIR = Path(__file__).resolve().parents[1] / "references"
+REFERENCE_DIR = Path(__file__).resolve().parents[2] / "references"
 
 
 def fingerprint(scene):

@@ -132,6 +132,6 @@ def sweep_modes(backend, scene, requested=None):
         return list(requested), None
     modes = [mode]
     if mode.startswith("llvm_ad_"):
-        from .backends.mitsuba_backend import scalar_twin
+        from ..backends.mitsuba_backend import scalar_twin
         modes.append(scalar_twin(mode))
     return modes, None

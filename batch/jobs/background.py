@@ -10,9 +10,9 @@ import subprocess
 import sys
 from pathlib import Path
 
-from . import results
+from ..report import results
 
-RUN_PY = Path(__file__).resolve().parent / "run.py"
+RUN_PY = Path(__file__).resolve().parents[1] / "run.py"
 
 
 class BackgroundRun:

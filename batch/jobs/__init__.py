@@ -1,0 +1,1 @@
+"""Running the batch: planning jobs, executing them, progress."""

@@ -1,0 +1,1 @@
+"""Studies made of more renders: speed against accuracy (sweeps) and stability strips."""

@@ -1,0 +1,1 @@
+"""Verdicts: comparison with references on noise, analytic probes (ground truth from no renderer), FLIP."""
