@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import ir, mesh_io, spectra
+from . import ir, mesh_io, mitsuba_plugins, spectra
 
 # Blender/OpenGL cameras look down -Z with +Y up; Mitsuba's look down +Z with +X to the
 # image's left. Mitsuba to_world = IR to_world @ diag(-1, 1, -1).
@@ -30,6 +30,7 @@ class _Writer:
         self.scene = scene
         self.out = Path(out_dir)
         self.files = []
+        self.plugins = set()  # this project's Python plugins the scene uses (exporters/mitsuba_plugins)
 
     def spectrum(self, parent, name, spec, stem):
         if spectra.is_constant(spec):
@@ -147,8 +148,12 @@ class _Writer:
             self.polarizer(root, cam, r)
         for obj in sc["objects"]:
             self.shape(root, obj)
+        if self.plugins:
+            root.insert(1, ET.Comment(f" needs Python plugins {', '.join(sorted(self.plugins))}: see load_plugins.py "))
         ET.indent(root, space="  ")
         self.out.mkdir(parents=True, exist_ok=True)
+        if self.plugins:
+            mitsuba_plugins.write_into(self.out, self.plugins)
         xml_path = self.out / "scene.xml"
         ET.ElementTree(root).write(xml_path, encoding="utf-8", xml_declaration=True)
         return xml_path

@@ -1,5 +1,19 @@
 """Renderer backends. Each one exports an IR scene to its format, picks the cheapest mode that
-models what the scene needs (or says plainly that it cannot), and renders to EXR."""
+models what the scene needs (or says plainly that it cannot), and renders to EXR.
+
+The interface every backend implements (plain objects; no base class needed):
+    name, formats                      "mitsuba", ("mitsuba",): the export formats it renders
+    availability() -> (bool, reason)   whether it can run here, and why not
+    mode_for(scene) -> (mode, None) | (None, reason)
+                                       the cheapest mode that models the scene, or why it cannot
+                                       (naming object and field where one is to blame)
+    export(scene, out_dir) -> path     the file the renderer reads
+    render(path, mode, spp, out_exr, passes=1, seed=0, timeout=1800, log_path=None) -> info
+        writes the mean image (R, G, B, then any further channels such as S0.R ... S3.B) and, with
+        passes >= 2, the standard error of that mean per pixel as stderr.<channel> from the
+        pass-to-pass spread; info holds variant/mode, spp, passes, seed, time_s (render only),
+        wall_s, resolution, channels, versions. Raises BackendFailure.
+"""
 from .art_backend import ArtBackend
 from .mitsuba_backend import BackendFailure, MitsubaBackend  # noqa: F401 - BackendFailure is part of the interface
 

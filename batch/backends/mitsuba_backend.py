@@ -19,6 +19,9 @@ from . import llvm
 
 WORKER = Path(__file__).resolve().parent / "mitsuba_worker.py"
 NATIVE = {"spectral", "polarization"}
+# phenomena this project's Python plugins add (exporters/mitsuba_plugins): they load through the
+# Python API only, not through the mitsuba executable
+PLUGIN_NEEDS = set()
 
 
 class BackendFailure(RuntimeError):
@@ -53,13 +56,16 @@ class MitsubaBackend:
 
     def mode_for(self, scene):
         """(variant, None) or (None, reason the scene is unsupported)."""
-        missing = sorted(set(scene.get("needs", [])) - NATIVE)
+        needs = set(scene.get("needs", []))
+        missing = sorted(needs - NATIVE - PLUGIN_NEEDS)
         if missing:
             return None, (f"Mitsuba 3 has no native {', '.join(missing)} "
                           "(needs a plugin this backend does not have yet)")
+        if self.executable and needs & PLUGIN_NEEDS:
+            return None, (f"{', '.join(sorted(needs & PLUGIN_NEEDS))} needs this project's Python plugins, "
+                          "which the mitsuba executable cannot load (use the Python route: no -e mitsuba=...)")
         if self.force_variant:
             return self.force_variant, None
-        needs = set(scene.get("needs", []))
         llvm_ok = llvm.find()[0] is not None
         prefix = "llvm_ad_" if llvm_ok else "scalar_"
         if "polarization" in needs:

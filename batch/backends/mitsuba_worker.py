@@ -52,11 +52,13 @@ def main(argv=None):
     import pkg_bootstrap
     pkg_bootstrap.package()
     from spectral_bench.batch import exr
+    from spectral_bench.exporters import mitsuba_plugins
     import drjit as dr
     import mitsuba as mi
     import numpy as np
 
     mi.set_variant(args.variant)
+    mitsuba_plugins.register_exported(Path(args.xml).parent)  # the plugins the exported folder carries
     scene = mi.load_file(args.xml)
     per_pass = math.ceil(args.spp / args.passes)
     # The LLVM variants trace all samples of a render call as one wavefront: keep each call

@@ -10,10 +10,14 @@ Each probe is a dict {name, expected, measured, error, unit, pass}; ``pass`` is 
 probe cannot be measured at the render's resolution (fewer than MIN_PIXELS whole pixels).
 """
 from . import fresnel, lambert, stokes
-from .common import MIN_PIXELS  # noqa: F401 - part of the interface
+from .common import MIN_PIXELS, Measurement  # noqa: F401 - part of the interface
+
+# Every probe: a function of one Measurement returning a list of probe records; a probe that does
+# not apply to the scene returns [].
+PROBES = [lambert.patches, fresnel.brewster, stokes.validity]
 
 
-def evaluate(scene, names, image, reference=None):
+def evaluate(scene, names, image, reference=None, stderr=None):
     """Every probe that applies to ``scene``, measured on ``image`` (channels ``names``)."""
-    return (lambert.patches(scene, names, image) + fresnel.brewster(scene, names, image)
-            + stokes.validity(scene, names, image, reference))
+    m = Measurement(scene, list(names), image, stderr, reference)
+    return [record for probe in PROBES for record in probe(m)]

@@ -1,7 +1,23 @@
-"""What every probe shares: its record and the smallest region it can be measured on."""
+"""What every probe shares: what it measures (a Measurement), its record, and the smallest
+region it can be measured on."""
+from dataclasses import dataclass
+
 import numpy as np
 
 MIN_PIXELS = 4
+
+
+@dataclass
+class Measurement:
+    """One render to probe: the IR scene as rendered (resolution and spp applied), the image's
+    channel names and H x W x C values, the per-pixel standard error of the image from the
+    render's own independent passes (None with one pass), and the scene's usable reference (or
+    None)."""
+    scene: dict
+    names: list
+    image: np.ndarray
+    stderr: np.ndarray = None
+    reference: object = None
 
 
 def probe(name, expected, measured, error, unit, passed, **extra):

@@ -63,7 +63,8 @@ def _reflection_geometry(scene, di, li, w, h, points):
     return valid, cos_i, psi, eta
 
 
-def brewster(scene, names, image):
+def brewster(m):
+    scene, names, image = m.scene, m.names, m.image
     objs = scene["objects"]
     h, w = image.shape[:2]
     pol = scene["camera"].get("polarizer")

@@ -25,7 +25,8 @@ def _max_height_above(obj, center, normal):
     return None
 
 
-def patches(scene, names, image):
+def patches(m):
+    scene, names, image = m.scene, m.names, m.image
     env = scene.get("environment")
     if not env:
         return []

@@ -7,7 +7,8 @@ from .common import probe as _probe
 Z_MAX = 4.0
 
 
-def validity(scene, names, image, reference):
+def validity(m):
+    scene, names, image, reference = m.scene, m.names, m.image, m.reference
     if "S0.G" not in names:
         return []
     name = "Stokes S0 >= |(S1, S2, S3)|"
