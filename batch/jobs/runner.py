@@ -270,7 +270,7 @@ class Run:
         ref = references.load(name, self.opts["references"])
         usable = ref is not None and references.check_usable(ref, scene) is None
         self.compare(entry, scene, ref, names, test_all, res_dir, test_var)
-        entry["probes"] = probes.evaluate(sc, names, test_all, reference=ref if usable else None)
+        entry["probes"] = probes.evaluate(sc, names, test_all, reference=ref if usable else None, stderr=stderr)
         bad = [p["name"] for p in entry["probes"] if p["pass"] is False]  # None: not measurable here
         if bad and entry["status"] == "ok":
             entry.update(status="failed", reason=f"analytic probes failed: {', '.join(bad[:6])}"
