@@ -7,15 +7,17 @@ import numpy as np
 
 
 def camera_rays(camera, width, height, points="centers"):
-    """Origins (3,) and unit directions of rays through pixel centers (H, W, 3) or pixel
-    corners (H+1, W+1, 3). Pixel (0, 0) is the top-left one."""
+    """Origins (3,) and unit directions of rays through pixel centers (H, W, 3), pixel corners
+    (H+1, W+1, 3), or a point (ox, oy) in [0, 1)^2 inside every pixel (H, W, 3). Pixel (0, 0)
+    is the top-left one."""
     m = np.asarray(camera["to_world"], dtype=np.float64)
     t = np.tan(np.radians(camera["fov"]) / 2)
     tx, ty = (t, t * height / width) if camera.get("fov_axis", "x") == "x" else (t * width / height, t)
-    if points == "centers":
-        xs, ys = (np.arange(width) + 0.5) / width, (np.arange(height) + 0.5) / height
-    else:
+    if points == "corners":
         xs, ys = np.arange(width + 1) / width, np.arange(height + 1) / height
+    else:
+        ox, oy = (0.5, 0.5) if points == "centers" else points
+        xs, ys = (np.arange(width) + ox) / width, (np.arange(height) + oy) / height
     gx, gy = np.meshgrid((2 * xs - 1) * tx, (1 - 2 * ys) * ty)
     local = np.stack([gx, gy, -np.ones_like(gx)], axis=-1)
     d = local @ m[:3, :3].T
@@ -84,3 +86,11 @@ def pixels_inside(camera, width, height, objects, index, margin=0.7):
     if shape["type"] == "rectangle":
         ok &= np.isfinite(hit_rectangle(shape, origin, dirs, margin))
     return ok[:-1, :-1] & ok[1:, :-1] & ok[:-1, 1:] & ok[1:, 1:]
+
+
+def footprint_offsets(k):
+    """k x k stratified points inside a pixel (Gauss-Legendre nodes on [0, 1]^2) and their
+    weights: the mean over a box-filtered pixel of a smooth function, to O(h^(2k))."""
+    x, wts = np.polynomial.legendre.leggauss(k)
+    x, wts = (x + 1) / 2, wts / 2
+    return [((float(a), float(b)), float(wa * wb)) for a, wa in zip(x, wts) for b, wb in zip(x, wts)]

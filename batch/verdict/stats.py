@@ -23,9 +23,28 @@ def sidak_threshold(alpha, tests):
 def two_sided_p(z, dof=None):
     """P(|Z| >= |z|) for a standard normal Z, or Student's t with ``dof`` degrees of freedom."""
     z = np.abs(np.asarray(z, dtype=np.float64))
-    if dof is None or np.all(np.asarray(dof) > 1e6):
-        return np.vectorize(lambda x: math.erfc(x / math.sqrt(2)))(z) if z.ndim else math.erfc(float(z) / math.sqrt(2))
-    return 2.0 * _st.t.sf(z, np.asarray(dof, dtype=np.float64))
+    normal = _st.norm.sf(z) * 2.0
+    if dof is None:
+        return normal if z.ndim else float(normal)
+    dof = np.broadcast_to(np.asarray(dof, dtype=np.float64), z.shape)
+    student = 2.0 * _st.t.sf(z, np.where(np.isfinite(dof) & (dof < 1e7), np.maximum(dof, 1.0), 1e7))
+    out = np.where(np.isfinite(dof) & (dof < 1e7), student, normal)
+    return out if z.ndim else float(out)
+
+
+def one_sided_p(z, dof=None):
+    """P(T >= z) for a standard normal, or Student's t with ``dof`` degrees of freedom."""
+    z = np.asarray(z, dtype=np.float64)
+    if dof is None:
+        return _st.norm.sf(z)
+    dof = np.broadcast_to(np.asarray(dof, dtype=np.float64), z.shape)
+    small = np.isfinite(dof) & (dof < 1e7)
+    return np.where(small, _st.t.sf(z, np.where(small, np.maximum(dof, 1.0), 1e7)), _st.norm.sf(z))
+
+
+def z_critical(p_threshold):
+    """|z| at which a two-sided normal test reaches ``p_threshold``."""
+    return float(_st.norm.isf(p_threshold / 2.0))
 
 
 def satterthwaite_dof(variances, dofs):
@@ -56,3 +75,33 @@ def region_mean_test(residuals, alpha=ALPHA, tests=1):
     worst = int(np.argmax(z))
     return {"z": float(z[worst]), "p": float(np.min(p)), "threshold": threshold,
             "se": se.tolist(), "mean": mean.tolist(), "n": n, "pass": bool(np.min(p) >= threshold)}
+
+
+def compare_means(measured, expected, se, dof=None, alpha=ALPHA, tests=None):
+    """Two-sided tests of measured means against expected values, each with its standard error
+    (arrays of one shape; dof: degrees of freedom of each se, None for normal). ``tests`` is the
+    number of tests the family makes in all (default: this many), for the Sidak correction.
+
+    Returns a dict that also keeps the arrays, so the verdict can be re-judged against a recorded
+    deviation (rejudge)."""
+    m = np.atleast_1d(np.asarray(measured, dtype=np.float64))
+    e = np.atleast_1d(np.asarray(expected, dtype=np.float64))
+    s = np.atleast_1d(np.asarray(se, dtype=np.float64))
+    z = (m - e) / np.maximum(s, 1e-300)
+    p = np.atleast_1d(two_sided_p(z, dof))
+    threshold = sidak_threshold(alpha, tests or m.size)
+    out = {"z": float(np.max(np.abs(z))) if z.size else 0.0, "p": float(np.min(p)) if p.size else 1.0,
+           "threshold": threshold, "pass": bool(np.all(p >= threshold) and np.all(np.isfinite(m))),
+           "measured": m.tolist(), "expected": e.tolist(), "se": s.tolist()}
+    if dof is not None:
+        out["dof"] = np.broadcast_to(np.asarray(dof, dtype=np.float64), m.shape).tolist()
+    return out
+
+
+def rejudge(stat, scale=1.0, scale_se=0.0):
+    """Would a compare_means result pass if the expected values were ``scale`` times larger
+    (with that factor's own standard error)? The model of a recorded deviation."""
+    m, e, s = (np.asarray(stat[k], dtype=np.float64) for k in ("measured", "expected", "se"))
+    se = np.sqrt(s**2 + (scale_se * e) ** 2)
+    p = np.atleast_1d(two_sided_p((m - scale * e) / np.maximum(se, 1e-300), stat.get("dof")))
+    return bool(np.all(p >= stat["threshold"]))

@@ -17,7 +17,8 @@ from .common import MIN_PIXELS, Measurement  # noqa: F401 - part of the interfac
 PROBES = [lambert.patches, fresnel.brewster, stokes.validity]
 
 
-def evaluate(scene, names, image, reference=None, stderr=None):
-    """Every probe that applies to ``scene``, measured on ``image`` (channels ``names``)."""
-    m = Measurement(scene, list(names), image, stderr, reference)
+def evaluate(scene, names, image, reference=None, stderr=None, passes=None):
+    """Every probe that applies to ``scene``, measured on ``image`` (channels ``names``; ``stderr``:
+    its per-pixel standard error from ``passes`` independent passes, or None)."""
+    m = Measurement(scene, list(names), image, stderr, reference, passes or (1 if stderr is None else 2))
     return [record for probe in PROBES for record in probe(m)]
