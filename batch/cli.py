@@ -17,8 +17,8 @@ FORMATS = ("mitsuba", "art", "json")
 DEFAULTS = {
     "input": None, "case": None, "scene": None, "renderer": None, "exec": None, "spp": None, "scale": 1.0,
     "out": None, "export_only": False, "format": None, "log": None, "visualize": False, "settings": None,
-    "variant": None, "alpha": 0.01, "block": None, "min_samples": 65536, "timeout": 1800, "passes": 1, "seed": 0, "flip": True,
-    "references": None, "list": False, "art_ggx": False, "sweep": False, "ladder": None, "sweep_modes": None, "stability": False,
+    "variant": None, "alpha": 0.01, "block": None, "min_samples": 65536, "timeout": 1800, "passes": 2, "seed": 0, "flip": True,
+    "references": None, "known": None, "list": False, "art_ggx": False, "sweep": False, "ladder": None, "sweep_modes": None, "stability": False,
 }
 
 
@@ -58,10 +58,13 @@ def parser():
     ap.add_argument("--block", type=int, help="block side in pixels of the noise test (default: from --min-samples)")
     ap.add_argument("--min-samples", type=int, help="samples pooled per block of the noise test (default 65536)")
     ap.add_argument("--timeout", type=float, help="seconds per render before it is stopped (default 1800)")
-    ap.add_argument("--passes", type=int, help="independent passes per render (default 1)")
+    ap.add_argument("--passes", type=int,
+                    help="independent passes per render: its own per-pixel noise for the verdict (default 2; "
+                         "with 1, only the reference's own backend is judged against the reference)")
     ap.add_argument("--seed", type=int, help="first sampler seed (default 0)")
     ap.add_argument("--no-flip", dest="flip", action="store_false", help="skip HDR-FLIP")
     ap.add_argument("--references", metavar="DIR", help="reference folder (default: references/)")
+    ap.add_argument("--known", metavar="FILE", help="known deviations (default: known_deviations.toml)")
     ap.add_argument("--list", action="store_true", help="list the jobs and exit")
     ap.add_argument("--sweep", action="store_true",
                     help="also render each scene over a ladder of sample counts and chart error against time")

@@ -3,26 +3,47 @@ the analytic probes): XYZ = integral of L(l) * [x_bar, y_bar, z_bar] / integral 
 spectrum of 1 has Y = 1, Mitsuba's convention), then linear sRGB (D65 white, no adaptation).
 CIE 1931 2-degree CMFs, 360-830 nm at 1 nm, from colour-science (exporters/data/). CIELAB and
 CIEDE2000 come from colour-science.
+
+Observers: "cie1931" (the 1 nm table above) is the ground truth. Others describe how a renderer's
+film deviates from it, for known deviations (batch/verdict/known.py): "mitsuba3" is Mitsuba 3's
+film, the same table's 5 nm entries interpolated linearly and normalised by 1 / 106.7502
+(mitsuba/core/spectrum.h, MI_CIE_Y_NORMALIZATION), measured in known_deviations.toml.
 """
+from functools import lru_cache
+
 import numpy as np
 
 from . import spectra
 
+GROUND_TRUTH = "cie1931"
+OBSERVERS = ("cie1931", "mitsuba3")
 
-def xyz(values_at_cmf_wavelengths):
+
+@lru_cache(maxsize=None)
+def observer(name=GROUND_TRUTH):
+    """(wavelengths, x_bar, y_bar, z_bar, normalisation) on the 1 nm grid of 360-830 nm."""
     wl, xb, yb, zb = spectra.cie_1931_cmfs()
+    if name == "cie1931":
+        return wl, xb, yb, zb, float(np.trapz(yb, wl))
+    if name == "mitsuba3":
+        knots = (wl % 5) == 0
+        return (wl, *(np.interp(wl, wl[knots], c[knots]) for c in (xb, yb, zb)), 106.7502593994140625)
+    raise KeyError(f"unknown observer {name!r} (known: {', '.join(OBSERVERS)})")
+
+
+def xyz(values_at_cmf_wavelengths, obs=GROUND_TRUTH):
+    wl, xb, yb, zb, norm = observer(obs)
     v = np.asarray(values_at_cmf_wavelengths, dtype=np.float64)
-    norm = np.trapz(yb, wl)
     return np.array([np.trapz(v * xb, wl), np.trapz(v * yb, wl), np.trapz(v * zb, wl)]) / norm
 
 
-def spectrum_xyz(spec, scale_fn=None):
+def spectrum_xyz(spec, scale_fn=None, obs=GROUND_TRUTH):
     """XYZ of an IR spectrum (optionally multiplied by scale_fn(wavelengths))."""
     wl = spectra.cie_1931_cmfs()[0]
     v = spectra.evaluate(spec, wl)
     if scale_fn is not None:
         v = v * scale_fn(wl)
-    return xyz(v)
+    return xyz(v, obs)
 
 
 def _colour():

@@ -43,18 +43,34 @@ def write_scene(tmp_path, scene, name=None):
     return ir_json.write(sc, tmp_path / f"{sc['name']}.json")
 
 
-def render(scene, tmp_path, spp, size=None):
-    """Render an IR scene with the Mitsuba backend; returns (channel names, image)."""
+def render_with_noise(scene, tmp_path, spp, size=None, passes=2, seed=0, backend="mitsuba"):
+    """Render an IR scene (Mitsuba by default) in independent passes; returns (the scene as
+    rendered, channel names, image, per-pixel standard error or None with one pass)."""
     from spectral_bench.batch import backends, exr
     from spectral_bench.exporters import ir
     sc = copy.deepcopy(scene)
     if size:
         sc["render"]["width"], sc["render"]["height"] = size
+    sc["render"]["spp"] = spp
     sc["needs"] = ir.derived_needs({k: v for k, v in sc.items() if k != "needs"})
-    backend = backends.get("mitsuba")
-    xml = backend.export(sc, Path(tmp_path) / "mitsuba")
-    backend.render(xml, backend.mode_for(sc)[0], spp, Path(tmp_path) / "render.exr")
-    return sc, *exr.read_image(Path(tmp_path) / "render.exr")
+    b = backends.get(backend)
+    path = b.export(sc, Path(tmp_path) / backend)
+    b.render(path, b.mode_for(sc)[0], spp, Path(tmp_path) / "render.exr", passes=passes, seed=seed)
+    return (sc, *exr.read_image_and_stderr(Path(tmp_path) / "render.exr"))
+
+
+def render(scene, tmp_path, spp, size=None):
+    """Render an IR scene with the Mitsuba backend in one pass; returns (scene, names, image)."""
+    return render_with_noise(scene, tmp_path, spp, size, passes=1)[:3]
+
+
+def noise_test(reference_name, image, stderr, spp, passes=2):
+    """The noise test of a render (with its own noise) against a committed reference."""
+    from spectral_bench.batch.verdict import compare, references
+    ref = references.load(reference_name)
+    at = compare.reference_at(ref.mean, ref.stderr, ref.spp, image.shape, ref.provenance.get("passes", 8))
+    own = None if stderr is None else stderr.astype("float64") ** 2
+    return compare.z_test(image, at, spp, own_var_of_mean=own, own_passes=passes)
 
 
 def run_bpy(body, timeout=600, env=None):

@@ -50,34 +50,81 @@ def test_noise_test_passes_unbiased_renders_at_its_nominal_rate():
     failures = 0
     for _ in range(40):
         test, rm, rs, n, spp = _synthetic(rng)
-        mean, vom, s2 = compare.reference_at(rm, rs, n, test.shape)
-        failures += not compare.z_test(test, mean, vom, s2, spp, alpha=0.05, block=4).passed
+        ref = compare.reference_at(rm, rs, n, test.shape)
+        failures += not compare.z_test(test, ref, spp, alpha=0.05, block=4).passed
     # each trial fails with probability <= 5 %: P(more than 8 of 40) < 0.001
     assert failures <= 8, failures
+
+
+def _passes(rng, mu, var, spp, passes):
+    """A render in ``passes`` independent passes: mean and per-pixel standard error."""
+    per = [mu + rng.normal(size=mu.shape) * np.sqrt(var / (spp / passes)) for _ in range(passes)]
+    stack = np.stack(per)
+    return stack.mean(0), stack.std(0, ddof=1) / np.sqrt(passes)
+
+
+def test_own_noise_from_two_passes_is_calibrated_with_student_t():
+    """Two passes give each pixel a variance estimate of one degree of freedom: pooled over a
+    small block, a normal z would false-alarm far above alpha; Student's t with Satterthwaite's
+    degrees of freedom keeps the nominal rate."""
+    rng = np.random.default_rng(5)
+    failures, normal_failures = 0, 0
+    for _ in range(60):
+        test_mu, rm, rs, n, spp = _synthetic(rng, shape=(16, 16))
+        big_var = compare.downsample(0.3 * (0.5 + 0 * rm), 2)  # any positive per-sample variance
+        mean, se = _passes(rng, compare.downsample(rm, 2), big_var, spp, 2)
+        ref = compare.reference_at(rm, rs, n, mean.shape)
+        zt = compare.z_test(mean, ref, spp, own_var_of_mean=se**2, own_passes=2, alpha=0.05, block=2)
+        failures += not zt.passed
+        z = zt.diff / np.sqrt(zt.var)
+        normal_failures += float(np.max(np.abs(z))) > 3.4  # ~Sidak at 0.05 over 192 normal tests
+    assert failures <= 9, failures          # nominal 5 % of 60: P(> 9) < 0.01
+    assert normal_failures >= 15, normal_failures  # the normal approximation would be badly off
+
+
+def test_every_pixel_is_in_a_block():
+    for n, b in ((64, 16), (63, 16), (17, 16), (15, 16), (100, 32)):
+        edges = compare.block_edges(n, b)
+        assert edges[0] == 0 and edges[-1] == n
+        sizes = np.diff(edges)
+        assert sizes.min() >= min(b, n) and sizes.max() <= max(2 * b - 1, n)
+
+
+def test_a_bias_in_the_last_partial_block_is_detected():
+    """The old test cut the image to whole blocks: a wrong strip at the edge went unseen."""
+    rng = np.random.default_rng(6)
+    test, rm, rs, n, spp = _synthetic(rng, spp=256, shape=(40, 40))
+    test[:, -6:] *= 1.2  # 6 columns past the last whole 16-pixel block
+    ref = compare.reference_at(rm, rs, n, test.shape)
+    assert not compare.z_test(test, ref, spp, block=16).passed
 
 
 def test_noise_test_fails_a_two_percent_bias():
     rng = np.random.default_rng(2)
     test, rm, rs, n, spp = _synthetic(rng, spp=256, bias=0.02)
-    mean, vom, s2 = compare.reference_at(rm, rs, n, test.shape)
-    zt = compare.z_test(test, mean, vom, s2, spp, block=4)
+    ref = compare.reference_at(rm, rs, n, test.shape)
+    zt = compare.z_test(test, ref, spp, block=4)
     assert not zt.passed and zt.p_min < zt.threshold
+    # re-judged as if the reference were 2 % brighter (a recorded deviation), it passes
+    assert zt.rejudge(1.02, 0.002)
+    assert not zt.rejudge(1.0)
 
 
 def test_noise_test_fails_light_where_the_reference_is_black():
-    ref = np.zeros((16, 16, 3))
-    test = ref.copy()
+    zeros = np.zeros((16, 16, 3))
+    test = zeros.copy()
     test[3, 3] = 0.5
-    zt = compare.z_test(test, ref, np.zeros_like(ref), np.zeros_like(ref), 16)
-    assert not zt.passed
+    ref = compare.ReferenceAt(zeros, zeros, zeros, 7.0)
+    assert not compare.z_test(test, ref, 16).passed
 
 
 def test_noise_test_fails_nan():
     rng = np.random.default_rng(3)
     test, rm, rs, n, spp = _synthetic(rng)
-    mean, vom, s2 = compare.reference_at(rm, rs, n, test.shape)
+    ref = compare.reference_at(rm, rs, n, test.shape)
+    assert compare.z_test(test, ref, spp, block=4).passed
     test[0, 0, 0] = np.nan
-    assert not compare.z_test(test, mean, vom, s2, spp, block=4).passed
+    assert not compare.z_test(test, ref, spp, block=4).passed
 
 
 def test_flip_runs_isolated_and_bad_input_cannot_exit_the_caller(tmp_path):

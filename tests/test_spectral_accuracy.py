@@ -5,10 +5,9 @@ import re
 import numpy as np
 import pytest
 
-from conftest import metrics, run_batch
-from spectral_bench.batch import backends, exr
+from conftest import metrics, noise_test, render_with_noise, run_batch
 from spectral_bench.exporters import colorimetry
-from spectral_bench.batch.verdict import compare, probes, references
+from spectral_bench.batch.verdict import probes
 from spectral_bench.exporters import spectra
 
 CHARTS = ["macbeth_chart_D65", "macbeth_chart_D50"]
@@ -50,43 +49,90 @@ def test_white_patch_under_d65_is_neutral_in_the_probe():
 @pytest.fixture(scope="module")
 def chart_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("charts") / "out"
-    proc = run_batch("-r", "mitsuba", "-c", "spectral_accuracy", "--scale", 0.5, "--spp", 64, "--alpha", 0.001, "-o", out)
+    proc = run_batch("-r", "mitsuba", "-c", "spectral_accuracy", "--no-flip", "-o", out)
     return proc, out, {r["scene"]: r for r in metrics(out)["runs"]}
 
 
-def test_rendered_charts_meet_the_probe_bounds_and_their_references(chart_run):
+def test_rendered_charts_meet_the_probes_and_their_references(chart_run):
+    """At the default settings: every patch and the chart's luminance scale are judged on the
+    render's own noise; Mitsuba's film deviates from the CIE 1931 observer (its 5 nm tables and
+    normalisation: known_deviations.toml), so a chart may be 'known' but never 'failed'."""
     proc, out, runs = chart_run
     assert sorted(runs) == sorted(CHARTS)
     for name, run in runs.items():
-        assert run["status"] == "ok", (name, run["reason"])
+        assert run["status"] in ("ok", "known"), (name, run["reason"])
         patches = [p for p in run["probes"] if p["name"].startswith("lambert patch_")]
-        assert len(patches) == 24 and all(p["pass"] for p in patches), name
-        assert max(p["error"] for p in patches) <= probes.lambert.PATCH_DE_MAX
+        assert len(patches) == 24 and all(p["pass"] is not None for p in patches), name
+        assert all(p["error"] < 0.5 for p in patches), name  # information: dE00 of every patch
+        scale = next(p for p in run["probes"] if p["name"] == "lambert chart luminance scale")
+        assert abs(scale["measured"] - 1) < 0.003, scale
+        assert not any(p["name"] == "lambert chart_board" for p in run["probes"])  # patches shade it
         assert run["test"]["pass"]
-    neutral = [p for p in runs["macbeth_chart_D65"]["probes"] if p["name"].startswith("neutral")]
-    assert len(neutral) == 1 and neutral[0]["pass"]
-    assert not any(p["name"].startswith("neutral") for p in runs["macbeth_chart_D50"]["probes"])
     assert proc.returncode == 0
+
+
+def _chart(golden, tmp_path, change_rendered, name="macbeth_chart_D65"):
+    """Render the chart changed by ``change_rendered`` at the default settings and probe it as
+    the unchanged scene; the verdict as the runner decides it (known deviations included)."""
+    from spectral_bench.batch.verdict import known, status
+    rendered = copy.deepcopy(golden[name])
+    change_rendered(rendered)
+    spp = rendered["render"]["spp"]
+    _, names, img, se = render_with_noise(rendered, tmp_path, spp)
+    judged = copy.deepcopy(golden[name])
+    entry = {"scene": name, "backend": "mitsuba", "mode": "llvm_ad_spectral",
+             "versions": {"mitsuba": "3.9.1"}, "sanity": {}}
+    devs = known.applicable(known.load(), entry)
+    entry["probes"] = probes.evaluate(judged, names, img, stderr=se, passes=2,
+                                      observers=[d.observer for d in devs if d.observer])
+    return status.decide(entry, known.load())
+
+
+def test_unchanged_chart_is_ok_or_known(golden, tmp_path):
+    assert _chart(golden, tmp_path, lambda sc: None)["status"] in ("ok", "known")
+
+
+def test_one_percent_brighter_illuminant_fails(golden, tmp_path):
+    def brighter(sc):
+        sc["environment"]["radiance"]["scale"] *= 1.01
+    entry = _chart(golden, tmp_path, brighter)
+    assert entry["status"] == "failed", entry["reason"]
+    scale = next(p for p in entry["probes"] if p["name"] == "lambert chart luminance scale")
+    assert scale["pass"] is False and scale["measured"] == pytest.approx(1.011, abs=0.002)
+
+
+def test_a_0_3_de00_shift_of_one_patch_fails(golden, tmp_path):
+    """Scale one patch's reflectance until its colour moves by 0.3 dE00 (computed, not guessed):
+    that patch's probe must fail, the others must not."""
+    patch = "patch_orange"
+    base = next(o for o in golden["macbeth_chart_D65"]["objects"] if o["name"] == patch)
+    env = golden["macbeth_chart_D65"]["environment"]["radiance"]
+    white = colorimetry.spectrum_xyz(env)
+
+    def de_for(k):
+        def lab(f):
+            return colorimetry.lab(colorimetry.spectrum_xyz(base["bsdf"]["reflectance"],
+                                                            lambda wl: f * spectra.evaluate(env, wl)), white)
+        return colorimetry.delta_e_2000(lab(1.0), lab(k))
+    k = 1.0
+    while de_for(k) < 0.3:
+        k += 0.0005
+
+    def shifted(sc):
+        obj = next(o for o in sc["objects"] if o["name"] == patch)
+        obj["bsdf"]["reflectance"]["scale"] = k
+    entry = _chart(golden, tmp_path, shifted)
+    failed = [p["name"] for p in entry["probes"] if p["pass"] is False]
+    assert f"lambert {patch}" in failed and entry["status"] == "failed", (k, entry["reason"])
 
 
 def test_d50_rendered_as_d65_fails(golden, tmp_path):
     """The D65 chart's probes and reference must reject a render lit by D50."""
-    d65 = golden["macbeth_chart_D65"]
-    wrong = copy.deepcopy(d65)
-    wrong["environment"]["radiance"]["name"] = "cie_d50"
-    for sc in (wrong,):
-        sc["render"]["width"], sc["render"]["height"] = 310, 210
-    backend = backends.get("mitsuba")
-    xml = backend.export(wrong, tmp_path / "m")
-    backend.render(xml, backend.mode_for(wrong)[0], 64, tmp_path / "r.exr")
-    names, img = exr.read_image(tmp_path / "r.exr")
-    judged = copy.deepcopy(d65)
-    judged["render"]["width"], judged["render"]["height"] = 310, 210
-    found = probes.evaluate(judged, names, img)
-    mean = next(p for p in found if p["name"] == "lambert mean dE00")
-    assert mean["pass"] is False and mean["error"] > 2.0
-    neutral = next(p for p in found if p["name"].startswith("neutral"))
-    assert neutral["pass"] is False
-    ref = references.load("macbeth_chart_D65")
-    m, v, s2 = compare.reference_at(ref.mean, ref.stderr, ref.spp, img.shape)
-    assert not compare.z_test(img, m, v, s2, 64).passed
+    def d50(sc):
+        sc["environment"]["radiance"]["name"] = "cie_d50"
+    entry = _chart(golden, tmp_path, d50)
+    assert entry["status"] == "failed"
+    failed = [p for p in entry["probes"] if p["name"].startswith("lambert patch_") and p["pass"] is False]
+    assert len(failed) >= 20 and np.mean([p["error"] for p in failed]) > 2.0
+    _, names, img, se = render_with_noise({**golden["macbeth_chart_D50"], "name": "d50"}, tmp_path / "ref", 64)
+    assert not noise_test("macbeth_chart_D65", img, se, 64).passed

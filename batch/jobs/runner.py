@@ -15,7 +15,7 @@ import numpy as np
 
 from ...exporters import art_writer, ir_json
 from .. import backends, exr, scene_sources
-from ..verdict import compare, flip_isolated, probes, references
+from ..verdict import compare, flip_isolated, known, probes, references, status
 from ..report import html as report, previews, summary
 from ..studies import sweep
 from .progress import Progress
@@ -95,6 +95,7 @@ class Run:
         self.runs = []
         self.sweeps = []
         self.started = _dt.datetime.now().isoformat(timespec="seconds")
+        self.deviations = known.load(opts.get("known"))
 
     def save(self):
         data = {"started": self.started, "options": {k: v for k, v in self.opts.items() if k != "exec"},
@@ -196,8 +197,8 @@ class Run:
         ladder = self.opts["ladder"] or list(sweep.DEFAULT_LADDER)
         sc = for_run(scene, dict(self.opts, spp=None))
         modes, why = sweep.sweep_modes(backend, sc, self.opts["sweep_modes"])
-        ref = references.load(name, self.opts["references"])
-        unusable = references.check_usable(ref, scene)
+        ref, broken = self.reference(name)
+        unusable = broken or references.check_usable(ref, scene)
         if not modes or unusable:
             self.sweeps.append({"scene": name, "backend": backend.name, "mode": None, "points": [],
                                 "reason": why or unusable})
@@ -213,11 +214,11 @@ class Run:
                     info = backend.render(scene_dir, mode, spp, image, seed=self.opts["seed"],
                                           timeout=self.opts["timeout"])
                     names, img = exr.read_image(image)
-                    mean, var, sigma2 = compare.reference_at(ref.mean, ref.stderr, ref.spp, img.shape)
+                    at = compare.reference_at(ref.mean, ref.stderr, ref.spp, img.shape, ref.provenance.get("passes", 8))
                     point = {"spp": info["spp"], "time_s": info["time_s"], "wall_s": info["wall_s"]}
-                    point.update(compare.metrics(img[..., :3], mean[..., :3]))
+                    point.update(compare.metrics(img[..., :3], at.mean[..., :3]))
                     line["points"].append(point)
-                line.update(sweep.analyse(line["points"], sigma2[..., :3], var[..., :3]))
+                line.update(sweep.analyse(line["points"], at.sigma2[..., :3], at.var_of_mean[..., :3]))
             except Exception as exc:  # noqa: BLE001 - a failing mode must not stop the sweep
                 line["reason"] = f"sweep failed: {exc}"
             self.sweeps.append(line)
@@ -240,6 +241,14 @@ class Run:
                     l["equal"] = table
         self.save()
 
+    def reference(self, name):
+        """(reference or None, why it cannot judge or None); a broken reference file is a reason."""
+        try:
+            ref = references.load(name, self.opts["references"])
+        except Exception as exc:  # noqa: BLE001 - a bad reference must not stop the batch
+            return None, f"reference unreadable: {exc}"
+        return ref, None
+
     def render_one(self, name, scene, backend):
         sc = for_run(scene, self.opts)
         r = sc["render"]
@@ -260,58 +269,71 @@ class Run:
         except backends.BackendFailure as exc:
             entry.update(status="failed", reason=f"render failed: {exc}")
             return entry
-        entry.update(time_s=info["time_s"], wall_s=info["wall_s"], spp=info["spp"],
+        entry.update(time_s=info["time_s"], wall_s=info["wall_s"], spp=info["spp"], passes=info.get("passes", 1),
                      image=str(image.relative_to(self.out)), versions=info.get("versions"))
         names, test_all, stderr = exr.read_image_and_stderr(image)
         entry["channels"] = names
         entry["sanity"] = compare.image_sanity(test_all)
+        if entry["sanity"]["negative"]:
+            # negative linear sRGB can be a legitimate out-of-gamut colour; negative S0 never is
+            entry["flags"] = [f"{entry['sanity']['negative']} negative values"]
         previews.save_linear(res_dir / "render.png", test_all[..., :3])
-        test_var = None if stderr is None else stderr.astype(np.float64) ** 2
-        ref = references.load(name, self.opts["references"])
-        usable = ref is not None and references.check_usable(ref, scene) is None
-        self.compare(entry, scene, ref, names, test_all, res_dir, test_var)
-        entry["probes"] = probes.evaluate(sc, names, test_all, reference=ref if usable else None, stderr=stderr)
-        bad = [p["name"] for p in entry["probes"] if p["pass"] is False]  # None: not measurable here
-        if bad and entry["status"] == "ok":
-            entry.update(status="failed", reason=f"analytic probes failed: {', '.join(bad[:6])}"
-                                                  + (f" and {len(bad) - 6} more" if len(bad) > 6 else ""))
+        ref, broken = self.reference(name)
+        unusable = broken or references.check_usable(ref, scene)
+        ztest = None
+        if unusable:
+            entry["reference_problem"] = unusable
+        else:
+            ztest = self.compare(entry, ref, names, test_all, stderr, res_dir)
+        observers = sorted({d.observer for d in known.applicable(self.deviations, entry) if d.observer})
+        entry["probes"] = probes.evaluate(sc, names, test_all, reference=None if unusable else ref, stderr=stderr,
+                                          passes=entry["passes"], observers=observers)
+        if unusable and not any(p["pass"] is not None for p in entry["probes"]):
+            entry["unjudged_because"] = unusable + ("" if entry["probes"] else "; no analytic probe applies")
+        status.decide(entry, self.deviations, ztest)
         return entry
 
-    def compare(self, entry, scene, ref, names, test_all, res_dir, test_var=None):
+    def compare(self, entry, ref, names, test_all, stderr, res_dir):
+        """The noise test against the reference, on the render's own noise (entry["test"]); the
+        diff, z-score and FLIP images. Returns the in-memory test (for re-judging) or None."""
         test = test_all[..., :3]
-        unusable = references.check_usable(ref, scene)
-        if ref is None:
-            entry["reason"] = "no reference: rendered, not compared"
-            return
-        if unusable:
-            entry.update(status="failed", reason=unusable)
-            return
-        if names != ref.names:
-            entry.update(status="failed", reason=f"render channels {names} differ from the reference's {ref.names}")
-            return
-        try:
-            mean_all, var_all, sigma2_all = compare.reference_at(ref.mean, ref.stderr, ref.spp, test_all.shape)
-        except ValueError as exc:
-            entry.update(status="failed", reason=f"cannot compare with the reference: {exc}")
-            return
-        mean = mean_all[..., :3]
         entry["reference"] = {"path": str(ref.path), "spp": ref.spp, "backend": ref.provenance.get("backend"),
-                              "mode": ref.provenance.get("mode")}
+                              "mode": ref.provenance.get("mode"), "versions": ref.provenance.get("versions")}
+        if names != ref.names:
+            entry["test"] = {"pass": False, "reason": f"render channels {names} differ from the reference's {ref.names}"}
+            return None
+        try:
+            at = compare.reference_at(ref.mean, ref.stderr, ref.spp, test_all.shape, ref.provenance.get("passes", 8))
+        except ValueError as exc:
+            entry["test"] = {"pass": None, "reason": f"cannot compare with the reference: {exc}"}
+            return None
+        mean = at.mean[..., :3]
         entry["metrics"].update(compare.metrics(test, mean))
-        # every channel is judged: R, G, B and, for Stokes output, S0..S3
-        zt = compare.z_test(test_all, mean_all, var_all, sigma2_all, entry["spp"], alpha=self.opts["alpha"],
-                            block=self.opts["block"], min_samples=self.opts["min_samples"], test_var_of_mean=test_var)
-        entry["test"] = zt.as_dict()
+        same = (entry["backend"], entry["mode"]) == (ref.provenance.get("backend"), ref.provenance.get("mode"))
+        if stderr is None and not same:
+            entry["test"] = {"pass": None, "reason": (
+                "one pass: the render has no per-pixel noise of its own and another renderer's is not "
+                "borrowed (render with --passes >= 2)")}
+            zt = None
+        else:
+            # every channel is judged: R, G, B and, for Stokes output, S0..S3
+            own = None if stderr is None else stderr.astype(np.float64) ** 2
+            zt = compare.z_test(test_all, at, entry["spp"], own_var_of_mean=own, own_passes=entry["passes"],
+                                alpha=self.opts["alpha"], block=self.opts["block"], min_samples=self.opts["min_samples"])
+            entry["test"] = zt.as_dict()
+            if not zt.passed:
+                entry["test"]["reason"] = (
+                    f"differs from the reference beyond noise: min p = {zt.p_min:.3g} < {zt.threshold:.3g} "
+                    f"(alpha {zt.alpha} Sidak-corrected over {zt.blocks} tests), max |z| = {zt.z_max:.1f}")
+            exr.write(res_dir / "zscore.exr", zt.zmap[..., :3])
+            worst = np.take_along_axis(zt.zmap, np.abs(zt.zmap).argmax(axis=-1)[..., None], axis=-1)[..., 0]
+            previews.save_signed(res_dir / "zscore.png", worst, scale=6)
         exr.write(res_dir / "reference.exr", mean)
         exr.write(res_dir / "diff_abs.exr", np.abs(test - mean))
         exr.write(res_dir / "diff_rel.exr", np.abs(test - mean) / (np.abs(mean) + compare.REL_EPS))
-        zfull = np.kron(zt.zmap, np.ones((zt.block, zt.block, 1)))
-        exr.write(res_dir / "zscore.exr", zfull[..., :3])
         previews.save_linear(res_dir / "reference.png", mean)
         previews.save_signed(res_dir / "diff.png", (test - mean).mean(axis=-1),
                              scale=max(float(np.percentile(np.abs(mean), 99)), 1e-6) * 0.25)
-        worst = np.take_along_axis(zfull, np.abs(zfull).argmax(axis=-1)[..., None], axis=-1)[..., 0]
-        previews.save_signed(res_dir / "zscore.png", worst, scale=6)
         if self.opts["flip"]:
             flip, err = flip_isolated.hdr_flip(res_dir / "reference.exr", self.out / entry["image"], res_dir / "flip.exr")
             entry["metrics"]["flip"] = flip
@@ -319,14 +341,13 @@ class Run:
                 entry["flip_error"] = err
             elif (res_dir / "flip.exr").exists():
                 previews.save_gray(res_dir / "flip.png", exr.read_rgb(res_dir / "flip.exr")[..., 0])
-        if not zt.passed:
-            entry.update(status="failed", reason=(
-                f"differs from the reference beyond its noise: min p = {zt.p_min:.3g} < {zt.threshold:.3g} "
-                f"(alpha {zt.alpha} Sidak-corrected over {zt.blocks} tests), max |z| = {zt.z_max:.1f}"))
+        return zt
 
 
 def run(opts):
-    """Run the batch; returns the exit status (0 only when every job that ran passed)."""
+    """Run the batch; returns the exit status (batch/verdict/status.py: 0 when every judged job
+    is ok, known or fixed and nothing was left unjudged, 3 when something was unjudged, 1 when
+    something failed)."""
     t0 = time.perf_counter()
     _jobs, scenes = plan(opts)
     batch = Run(opts)
@@ -343,5 +364,4 @@ def run(opts):
                          getattr(batch, "stability", None))
     report.write(batch.out)
     print(text)
-    failed = [r for r in batch.runs + getattr(batch, "stability", []) if r["status"] == "failed"]
-    return 1 if failed else 0
+    return status.exit_code(batch.runs + getattr(batch, "stability", []))

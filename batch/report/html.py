@@ -6,13 +6,15 @@ import html
 import json
 from pathlib import Path
 
+from ..verdict.status import ORDER
+
 VIEWS = [("render", "render.png"), ("reference", "reference.png"), ("difference", "diff.png"),
          ("FLIP", "flip.png"), ("z-score", "zscore.png")]
 
 STYLE = """
 body{font-family:system-ui,sans-serif;margin:1.5em;color:#222}
 table{border-collapse:collapse;font-size:13px}td,th{border:1px solid #ccc;padding:3px 6px}
-.failed{background:#fdd}.ok{background:#dfd}.skipped,.unsupported{background:#eee}
+.failed{background:#fdd}.known{background:#fec}.unjudged{background:#ffd}.ok,.fixed{background:#dfd}.skipped,.unsupported{background:#eee}
 .viewer{display:flex;gap:1.5em;margin:1em 0 2em;flex-wrap:wrap}.frame{overflow:auto;max-width:70vw;max-height:70vh;border:1px solid #999}
 .frame img{image-rendering:pixelated;transform-origin:0 0}.tabs button.active{font-weight:bold;background:#cde}
 """
@@ -44,7 +46,7 @@ def _fmt(x, f="{:.4g}"):
 def _summary(runs):
     rows = ["<table><tr><th>scene</th><th>backend</th><th>mode</th><th>status</th><th>spp</th><th>time (s)</th>"
             "<th>RMSE</th><th>relMSE</th><th>MAPE</th><th>FLIP</th><th>probes</th><th>reason</th></tr>"]
-    for r in sorted(runs, key=lambda r: ({"failed": 0}.get(r["status"], 1), r["scene"], r["backend"])):
+    for r in sorted(runs, key=lambda r: (ORDER.get(r["status"], 9), r["scene"], r["backend"])):
         m, pr = r.get("metrics") or {}, r.get("probes") or []
         probes = f"{sum(p['pass'] is True for p in pr)}/{len(pr)} pass" if pr else ""
         anchor = f"<a href='#{_id(r)}'>{html.escape(r['scene'])}</a>" if r.get("image") else html.escape(r["scene"])

@@ -1,7 +1,7 @@
 """The readable summary: summary.md in the output folder, also printed. Failures first."""
 from pathlib import Path
 
-ORDER = {"failed": 0, "unsupported": 1, "skipped": 2, "ok": 3}
+from ..verdict.status import ORDER
 
 
 def _num(x, fmt="{:.4g}"):
@@ -14,7 +14,8 @@ def table(runs):
     for r in sorted(runs, key=lambda r: (ORDER.get(r["status"], 9), r["scene"], r["backend"])):
         m = r.get("metrics") or {}
         t = r.get("test")
-        test = f"p_min {t['p_min']:.2g} / {t['threshold']:.2g}" if t else ""
+        test = (f"p_min {t['p_min']:.2g} / {t['threshold']:.2g}" if t and t.get("p_min") is not None
+                else "not judged" if t else "")
         res = "x".join(map(str, r["resolution"])) if r.get("resolution") else ""
         reason = (r.get("reason") or "").replace("|", "/").replace("\n", " ")
         rows.append(f"| {r['status']} | {r['scene']} | {r['backend']} | {r.get('mode') or ''} | {_num(r.get('spp'), '{}')} "
@@ -66,8 +67,10 @@ def write(out_dir, runs, elapsed_s, sweeps=None, stability=None):
     c = counts(runs)
     head = ", ".join(f"{n} {s}" for s, n in sorted(c.items(), key=lambda kv: ORDER.get(kv[0], 9)))
     text = (f"# Spectral benchmark results\n\n{len(runs)} jobs in {elapsed_s:.1f} s: {head or 'nothing ran'}.\n\n"
-            "A render passes when it agrees with its reference within the reference's noise (block Z-test, "
-            "Sidak-corrected). Images and diffs: `<scene>/results/<backend>/`; all numbers: `metrics.json`.\n\n"
+            "A render is ok when every check passes: its agreement with the reference within noise (its own and "
+            "the reference's; block test, Sidak-corrected) and the analytic probes (ground truth from no renderer). "
+            "known: fails exactly as a recorded deviation (known_deviations.toml); unjudged: nothing could judge it. "
+            "Images and diffs: `<scene>/results/<backend>/`; all numbers: `metrics.json`.\n\n"
             + table(runs) + "\n" + sweeps_table(sweeps) + stability_table(stability))
     Path(out_dir, "summary.md").write_text(text)
     return text

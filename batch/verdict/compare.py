@@ -139,10 +139,10 @@ class ZTest:
                 "z_max": self.z_max, "dof_min": self.dof_min if np.isfinite(self.dof_min) else None,
                 "fraction_abs_z_over_3": self.frac_over_3, "pass": self.passed}
 
-    def rejudge(self, scale):
-        """Would the render pass if the reference were ``scale`` times brighter?"""
+    def rejudge(self, scale, scale_se=0.0):
+        """Would the render pass if the reference were ``scale`` (+- scale_se) times brighter?"""
         d = self.diff - (scale - 1.0) * self.ref_block_mean
-        p = stats.two_sided_p(d / np.sqrt(self.var), self.dof)
+        p = stats.two_sided_p(d / np.sqrt(self.var + (scale_se * self.ref_block_mean) ** 2), self.dof)
         return bool(np.min(p) >= self.threshold) if p.size else True
 
 

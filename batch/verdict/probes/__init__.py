@@ -17,8 +17,10 @@ from .common import MIN_PIXELS, Measurement  # noqa: F401 - part of the interfac
 PROBES = [lambert.patches, fresnel.brewster, stokes.validity]
 
 
-def evaluate(scene, names, image, reference=None, stderr=None, passes=None):
+def evaluate(scene, names, image, reference=None, stderr=None, passes=None, observers=()):
     """Every probe that applies to ``scene``, measured on ``image`` (channels ``names``; ``stderr``:
-    its per-pixel standard error from ``passes`` independent passes, or None)."""
-    m = Measurement(scene, list(names), image, stderr, reference, passes or (1 if stderr is None else 2))
+    its per-pixel standard error from ``passes`` independent passes, or None; ``observers``: see
+    Measurement)."""
+    m = Measurement(scene, list(names), image, stderr, reference, passes or (1 if stderr is None else 2),
+                    tuple(observers))
     return [record for probe in PROBES for record in probe(m)]

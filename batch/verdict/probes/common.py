@@ -11,13 +11,17 @@ MIN_PIXELS = 4
 class Measurement:
     """One render to probe: the IR scene as rendered (resolution and spp applied), the image's
     channel names and H x W x C values, the per-pixel standard error of the image from the
-    render's own independent passes (None with one pass), and the scene's usable reference (or
-    None)."""
+    render's own independent passes (None with one pass) and their number, the scene's usable
+    reference (or None), and the observers (exporters/colorimetry.py) besides the ground truth for
+    which probes that integrate spectra also report their verdict (``alternatives``), so that a
+    known deviation of a renderer's film can be re-judged."""
     scene: dict
     names: list
     image: np.ndarray
     stderr: np.ndarray = None
     reference: object = None
+    passes: int = 1
+    observers: tuple = ()
 
 
 def probe(name, expected, measured, error, unit, passed, **extra):

@@ -93,7 +93,8 @@ def _expected(scene, di, li, w, h, pol):
         acc = weight * values if acc is None else acc + weight * values
     corners, *_ = _reflection(scene, di, li, w, h, "corners")
     mask &= corners[:-1, :-1] & corners[1:, :-1] & corners[:-1, 1:] & corners[1:, 1:]
-    return mask, acc, eta
+    cos_centre = _reflection(scene, di, li, w, h, "centers")[1]
+    return mask, acc, eta, cos_centre
 
 
 def brewster(m):
@@ -111,29 +112,34 @@ def brewster(m):
     out = []
     for di in dielectrics:
         for li in lights:
-            mask, factor, eta = _expected(scene, di, li, w, h, pol)
-            light_rgb = colorimetry.xyz_to_srgb(colorimetry.spectrum_xyz(objs[li]["emitter"]["radiance"]))
+            mask, factor, eta, cos_i = _expected(scene, di, li, w, h, pol)
             label = f"{objs[di]['name']} reflecting {objs[li]['name']}"
             extra = {"brewster_deg": float(np.degrees(np.arctan(eta))), "pixels": int(mask.sum())}
+            if mask.any():
+                extra["incidence_deg"] = [float(np.degrees(np.arccos(cos_i[mask].max()))),
+                                          float(np.degrees(np.arccos(cos_i[mask].min())))]
             name = f"brewster {label}, polariser {pol['angle']:g} deg" if pol else f"reflection {label}"
             if mask.sum() < MIN_PIXELS:
                 out.append(_probe(name, None, None, None, "relative", None, **extra))
                 continue
-            n = int(mask.sum())
             if pol or not stokes:
-                expected_px = factor[mask][:, :1] * light_rgb
                 measured_px = image[mask][:, :3].astype(np.float64)
             else:
-                channels = [names.index(f"S{k}.{c}") for k in range(3) for c in "RGB"]
-                expected_px = (factor[mask][:, :, None] * light_rgb[None, None, :]).reshape(n, 9)
-                measured_px = image[mask][:, channels].astype(np.float64)
-            resid = measured_px - expected_px
-            se = resid.std(axis=0, ddof=1) / np.sqrt(n)
-            stat = stats.compare_means(measured_px.mean(axis=0), expected_px.mean(axis=0), se, dof=n - 1)
-            exp_mean, meas_mean = expected_px.mean(axis=0), measured_px.mean(axis=0)
-            rel = float(np.sum(meas_mean[:3]) / max(np.sum(exp_mean[:3]), 1e-30) - 1.0)
-            out.append(_probe(name, exp_mean[:3], meas_mean[:3], rel, "relative", stat["pass"], z=stat["z"], stat=stat,
-                              **extra))
+                measured_px = image[mask][:, [names.index(f"S{k}.{c}") for k in range(3) for c in "RGB"]]
+                measured_px = measured_px.astype(np.float64)
+
+            def judged(obs):
+                light = colorimetry.xyz_to_srgb(colorimetry.spectrum_xyz(objs[li]["emitter"]["radiance"], obs=obs))
+                expected_px = (factor[mask][:, :, None] * light[None, None, :]).reshape(measured_px.shape)
+                se = (measured_px - expected_px).std(axis=0, ddof=1) / np.sqrt(len(measured_px))
+                return stats.compare_means(measured_px.mean(axis=0), expected_px.mean(axis=0), se,
+                                           dof=len(measured_px) - 1)
+            stat = judged(colorimetry.GROUND_TRUTH)
+            alternatives = {o: judged(o) for o in m.observers if o != colorimetry.GROUND_TRUTH}
+            exp_mean, meas_mean = np.array(stat["expected"][:3]), np.array(stat["measured"][:3])
+            rel = float(np.sum(meas_mean) / max(np.sum(exp_mean), 1e-30) - 1.0)
+            out.append(_probe(name, exp_mean, meas_mean, rel, "relative", stat["pass"], z=stat["z"], stat=stat,
+                              alternatives=alternatives, **extra))
             if stokes and not pol:
                 s0 = image[mask][:, names.index("S0.G")].mean()
                 s_vec = [image[mask][:, names.index(f"S{k}.G")].mean() for k in (1, 2, 3)]

@@ -43,11 +43,26 @@ def _patches(scene):
         center, normal, hx, hy = raycast.rectangle_frame(obj["shape"])
         if (cam_pos - center) @ normal <= 0:
             continue  # seen from behind
-        eps = 0.01 * min(hx, hy)
+        eps = 1e-6 * max(hx, hy)  # numerical only: even a patch 1 mm above shades its surroundings
         heights = [_max_height_above(o, center, normal) for j, o in enumerate(objs) if j != i]
         if any(hgt is None or hgt > eps for hgt in heights):
             continue  # something above the patch's plane: no closed form
         yield i
+
+
+def _expected(obj, radiance, obs):
+    return colorimetry.xyz_to_srgb(colorimetry.spectrum_xyz(
+        obj["bsdf"]["reflectance"], lambda wl: spectra.evaluate(radiance, wl), obs))
+
+
+def _scale_test(rows, y_row, tests):
+    """Weighted least-squares luminance scale of measured over expected patches, against 1."""
+    ym = np.array([r[0] @ y_row for r in rows])
+    ye = np.array([r[1] @ y_row for r in rows])
+    sy = np.array([r[2] for r in rows])
+    wts = 1.0 / sy**2
+    s = float(np.sum(wts * ym * ye) / np.sum(wts * ye**2))
+    return s, stats.compare_means(s, 1.0, float(1.0 / np.sqrt(np.sum(wts * ye**2))), tests=tests)
 
 
 def patches(m):
@@ -60,21 +75,17 @@ def patches(m):
     radiance = env["radiance"]
     white = colorimetry.spectrum_xyz(radiance)
     y_row = colorimetry.srgb_to_xyz(np.eye(3))[:, 1]  # Y of each sRGB primary
-    found = []
-    for i in _patches(scene):
-        obj = objs[i]
-        expected = colorimetry.xyz_to_srgb(colorimetry.spectrum_xyz(
-            obj["bsdf"]["reflectance"], lambda wl: spectra.evaluate(radiance, wl)))
-        mask = raycast.pixels_inside(cam, w, h, objs, i, margin=0.7)
-        found.append((obj["name"], expected, mask))
+    observers = [o for o in m.observers if o != colorimetry.GROUND_TRUTH]
+    found = [(objs[i], raycast.pixels_inside(cam, w, h, objs, i, margin=0.7)) for i in _patches(scene)]
     if not found:
         return []
-    measurable = [(n, e, mk) for n, e, mk in found if mk.sum() >= MIN_PIXELS]
-    tests = 3 * len(measurable) + (1 if len(measurable) > 1 else 0)
+    measurable = sum(1 for _, mk in found if mk.sum() >= MIN_PIXELS)
+    tests = 3 * measurable + (1 if measurable > 1 else 0)
     z_crit = stats.z_critical(stats.sidak_threshold(stats.ALPHA, tests))
-    out, scale_rows = [], []
-    for name, expected, mask in found:
-        label = f"lambert {name}"
+    out, rows = [], {o: [] for o in [colorimetry.GROUND_TRUTH] + observers}
+    for obj, mask in found:
+        label = f"lambert {obj['name']}"
+        expected = _expected(obj, radiance, colorimetry.GROUND_TRUTH)
         if mask.sum() < MIN_PIXELS:
             out.append(_probe(label, expected, None, None, "dE00", None, pixels=int(mask.sum())))
             continue
@@ -82,21 +93,23 @@ def patches(m):
         n = px.shape[0]
         measured = px.mean(axis=0)
         se = px.std(axis=0, ddof=1) / np.sqrt(n)
+        se_y = float((px @ y_row).std(ddof=1) / np.sqrt(n))
         stat = stats.compare_means(measured, expected, se, dof=n - 1, tests=tests)
+        alternatives = {}
+        for o in rows:
+            e_o = expected if o == colorimetry.GROUND_TRUTH else _expected(obj, radiance, o)
+            rows[o].append((measured, e_o, se_y))
+            if o != colorimetry.GROUND_TRUTH:
+                alternatives[o] = stats.compare_means(measured, e_o, se, dof=n - 1, tests=tests)
         lab_e = colorimetry.lab(colorimetry.srgb_to_xyz(expected), white)
         de = colorimetry.delta_e_2000(colorimetry.lab(colorimetry.srgb_to_xyz(measured), white), lab_e)
         shifted = expected + z_crit * se * np.sign(measured - expected)
         de_noise = colorimetry.delta_e_2000(colorimetry.lab(colorimetry.srgb_to_xyz(shifted), white), lab_e)
         out.append(_probe(label, expected, measured, de, "dE00", stat["pass"], pixels=n, z=stat["z"],
-                          resolvable_dE00=de_noise, stat=stat))
-        y = px @ y_row
-        scale_rows.append((float(y.mean()), float(expected @ y_row), float(y.std(ddof=1) / np.sqrt(n))))
-    if len(scale_rows) > 1:
-        ym, ye, sy = (np.array(c) for c in zip(*scale_rows))
-        wts = 1.0 / sy**2
-        s = float(np.sum(wts * ym * ye) / np.sum(wts * ye**2))
-        s_se = float(1.0 / np.sqrt(np.sum(wts * ye**2)))
-        stat = stats.compare_means(s, 1.0, s_se, tests=tests)
+                          resolvable_dE00=de_noise, stat=stat, alternatives=alternatives))
+    if measurable > 1:
+        s, stat = _scale_test(rows[colorimetry.GROUND_TRUTH], y_row, tests)
+        alternatives = {o: _scale_test(rows[o], y_row, tests)[1] for o in observers}
         out.append(_probe("lambert chart luminance scale", 1.0, s, s - 1.0, "relative", stat["pass"],
-                          patches=len(scale_rows), z=stat["z"], stat=stat))
+                          patches=measurable, z=stat["z"], stat=stat, alternatives=alternatives))
     return out

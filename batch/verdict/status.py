@@ -1,0 +1,99 @@
+"""The status of a rendered job, from its checks (the noise test against the reference, the
+analytic probes, finite values) and the known deviations (batch/verdict/known.py).
+
+  ok        judged (at least one check could be made) and every check passed
+  failed    a check failed and no recorded deviation explains it, or the image has NaN/Inf
+  known     every failing check fails exactly as a recorded deviation
+  fixed     a recorded deviation would have been seen at this noise and is gone
+  unjudged  rendered, but no usable reference and no applicable probe: not a pass
+  skipped, unsupported: decided before rendering (the backend is missing, or cannot model it)
+
+Exit status of a batch (batch/jobs/runner.py): 0 when every judged job is ok, known or fixed and
+nothing was left unjudged; 3 when nothing failed but something was unjudged; 1 when something
+failed (2 is kept for usage errors).
+"""
+from dataclasses import dataclass
+from typing import Callable, Optional
+
+from . import known as _known, stats
+
+ORDER = {"failed": 0, "known": 1, "unjudged": 2, "fixed": 3, "ok": 4, "unsupported": 5, "skipped": 6}
+EXIT_FAILED, EXIT_UNJUDGED = 1, 3
+
+
+@dataclass
+class Check:
+    name: str
+    passed: Optional[bool]  # None: could not be made here
+    rejudge: Optional[Callable] = None  # deviation -> passed under its model (None: cannot tell)
+
+
+def checks_of(entry, ztest=None):
+    """The checks of one job record (and its in-memory noise test, for re-judging)."""
+    out = []
+    sanity = entry.get("sanity") or {}
+    if sanity.get("nan") or sanity.get("inf"):
+        out.append(Check("finite values", False))
+    test = entry.get("test")
+    if test is not None:
+        rj = (lambda d, zt=ztest: zt.rejudge(d.scale, d.scale_se)) if ztest is not None else None
+        out.append(Check("noise test", test.get("pass"), rj))
+    for p in entry.get("probes") or []:
+        if p.get("stat"):
+            out.append(Check(p["name"], p.get("pass"), lambda d, p=p: _rejudge_probe(p, d)))
+        else:
+            out.append(Check(p["name"], p.get("pass")))
+    return out
+
+
+def _rejudge_probe(record, dev):
+    """A probe's verdict under a deviation's model (None when the probe has no result for the
+    model's observer)."""
+    stat = record["stat"] if dev.observer is None else (record.get("alternatives") or {}).get(dev.observer)
+    return None if stat is None else stats.rejudge(stat, dev.scale, dev.scale_se)
+
+
+def decide(entry, deviations=(), ztest=None):
+    """Set entry's status, reason, and known/fixed deviation ids from its checks."""
+    checks = checks_of(entry, ztest)
+    judged = [c for c in checks if c.passed is not None]
+    if not judged:
+        why = entry.get("unjudged_because") or "no usable reference and no applicable probe"
+        entry.update(status="unjudged", reason=f"rendered, not judged: {why}")
+        return entry
+    devs = _known.applicable(deviations, entry)
+    failing, known, fixed = [], set(), set()
+    for c in judged:
+        models = [d for d in devs if d.explains(c.name) and c.rejudge is not None]
+        under = {d.id: ok for d in models if (ok := c.rejudge(d)) is not None}
+        if c.passed is False:
+            explained = [i for i, ok in under.items() if ok]
+            if explained:
+                known.update(explained)
+            else:
+                failing.append(c.name)
+        else:
+            fixed.update(i for i, ok in under.items() if not ok)
+    entry["known"], entry["fixed"] = sorted(known), sorted(fixed - known)
+    if failing:
+        shown = ", ".join(failing[:6]) + (f" and {len(failing) - 6} more" if len(failing) > 6 else "")
+        entry.update(status="failed", reason=(entry.get("reason") or "") + ("; " if entry.get("reason") else "")
+                     + f"failed: {shown}")
+    elif known:
+        entry.update(status="known", reason=f"fails as recorded: {', '.join(sorted(known))} (known_deviations.toml)")
+    elif entry["fixed"]:
+        entry.update(status="fixed", reason=(f"recorded deviation no longer reproduces: {', '.join(entry['fixed'])} "
+                                             "(update known_deviations.toml)"))
+    else:
+        entry.update(status="ok")
+    return entry
+
+
+def exit_code(records):
+    """0, EXIT_UNJUDGED or EXIT_FAILED for a batch's job records (see the module docstring)."""
+    statuses = {r.get("status") for r in records}
+    if "failed" in statuses:
+        return EXIT_FAILED
+    if "unjudged" in statuses:
+        return EXIT_UNJUDGED
+    return 0
