@@ -196,7 +196,7 @@ class Run:
         ladder = self.opts["ladder"] or list(sweep.DEFAULT_LADDER)
         sc = for_run(scene, dict(self.opts, spp=None))
         modes, why = sweep.sweep_modes(backend, sc, self.opts["sweep_modes"])
-        ref = references.load(name, self.opts["references"])
+        ref = references.load(name, self.opts["references"], scene=scene)
         unusable = references.check_usable(ref, scene)
         if not modes or unusable:
             self.sweeps.append({"scene": name, "backend": backend.name, "mode": None, "points": [],
@@ -267,7 +267,7 @@ class Run:
         entry["sanity"] = compare.image_sanity(test_all)
         previews.save_linear(res_dir / "render.png", test_all[..., :3])
         test_var = None if stderr is None else stderr.astype(np.float64) ** 2
-        ref = references.load(name, self.opts["references"])
+        ref = references.load(name, self.opts["references"], scene=scene)
         usable = ref is not None and references.check_usable(ref, scene) is None
         self.compare(entry, scene, ref, names, test_all, res_dir, test_var)
         entry["probes"] = probes.evaluate(sc, names, test_all, reference=ref if usable else None, stderr=stderr)
@@ -296,7 +296,7 @@ class Run:
             return
         mean = mean_all[..., :3]
         entry["reference"] = {"path": str(ref.path), "spp": ref.spp, "backend": ref.provenance.get("backend"),
-                              "mode": ref.provenance.get("mode")}
+                              "mode": ref.provenance.get("mode"), "date": ref.provenance.get("date")}
         entry["metrics"].update(compare.metrics(test, mean))
         # every channel is judged: R, G, B and, for Stokes output, S0..S3
         zt = compare.z_test(test_all, mean_all, var_all, sigma2_all, entry["spp"], alpha=self.opts["alpha"],
