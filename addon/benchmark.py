@@ -11,6 +11,7 @@ outputs folder: the panel reads runs started from the command line the same way.
 """
 import datetime as dt
 import tempfile
+import time
 from pathlib import Path
 
 import bpy
@@ -74,13 +75,26 @@ def output_parent(s):
 
 
 # -- backends -------------------------------------------------------------------------------------
+_AVAILABILITY = {}  # name: (time checked, available, reason); the panel redraws often
+AVAILABILITY_TTL_S = 10.0
+
+
+def availability(name):
+    now = time.monotonic()
+    checked = _AVAILABILITY.get(name)
+    if checked is None or now - checked[0] > AVAILABILITY_TTL_S:
+        checked = (now, *backends.get(name).availability())
+        _AVAILABILITY[name] = checked
+    return checked[1], checked[2]
+
+
 def backend_states(s=None):
     """[(name, available, reason, selected)] for every backend the batch runner knows: a backend
     added to batch/backends appears here (and in the panel) without any change to the extension."""
     off = set(filter(None, (s.backends_off if s is not None else "").split(",")))
     out = []
     for name in backends.BACKENDS:
-        ok, why = backends.get(name).availability()
+        ok, why = availability(name)
         out.append((name, ok, why, name not in off))
     return out
 

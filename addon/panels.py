@@ -149,12 +149,13 @@ class SPECTRAL_BENCH_PT_benchmark(_Base, bpy.types.Panel):
     def draw(self, context):
         s = benchmark.settings(context)
         layout = self.layout
-        layout.prop(s, "scene_source")
-        if s.scene_source == "CANONICAL":
-            layout.prop(s, "canonical_scene", text="")
-        row = layout.row(align=True)
-        row.operator("spectral_bench.open_canonical_scenes", icon="FILE_FOLDER")
+        box = layout.box()
+        box.label(text="Canonical Scenes", icon="SCENE_DATA")
+        box.prop(s, "canonical_scene", text="")
+        row = box.row(align=True)
+        row.operator("spectral_bench.open_canonical_scenes", text="Open All", icon="FILE_FOLDER")
         row.operator("spectral_bench.append_canonical_scene", text="Append", icon="APPEND_BLEND")
+        layout.prop(s, "scene_source")
         col = layout.column(align=True)
         col.label(text="Backends")
         for name, ok, why, on in benchmark.backend_states(s):

@@ -255,6 +255,15 @@ def main():
                    f"{r['zipped'] / committed_zipped:.2f} | {'yes' if r['mean_exact'] else 'NO (lossy)'} | "
                    f"{r['stderr_rel']:.1e} | {small} | {r.get('read_s', float('nan')):.2f} | "
                    f"{'yes' if r['blender'] else 'no'} |")
+    chosen, best = rows.get(CHOSEN, {}), min((r for r in rows.values() if "zipped" in r and r["mean_exact"]),
+                                             key=lambda r: r["zipped"], default=None)
+    if "zipped" in chosen:
+        unreadable = [f"{c}" for (c, d), r in rows.items() if d == "half" and "zipped" in r and not r["blender"]]
+        out += ["", f"Chosen (what references.save writes): {CHOSEN[0]} with the noise channels as {CHOSEN[1]}, "
+                f"{fmt_mb(chosen['zipped'])} MB in the extension zip instead of {fmt_mb(committed_zipped)} MB; the "
+                f"mean stays float32 and bit-exact. The smallest lossless option measured, "
+                f"{fmt_mb(best['zipped'])} MB, needs a compression Blender cannot read "
+                f"({', '.join(unreadable) or 'none'})."]
     if not args.no_verdicts:
         with tempfile.TemporaryDirectory() as tmp:
             conv = Path(tmp) / "converted"

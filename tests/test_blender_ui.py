@@ -472,3 +472,33 @@ def test_sweep_chart_loads_into_an_image(tmp_path):
         print(json.dumps({{"r": list(r), "size": list(img.size)}}))
     """)
     assert res["r"] == ["FINISHED"] and res["size"][0] > 100
+
+
+def test_reference_search_first_usable_folder_wins(tmp_path, golden):
+    """The order the extension passes folders in (the preferences' folder, then its own): a stale
+    reference in the first folder is passed over for a usable one in the next, and still reported
+    as stale when it is the only one; each reference's origin is named."""
+    import shutil
+    from spectral_bench.addon import reference_sources
+    from spectral_bench.batch import cli
+    from spectral_bench.batch.verdict import references
+    stale = tmp_path / "stale"
+    stale.mkdir()
+    shutil.copy(ROOT / "references" / "ggx_copper_50.exr", stale)
+    meta = json.loads((ROOT / "references" / "ggx_copper_50.json").read_text())
+    (stale / "ggx_copper_50.json").write_text(json.dumps(dict(meta, fingerprint="0" * 64)))
+    scene = golden["ggx_copper_50"]
+    search = reference_sources.folders("BOTH", stale)
+    assert [o for o, _ in search] == ["folder", "extension"]
+    used = references.load("ggx_copper_50", [f for _, f in search], scene=scene)
+    assert used.path == references.REFERENCE_DIR / "ggx_copper_50.exr" and references.check_usable(used, scene) is None
+    assert reference_sources.origin_of(used.path, search) == "extension"
+    only = references.load("ggx_copper_50", [stale], scene=scene)
+    assert only.path == stale / "ggx_copper_50.exr" and "stale" in references.check_usable(only, scene)
+    assert reference_sources.origin_of(only.path, search) == "folder"
+    assert references.load("ggx_copper_50", [tmp_path / "empty"], scene=scene) is None
+    assert reference_sources.folders("FOLDER", None) == [] and reference_sources.folders("EXTENSION", stale) == [
+        ("extension", references.REFERENCE_DIR)]
+    catalog = reference_sources.catalog(search)
+    assert [r["origin"] for r in catalog["ggx_copper_50"]] == ["folder", "extension"]
+    assert cli.parse(["--references", "a", "--references", "b"])["references"] == ["a", "b"]
