@@ -502,3 +502,24 @@ def test_reference_search_first_usable_folder_wins(tmp_path, golden):
     catalog = reference_sources.catalog(search)
     assert [r["origin"] for r in catalog["ggx_copper_50"]] == ["folder", "extension"]
     assert cli.parse(["--references", "a", "--references", "b"])["references"] == ["a", "b"]
+
+
+def test_references_save_noise_as_half_and_mean_exactly(tmp_path, golden):
+    """What the extension ships: the mean bit for bit as float32, the standard error as half (float32
+    where a value does not fit in half)."""
+    import OpenEXR
+    from spectral_bench.batch.verdict import references
+    rng = np.random.default_rng(3)
+    mean = rng.random((8, 8, 3)).astype(np.float32)
+    stderr = (1e-3 + rng.random((8, 8, 3)) * 1e-2).astype(np.float32)  # within half's normal range
+    scene = golden["ggx_copper_50"]
+    for name, err, want in (("small", stderr, OpenEXR.HALF), ("huge", stderr * 1e7, OpenEXR.FLOAT)):
+        folder = tmp_path / name
+        path = references.save(scene, ["R", "G", "B"], mean, err, {"spp": 4, "passes": 8}, folder)
+        with OpenEXR.File(str(path), separate_channels=True) as f:
+            types = {n: c.pixels.dtype for n, c in f.channels().items()}
+        assert all(types[c] == np.float32 for c in "RGB")
+        assert all(types[f"stderr.{c}"] == (np.float16 if want == OpenEXR.HALF else np.float32) for c in "RGB")
+        ref = references.load(scene["name"], folder, scene=scene)
+        assert np.array_equal(ref.mean, mean) and references.check_usable(ref, scene) is None
+        assert np.allclose(ref.stderr, err, rtol=2 ** -11, atol=0)
