@@ -1,7 +1,7 @@
 """Blender UI of the extension: annotation properties, operators, panels."""
-from . import benchmark, operators, panels, properties
+from . import benchmark, operators, panels, preferences, properties
 
-_MODULES = (properties, benchmark, operators, panels)
+_MODULES = (properties, preferences, benchmark, operators, panels)
 
 
 def register():

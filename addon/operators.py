@@ -1,5 +1,9 @@
-"""Operators: File > Export entries for the generic JSON and Mitsuba 3 XML (scriptable as
-bpy.ops.spectral_bench.export_json / export_mitsuba). Logic lives in exporters/; these stay thin."""
+"""Operators: File > Export entries for the generic JSON, Mitsuba 3 and ART (scriptable as
+bpy.ops.spectral_bench.export_json / export_mitsuba / export_art), the canonical scenes (open,
+append), the benchmark run (start, cancel, backends) and its results (images, report). Logic lives
+in exporters/, batch/ and addon/benchmark.py; these stay thin and report through self.report.
+Operators that change the file's data are undoable (bl_options UNDO)."""
+import webbrowser
 from pathlib import Path
 
 import bpy
@@ -8,7 +12,7 @@ from bpy_extras.io_utils import ExportHelper, ImportHelper
 
 from ..batch.report import results
 from ..exporters import art_writer, extract_blender, ir_json, mitsuba_writer, validate
-from . import benchmark
+from . import benchmark, canonical
 
 
 def export_scene(scene, fmt, path):
@@ -143,7 +147,7 @@ class SPECTRAL_BENCH_OT_spectrum_sample(bpy.types.Operator):
 
 
 class SPECTRAL_BENCH_OT_run_benchmark(bpy.types.Operator):
-    """Render the benchmark scenes in the background with the chosen backends and compare them"""
+    """Render the chosen scenes in the background with the chosen backends and judge them"""
     bl_idname = "spectral_bench.run_benchmark"
     bl_label = "Run Benchmark"
     wait: BoolProperty(default=False, options={"HIDDEN", "SKIP_SAVE"},
@@ -156,9 +160,13 @@ class SPECTRAL_BENCH_OT_run_benchmark(bpy.types.Operator):
         except RuntimeError as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
+        for problem in job.export_problems:
+            self.report({"WARNING"}, f"not exported: {problem}")
+        self.report({"INFO"}, f"started {job.total} jobs -> {job.out_dir}")
         if self.wait:
             job.wait()
             benchmark.poll_run(context)
+            self.report({"INFO"}, benchmark.settings(context).status)
         return {"FINISHED"}
 
     def invoke(self, context, event):
@@ -174,9 +182,9 @@ class SPECTRAL_BENCH_OT_run_benchmark(bpy.types.Operator):
         if event.type != "TIMER":
             return {"PASS_THROUGH"}
         going = benchmark.poll_run(context)
-        job = benchmark._ACTIVE.get("job")
-        if job is not None and job.total:
-            context.window_manager.progress_update(int(100 * job.done_jobs() / job.total))
+        fraction = benchmark.progress_fraction()
+        if fraction is not None:
+            context.window_manager.progress_update(int(100 * fraction))
         context.workspace.status_text_set(f"Spectral Bench: {benchmark.settings(context).status}")
         for area in context.screen.areas:
             area.tag_redraw()
@@ -185,6 +193,7 @@ class SPECTRAL_BENCH_OT_run_benchmark(bpy.types.Operator):
         context.window_manager.event_timer_remove(self._timer)
         context.window_manager.progress_end()
         context.workspace.status_text_set(None)
+        self.report({"INFO"}, f"Spectral Bench: {benchmark.settings(context).status}")
         return {"FINISHED"}
 
 
@@ -193,27 +202,123 @@ class SPECTRAL_BENCH_OT_cancel_benchmark(bpy.types.Operator):
     bl_idname = "spectral_bench.cancel_benchmark"
     bl_label = "Cancel Benchmark"
 
+    @classmethod
+    def poll(cls, context):
+        job = benchmark.active_job()
+        return job is not None and job.running()
+
     def execute(self, context):
-        benchmark.cancel_run(context)
+        kept = benchmark.cancel_run(context)
+        if kept is None:
+            self.report({"WARNING"}, "no benchmark is running")
+            return {"CANCELLED"}
+        self.report({"INFO"}, f"cancelled: {kept} finished jobs kept in {benchmark.settings(context).output_dir}")
+        return {"FINISHED"}
+
+
+class SPECTRAL_BENCH_OT_toggle_backend(bpy.types.Operator):
+    """Use this backend in the next run, or not"""
+    bl_idname = "spectral_bench.toggle_backend"
+    bl_label = "Toggle Backend"
+    backend: StringProperty()
+
+    def execute(self, context):
+        try:
+            benchmark.toggle_backend(benchmark.settings(context), self.backend)
+        except KeyError as exc:
+            self.report({"ERROR"}, exc.args[0])
+            return {"CANCELLED"}
+        return {"FINISHED"}
+
+
+class SPECTRAL_BENCH_OT_open_canonical_scenes(bpy.types.Operator):
+    """Open the canonical scenes shipped with the extension (a copy: saving never changes the extension)"""
+    bl_idname = "spectral_bench.open_canonical_scenes"
+    bl_label = "Open Canonical Scenes"
+
+    def invoke(self, context, event):
+        if bpy.data.is_dirty:
+            return context.window_manager.invoke_confirm(self, event)
+        return self.execute(context)
+
+    def execute(self, context):
+        if not canonical.available():
+            self.report({"ERROR"}, f"the extension's scenes.blend is missing ({canonical.BLEND})")
+            return {"CANCELLED"}
+        path = canonical.working_copy()
+        self.report({"INFO"}, f"opening the canonical scenes (a copy in {path.parent})")
+        bpy.ops.wm.open_mainfile(filepath=str(path), load_ui=False)
+        return {"FINISHED"}
+
+
+class SPECTRAL_BENCH_OT_append_canonical_scene(bpy.types.Operator):
+    """Append one canonical scene (with its objects, materials and annotations) to this file"""
+    bl_idname = "spectral_bench.append_canonical_scene"
+    bl_label = "Append Canonical Scene"
+    bl_options = {"REGISTER", "UNDO"}
+    scene: StringProperty(name="Scene", description="Name of the canonical scene (default: the panel's choice)")
+
+    def execute(self, context):
+        name = self.scene or benchmark.settings(context).canonical_scene
+        if name in ("", canonical.ALL):
+            self.report({"ERROR"}, "choose one canonical scene to append")
+            return {"CANCELLED"}
+        try:
+            scene = canonical.append(name)
+        except KeyError as exc:
+            self.report({"ERROR"}, exc.args[0])
+            return {"CANCELLED"}
+        if getattr(context, "window", None) is not None:
+            context.window.scene = scene
+        self.report({"INFO"}, f"appended the canonical scene {name} as {scene.name!r}")
+        return {"FINISHED"}
+
+
+class SPECTRAL_BENCH_OT_open_report(bpy.types.Operator):
+    """Open the run's report.html in the web browser"""
+    bl_idname = "spectral_bench.open_report"
+    bl_label = "Open Report"
+
+    def execute(self, context):
+        out_dir = benchmark.settings(context).output_dir
+        path = benchmark.report_path(out_dir)
+        if path is None:
+            self.report({"ERROR"}, f"no report.html in {out_dir or '(no results folder)'} (yet)")
+            return {"CANCELLED"}
+        webbrowser.open(path.resolve().as_uri())
+        self.report({"INFO"}, f"opened {path}")
         return {"FINISHED"}
 
 
 def _show_in_image_editor(context, image):
-    """Show ``image`` in the first Image Editor of the screen, if there is one (none headless)."""
+    """Show ``image`` in the screen's Image Editor; with none, in Blender's image window (as F11
+    does). Nothing to show it in headless."""
     screen = getattr(context, "screen", None)
-    for area in (screen.areas if screen else []):
+    if screen is None:
+        return False
+    for area in screen.areas:
         if area.type == "IMAGE_EDITOR":
             area.spaces.active.image = image
-            return
+            return True
+    bpy.ops.render.view_show("INVOKE_DEFAULT")
+    for window in context.window_manager.windows:
+        for area in window.screen.areas:
+            if area.type == "IMAGE_EDITOR":
+                area.spaces.active.image = image
+                return True
+    return False
 
 
 class SPECTRAL_BENCH_OT_load_result(bpy.types.Operator):
-    """Load a result image (render, reference or a diff) into an Image Editor"""
+    """Load a result image (render, reference, a difference, FLIP, z-score or a Stokes component) into
+    the Image Editor"""
     bl_idname = "spectral_bench.load_result"
     bl_label = "Load Result Image"
+    bl_options = {"REGISTER", "UNDO"}
     scene: StringProperty()
     backend: StringProperty(default="mitsuba")
-    kind: EnumProperty(items=[(k, k.replace("_", " ").title(), "") for k in results.IMAGE_KINDS])
+    kind: EnumProperty(items=[(k, k.replace("_", " ").title(), "") for k in results.IMAGE_KINDS]
+                       + [(k, k, f"Stokes component {k} of the render") for k in benchmark.STOKES])
 
     def execute(self, context):
         out_dir = bpy.path.abspath(benchmark.settings(context).output_dir)
@@ -231,6 +336,7 @@ class SPECTRAL_BENCH_OT_load_chart(bpy.types.Operator):
     """Load the error-against-time chart of a sweep into an Image Editor"""
     bl_idname = "spectral_bench.load_chart"
     bl_label = "Load Sweep Chart"
+    bl_options = {"REGISTER", "UNDO"}
     scene: StringProperty()
 
     def execute(self, context):
@@ -242,6 +348,7 @@ class SPECTRAL_BENCH_OT_load_chart(bpy.types.Operator):
         image = bpy.data.images.load(str(path), check_existing=True)
         image.name = f"{self.scene} sweep chart"
         _show_in_image_editor(context, image)
+        self.report({"INFO"}, f"loaded {image.name}")
         return {"FINISHED"}
 
 
@@ -254,6 +361,8 @@ def _menu(self, context):
 CLASSES = (SPECTRAL_BENCH_OT_export_json, SPECTRAL_BENCH_OT_export_mitsuba, SPECTRAL_BENCH_OT_export_art,
            SPECTRAL_BENCH_OT_load_spectrum,
            SPECTRAL_BENCH_OT_spectrum_sample, SPECTRAL_BENCH_OT_run_benchmark, SPECTRAL_BENCH_OT_cancel_benchmark,
+           SPECTRAL_BENCH_OT_toggle_backend, SPECTRAL_BENCH_OT_open_canonical_scenes,
+           SPECTRAL_BENCH_OT_append_canonical_scene, SPECTRAL_BENCH_OT_open_report,
            SPECTRAL_BENCH_OT_load_result, SPECTRAL_BENCH_OT_load_chart)
 
 

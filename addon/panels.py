@@ -1,10 +1,12 @@
 """Panels: annotations (Material, Light, World, Camera, Object, Scene) with inline validation,
-and the benchmark panel (Properties > Scene). Draw code only: the logic is in validation.py,
-benchmark.py and batch/report/results.py, which tests call directly (draw() cannot run headless)."""
+and the benchmark panel with its References and Results sub-panels (Properties > Scene). Draw code
+only: the logic is in validation.py, benchmark.py, reference_sources.py and batch/report/results.py.
+tests/test_blender_ui.py runs every panel's draw() against a recording layout that checks each
+drawn property, operator and icon exists."""
 import bpy
 
 from ..batch.report import results
-from . import benchmark, validation
+from . import benchmark, preferences, reference_sources, validation
 
 
 def _draw_problems(layout, problems):
@@ -139,55 +141,120 @@ class SPECTRAL_BENCH_PT_object(_Base, bpy.types.Panel):
 
 
 class SPECTRAL_BENCH_PT_benchmark(_Base, bpy.types.Panel):
+    """Scenes, backends (every one batch/backends knows, unavailable ones with the reason), samples,
+    scale, passes; run and cancel with progress."""
     bl_label = "Spectral Benchmark"
     bl_context = "scene"
 
     def draw(self, context):
         s = benchmark.settings(context)
         layout = self.layout
+        box = layout.box()
+        box.label(text="Canonical Scenes", icon="SCENE_DATA")
+        box.prop(s, "canonical_scene", text="")
+        row = box.row(align=True)
+        row.operator("spectral_bench.open_canonical_scenes", text="Open All", icon="FILE_FOLDER")
+        row.operator("spectral_bench.append_canonical_scene", text="Append", icon="APPEND_BLEND")
+        layout.prop(s, "scene_source")
         col = layout.column(align=True)
-        for name, ok, why in benchmark.backend_states():
-            row = col.row()
+        col.label(text="Backends")
+        for name, ok, why, on in benchmark.backend_states(s):
+            row = col.row(align=True)
             row.enabled = ok
-            row.prop(s, f"use_{name}", text=name if ok else f"{name}: {why}")
-        layout.prop(s, "spp")
-        layout.prop(s, "scale")
-        layout.prop(s, "only_active")
+            op = row.operator("spectral_bench.toggle_backend", text=name if ok else f"{name}: {why}",
+                              icon="CHECKBOX_HLT" if (on and ok) else "CHECKBOX_DEHLT", emboss=False)
+            op.backend = name
+        col = layout.column(align=True)
+        col.prop(s, "spp")
+        col.prop(s, "scale")
+        col.prop(s, "passes")
+        layout.prop(s, "use_flip")
         layout.prop(s, "output_parent")
         row = layout.row()
         row.operator_context = "INVOKE_DEFAULT"
         row.operator("spectral_bench.run_benchmark", icon="PLAY")
         row.operator("spectral_bench.cancel_benchmark", icon="CANCEL")
-        if s.status:
+        job = benchmark.active_job()
+        fraction = benchmark.progress_fraction()
+        if job is not None and job.running() and fraction is not None:
+            layout.progress(factor=fraction, type="BAR", text=s.status)
+        elif s.status:
             layout.label(text=s.status)
-        layout.prop(s, "output_dir")
-        status = results.last_status(bpy.path.abspath(s.output_dir)) if s.output_dir else {}
-        for scene in sorted(status):
-            for backend, run in status[scene].items():
-                box = layout.box()
-                icon = {"ok": "CHECKMARK", "failed": "ERROR"}.get(run["status"], "INFO")
-                box.label(text=f"{scene} / {backend}: {run['status']}", icon=icon)
-                if run.get("reason"):
-                    box.label(text=run["reason"][:120])
-                m = run.get("metrics") or {}
-                if m.get("rmse") is not None:
-                    box.label(text="RMSE {rmse:.3g}  relMSE {relmse:.3g}  MAPE {mape:.3g}".format(**m)
-                              + (f"  FLIP {m['flip']:.3g}" if m.get("flip") is not None else ""))
-                for p in run.get("probes", [])[:30]:
-                    err = "" if p["error"] is None else f"{p['error']:.3g} {p['unit']}"
-                    mark = {True: "CHECKMARK", False: "ERROR"}.get(p["pass"], "QUESTION")
-                    box.label(text=f"{p['name']}: {err}", icon=mark)
-                if results.chart_path(bpy.path.abspath(s.output_dir), scene):
-                    box.operator("spectral_bench.load_chart", text="Error against time").scene = scene
-                row = box.row(align=True)
-                for kind in results.IMAGE_KINDS:
-                    if results.image_path(bpy.path.abspath(s.output_dir), scene, backend, kind):
-                        op = row.operator("spectral_bench.load_result", text=kind.replace("_", " "))
-                        op.scene, op.backend, op.kind = scene, backend, kind
+
+
+class SPECTRAL_BENCH_PT_benchmark_references(_Base, bpy.types.Panel):
+    """Where references come from (the extension, the preferences' folder, or both) and, per
+    scene, the reference a run would use first, with its provenance."""
+    bl_label = "References"
+    bl_context = "scene"
+    bl_parent_id = "SPECTRAL_BENCH_PT_benchmark"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        layout = self.layout
+        search = preferences.reference_folders(context)
+        if not search:
+            layout.label(text="No reference folder chosen (Preferences > Add-ons)", icon="ERROR")
+        for origin, folder, count, exists in reference_sources.summary(search):
+            text = f"{origin}: {count} in {folder}" if exists else f"{origin}: no such folder {folder}"
+            layout.label(text=text, icon="FILE_FOLDER" if exists else "ERROR")
+        found = reference_sources.catalog(search)
+        col = layout.column(align=True)
+        for scene in sorted(found):
+            first = found[scene][0]
+            row = col.split(factor=0.4)
+            row.label(text=scene)
+            row.label(text=f"{first['origin']}: {reference_sources.describe(first)}"
+                      + (f" (+{len(found[scene]) - 1} more)" if len(found[scene]) > 1 else ""))
+
+
+class SPECTRAL_BENCH_PT_benchmark_results(_Base, bpy.types.Panel):
+    """The results of an outputs folder (also one made on the command line): per scene and backend
+    the status (failures first), the reference judged against, metrics, probes and images."""
+    bl_label = "Results"
+    bl_context = "scene"
+    bl_parent_id = "SPECTRAL_BENCH_PT_benchmark"
+
+    def draw(self, context):
+        s = benchmark.settings(context)
+        layout = self.layout
+        row = layout.row(align=True)
+        row.prop(s, "output_dir", text="")
+        row.operator("spectral_bench.open_report", text="Open Report", icon="URL")
+        out_dir = bpy.path.abspath(s.output_dir) if s.output_dir else ""
+        search = preferences.reference_folders(context)
+        for scene, backend, run in benchmark.result_rows(out_dir):
+            box = layout.box()
+            box.label(text=f"{scene} / {backend}: {run['status']}", icon=benchmark.status_icon(run["status"]))
+            if run.get("reason"):
+                box.label(text=run["reason"][:160])
+            ref = run.get("reference") or {}
+            if ref.get("path"):
+                box.label(text=f"reference ({reference_sources.origin_of(ref['path'], search)}): "
+                               f"{reference_sources.describe(ref)}", icon="IMAGE_REFERENCE")
+            m = run.get("metrics") or {}
+            if m.get("rmse") is not None:
+                box.label(text="RMSE {rmse:.3g}  relMSE {relmse:.3g}  MAPE {mape:.3g}".format(**m)
+                          + (f"  FLIP {m['flip']:.3g}" if m.get("flip") is not None else ""))
+            t = run.get("test")
+            if t:
+                box.label(text=f"noise test: p_min {t['p_min']:.3g} (threshold {t['threshold']:.3g}), "
+                               f"max |z| {t['z_max']:.2f}")
+            for p in run.get("probes", [])[:30]:
+                err = "" if p.get("error") is None else f"{p['error']:.3g} {p.get('unit') or ''}"
+                mark = {True: "CHECKMARK", False: "ERROR"}.get(p.get("pass"), "QUESTION")
+                box.label(text=f"{p['name']}: {err}", icon=mark)
+            if results.chart_path(out_dir, scene):
+                box.operator("spectral_bench.load_chart", text="Error against time").scene = scene
+            flow = box.grid_flow(columns=4, align=True)
+            for kind in benchmark.image_kinds(out_dir, scene, backend, run):
+                op = flow.operator("spectral_bench.load_result", text=kind.replace("_", " "))
+                op.scene, op.backend, op.kind = scene, backend, kind
 
 
 CLASSES = (SPECTRAL_BENCH_PT_material, SPECTRAL_BENCH_PT_light, SPECTRAL_BENCH_PT_world, SPECTRAL_BENCH_PT_camera,
-           SPECTRAL_BENCH_PT_scene, SPECTRAL_BENCH_PT_object, SPECTRAL_BENCH_PT_benchmark)
+           SPECTRAL_BENCH_PT_scene, SPECTRAL_BENCH_PT_object, SPECTRAL_BENCH_PT_benchmark,
+           SPECTRAL_BENCH_PT_benchmark_references, SPECTRAL_BENCH_PT_benchmark_results)
 
 
 def register():

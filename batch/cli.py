@@ -63,7 +63,9 @@ def parser():
                          "with 1, only the reference's own backend is judged against the reference)")
     ap.add_argument("--seed", type=int, help="first sampler seed (default 0)")
     ap.add_argument("--no-flip", dest="flip", action="store_false", help="skip HDR-FLIP")
-    ap.add_argument("--references", metavar="DIR", help="reference folder (default: references/)")
+    ap.add_argument("--references", action="append", metavar="DIR",
+                    help="reference folder (repeatable: for each scene the first folder holding a usable "
+                         "reference wins; default: references/)")
     ap.add_argument("--known", metavar="FILE", help="known deviations (default: known_deviations.toml)")
     ap.add_argument("--list", action="store_true", help="list the jobs and exit")
     ap.add_argument("--sweep", action="store_true",
@@ -94,7 +96,7 @@ def load_settings(path):
     unknown = sorted(set(data) - set(DEFAULTS))
     if unknown:
         raise SettingsError(f"settings file {path}: unknown keys {unknown} (known: {sorted(DEFAULTS)})")
-    for key in ("input", "case", "scene", "renderer", "exec", "format"):
+    for key in ("input", "case", "scene", "renderer", "exec", "format", "references"):
         if isinstance(data.get(key), str):
             data[key] = [data[key]]
     return data

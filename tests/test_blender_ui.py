@@ -1,11 +1,17 @@
-"""The Blender UI's operators and logic, headless (panel draw code cannot run without a window,
-so it is kept thin and these test what it calls)."""
+"""The Blender UI headless: every panel's draw code (through tests/layout_recorder.py, which checks
+each drawn property, operator, operator property, icon and keyword against Blender's RNA), the
+operators (canonical scenes, run, cancel, results, report) and the logic they call."""
 import json
+import sys
+import time
+from pathlib import Path
 
 import numpy as np
 
-from conftest import run_bpy
+from conftest import ROOT, run_batch, run_bpy
 from spectral_bench.batch import exr
+
+TESTS = str(ROOT / "tests")
 
 
 def test_invalid_annotations_give_messages_not_exceptions():
@@ -58,56 +64,366 @@ def test_sampled_spectrum_from_file_and_table(tmp_path):
     assert "line 2" in out["r2"]  # the bad file is reported with its line, the spectrum kept
 
 
-def test_run_from_blender_then_load_result_images(tmp_path):
+# -- drawing -------------------------------------------------------------------------------------
+def _write_outputs(out):
+    """An outputs folder with every status (and one the panel has never heard of), images for one
+    Stokes run and a sweep chart: what the results view must show."""
+    statuses = ["ok", "skipped", "fixed", "unsupported", "known", "unjudged", "brand_new_status", "failed"]
+    runs = []
+    ref_path = ROOT / "references" / "ggx_copper_50.exr"
+    for i, status in enumerate(statuses):
+        runs.append({"scene": f"scene_{i}_{status}", "case": "c", "backend": "mitsuba", "mode": "m", "status": status,
+                     "reason": f"reason for {status}" if status != "ok" else "", "spp": 4, "resolution": [8, 8],
+                     "time_s": 0.1, "image": None, "channels": ["R", "G", "B"],
+                     "metrics": {"rmse": 0.1, "relmse": 0.2, "mape": 0.3, "flip": 0.4 if i % 2 else None},
+                     "probes": [{"name": "p", "expected": 1.0, "measured": 1.1, "error": 0.1, "unit": "dE00",
+                                 "pass": [True, False, None][i % 3]}],
+                     "test": {"p_min": 0.5, "threshold": 0.001, "z_max": 1.2, "pass": True},
+                     "reference": {"path": str(ref_path), "spp": 4096, "backend": "mitsuba", "mode": "llvm_ad_spectral",
+                                   "date": "2026-11-22T02:27:31"}})
+    stokes = runs[-1]  # the failed one gets images, with Stokes channels
+    stokes["channels"] = ["R", "G", "B"] + [f"S{k}.{c}" for k in range(4) for c in "RGB"]
+    res = out / stokes["scene"] / "results" / "mitsuba"
+    img = np.random.default_rng(0).random((8, 8, 15)).astype(np.float32)
+    exr.write_image(res / "render.exr", stokes["channels"], img)
+    for name in ("reference", "diff_abs", "diff_rel", "flip", "zscore"):
+        exr.write(res / f"{name}.exr", img[..., :3])
+    stokes["image"] = str((res / "render.exr").relative_to(out))
+    (out / "sweeps").mkdir(parents=True)
+    from PIL import Image
+    Image.new("RGB", (4, 4)).save(out / "sweeps" / f"{stokes['scene']}.png")
+    (out / "metrics.json").write_text(json.dumps({"started": "now", "options": {}, "runs": runs}))
+    return statuses
+
+
+def test_every_panel_draws_with_real_data(tmp_path):
+    """poll() and draw() of every registered panel, the preferences and the File > Export entries,
+    over every scene, object and material of scenes.blend, every value of the enums that steer the
+    draw code, a results folder holding every status, and a backend the panel has never seen."""
+    out_dir = tmp_path / "outputs"
+    statuses = _write_outputs(out_dir)
     out = run_bpy(f"""
-        import numpy as np
-        from spectral_bench.addon import benchmark
-        bpy.context.window_manager.spectral_bench_run.only_active = True
+        sys.path.insert(0, {TESTS!r})
+        import types
+        import layout_recorder as lr
+        from spectral_bench.addon import benchmark, operators, preferences
+        from spectral_bench.batch import backends
+
+        class FakeRGB:  # a backend that lands later: it must appear without any panel change
+            name, formats = "fake_rgb", ("json",)
+            def availability(self):
+                return False, "fake_rgb is not installed here"
+        backends.BACKENDS["fake_rgb"] = lambda **kw: FakeRGB()
+
+        panels = lr.registered_panels("spectral_bench")
+        drawn = {{p.__name__: 0 for p in panels}}
+        calls = []
+        def draw_all(**ctx):
+            context = lr.Context(**ctx)
+            for p in panels:
+                got = lr.draw(p, context)
+                if got is not None:
+                    drawn[p.__name__] += 1
+                    calls.extend((p.__name__, c) for c in got)
+
+        def spectra_of(owner):
+            return [getattr(owner.spectral_bench, f) for f in ("reflectance", "eta", "k", "radiance")
+                    if hasattr(owner.spectral_bench, f)]
+
         s = bpy.context.window_manager.spectral_bench_run
-        s.spp, s.scale, s.output_parent = 64, 0.125, {str(tmp_path)!r}
+        for scene in bpy.data.scenes:
+            for obj in list(scene.objects) + [None]:
+                mats = [obj.active_material] if obj is not None and obj.active_material else [None]
+                for mat in mats:
+                    draw_all(scene=scene, object=obj, material=mat)
+        # every branch of the annotation panels
+        mat = bpy.data.materials["ggx_copper"]
+        light = next(o for o in bpy.data.objects if o.type == "LIGHT")
+        camera = next(o for o in bpy.data.objects if o.type == "CAMERA")
+        world_scene = next(sc for sc in bpy.data.scenes if sc.world is not None)
+        for kind in ("NONE", "DIFFUSE", "CONDUCTOR", "DIELECTRIC"):
+            mat.spectral_bench.kind = kind
+            for named in (True, False):
+                mat.spectral_bench.conductor_named = named
+                for dist in ("SMOOTH", "GGX"):
+                    mat.spectral_bench.distribution = dist
+                    for skind in ("CONSTANT", "SAMPLED", "NAMED", "BLACKBODY"):
+                        for spec in spectra_of(mat) + spectra_of(light.data) + spectra_of(world_scene.world):
+                            spec.kind = skind
+                        for spec in spectra_of(mat):
+                            if skind == "SAMPLED" and not len(spec.samples):
+                                spec.samples.add()
+                        draw_all(scene=world_scene, object=light, material=mat)
+        for enabled in (True, False):
+            world_scene.world.spectral_bench.enabled = enabled
+            camera.data.spectral_bench.polarizer = enabled
+            draw_all(scene=world_scene, object=camera)
+        # every scene source, and the results folder
+        s.output_dir = {str(out_dir)!r}
+        for source in ("CANONICAL", "FILE", "ACTIVE"):
+            s.scene_source = source
+            draw_all(scene=world_scene)
+        # the preferences (the extension is not installed here: the class with default values)
+        prefs = types.SimpleNamespace(bl_rna=preferences.SpectralBenchPreferences.bl_rna, references_dir="",
+                                      reference_source="BOTH")
+        pref_calls = lr.draw(preferences.SpectralBenchPreferences, lr.Context(), instance=prefs)
+        menu_calls = lr.draw_function(operators._menu, lr.Context(), "TOPBAR_MT_file_export")
+
+        def texts(name, func):
+            return [c[2].get("text") for p, c in calls if p == name and c[1] == func]
+        results = texts("SPECTRAL_BENCH_PT_benchmark_results", "label")
+        print(json.dumps({{
+            "drawn": drawn,
+            "props": sorted({{c[2]["property"] for p, c in calls if c[1] == "prop"}}),
+            "status_order": [t.split(": ", 1)[1] for t in results if t and t.startswith("scene_") and "/" in t][:8],
+            "reference_labels": [t for t in results if t and t.startswith("reference (")],
+            "load_kinds": sorted({{c[2]["properties"].get("kind") for p, c in calls
+                                 if c[1] == "operator" and c[2]["operator"] == "spectral_bench.load_result"}}),
+            "backend_buttons": sorted(set(texts("SPECTRAL_BENCH_PT_benchmark", "operator")) - {{None}}),
+            "disabled_rows": sum(1 for p, c in calls if c[1] == "set enabled" and c[2]["value"] is False),
+            "pref_labels": [c[2].get("text") for c in pref_calls if c[1] == "label"],
+            "menu": [c[2]["operator"] for c in menu_calls],
+        }}))
+    """)
+    assert all(n > 0 for n in out["drawn"].values()), out["drawn"]  # every panel's poll() let it draw
+    assert len(out["drawn"]) >= 9
+    assert {"kind", "scene_source", "canonical_scene", "spp", "scale", "passes", "use_flip", "output_dir"} <= set(out["props"])
+    # failures first, a status the view does not know next, passes last; every status shown as it is
+    assert out["status_order"][0] == "failed" and out["status_order"][1] == "brand_new_status"
+    assert out["status_order"][-1] == "ok" and sorted(out["status_order"]) == sorted(statuses)
+    assert out["reference_labels"] and all(t.startswith("reference (extension): mitsuba llvm_ad_spectral 4096 spp")
+                                           for t in out["reference_labels"])
+    assert out["load_kinds"] == sorted(["render", "reference", "diff_abs", "diff_rel", "flip", "zscore",
+                                        "S0", "S1", "S2", "S3"])
+    assert "fake_rgb: fake_rgb is not installed here" in out["backend_buttons"] and "mitsuba" in out["backend_buttons"]
+    assert out["disabled_rows"] >= 1
+    assert any(t.startswith("extension: ") and int(t.split()[1]) > 0 and t.endswith(str(ROOT / "references"))
+               for t in out["pref_labels"]), out["pref_labels"]
+    assert out["menu"] == ["spectral_bench.export_json", "spectral_bench.export_mitsuba", "spectral_bench.export_art"]
+
+
+def test_draw_check_catches_broken_panels():
+    """The check's power: each deliberately broken panel fails with a message naming the culprit,
+    among them the benchmark panel's old backend loop (it drew ``use_art``, which never existed)."""
+    out = run_bpy(f"""
+        sys.path.insert(0, {TESTS!r})
+        import layout_recorder as lr
+        from spectral_bench.batch import backends
+
+        def broken(draw):
+            cls = type("SPECTRAL_BENCH_PT_broken", (bpy.types.Panel,), dict(
+                bl_label="Broken", bl_space_type="PROPERTIES", bl_region_type="WINDOW", bl_context="scene",
+                draw=draw))
+            bpy.utils.register_class(cls)
+            try:
+                lr.draw(cls, lr.Context())
+                return None
+            except lr.DrawError as exc:
+                return str(exc)
+            finally:
+                bpy.utils.unregister_class(cls)
+
+        def old_backend_loop(self, context):
+            s = context.window_manager.spectral_bench_run
+            for name in backends.BACKENDS:
+                self.layout.row().prop(s, f"use_{{name}}", text=name)
+
+        wm = lambda c: c.window_manager.spectral_bench_run
+        cases = {{
+            "old_backend_loop": old_backend_loop,
+            "missing_property": lambda self, c: self.layout.prop(wm(c), "use_art"),
+            "missing_operator": lambda self, c: self.layout.operator("spectral_bench.run_benchmrk"),
+            "missing_operator_property": lambda self, c: setattr(
+                self.layout.operator("spectral_bench.load_result"), "scenes", "x"),
+            "bad_operator_enum": lambda self, c: setattr(
+                self.layout.operator("spectral_bench.load_result"), "kind", "S4"),
+            "bad_icon": lambda self, c: self.layout.label(text="x", icon="CHECKMARKS"),
+            "bad_keyword": lambda self, c: self.layout.prop(wm(c), "spp", txt="Samples"),
+            "bad_layout_attribute": lambda self, c: setattr(self.layout.row(), "enable", False),
+            "bad_operator_context": lambda self, c: setattr(self.layout.row(), "operator_context", "INVOKE"),
+            "not_rna_data": lambda self, c: self.layout.prop({{"spp": 1}}, "spp"),
+            "fine": lambda self, c: self.layout.prop(wm(c), "spp", text="Samples"),
+        }}
+        print(json.dumps({{name: broken(draw) for name, draw in cases.items()}}))
+    """)
+    assert out.pop("fine") is None
+    expect = {"old_backend_loop": "use_mitsuba", "missing_property": "use_art", "missing_operator": "run_benchmrk",
+              "missing_operator_property": "scenes", "bad_operator_enum": "S4", "bad_icon": "CHECKMARKS",
+              "bad_keyword": "txt", "bad_layout_attribute": "enable", "bad_operator_context": "INVOKE",
+              "not_rna_data": "bl_rna"}
+    for name, culprit in expect.items():
+        assert out[name] is not None and culprit in out[name], (name, out[name])
+
+
+# -- canonical scenes ----------------------------------------------------------------------------
+def test_canonical_scenes_open_append_and_extract_unchanged(golden):
+    out = run_bpy("""
+        from spectral_bench.addon import canonical
+        from spectral_bench.exporters import extract_blender, ir_json
+        bpy.ops.wm.read_homefile(use_empty=True)
+        before = [sc.name for sc in bpy.data.scenes]
+        listed = canonical.scene_names()
+        # extraction for a run reads a temporary BlendData: the open file does not change
+        extracted = {n: ir_json.dumps(d) for n, d in canonical.extract(["ggx_copper_50", "polarizing_spheres"])}
+        untouched = [sc.name for sc in bpy.data.scenes] == before and not bpy.data.libraries
+        r1 = bpy.ops.spectral_bench.append_canonical_scene(scene="ggx_copper_50")
+        appended = ir_json.dumps(extract_blender.extract_scene(bpy.data.scenes["ggx_copper_50"]))
+        try:
+            bpy.ops.spectral_bench.append_canonical_scene(scene="no_such_scene")
+            bad = None
+        except RuntimeError as exc:
+            bad = str(exc)
+        undoable = {op: "UNDO" in getattr(bpy.types, op).bl_options for op in (
+            "SPECTRAL_BENCH_OT_append_canonical_scene", "SPECTRAL_BENCH_OT_load_result",
+            "SPECTRAL_BENCH_OT_load_chart", "SPECTRAL_BENCH_OT_load_spectrum", "SPECTRAL_BENCH_OT_spectrum_sample")}
+        r2 = bpy.ops.spectral_bench.open_canonical_scenes()
+        print(json.dumps({"before": before, "listed": listed, "extracted": extracted, "untouched": untouched,
+                          "r1": list(r1), "appended": appended, "bad": bad, "undoable": undoable, "r2": list(r2),
+                          "opened": sorted(sc.name for sc in bpy.data.scenes), "filepath": bpy.data.filepath,
+                          "annotated": bpy.data.scenes["ggx_copper_50"].spectral_bench.case}))
+    """)
+    from spectral_bench.exporters import ir_json
+    names = sorted(golden)
+    assert out["listed"] == names and out["untouched"]
+    for name, text in out["extracted"].items():
+        assert text == ir_json.dumps(golden[name]), name
+    assert out["r1"] == ["FINISHED"] and out["appended"] == ir_json.dumps(golden["ggx_copper_50"])
+    assert "no_such_scene" in out["bad"]
+    assert all(out["undoable"].values()), out["undoable"]
+    assert out["r2"] == ["FINISHED"] and out["opened"] == names and out["annotated"] == "reflectance"
+    assert out["filepath"] != str(ROOT / "scenes.blend")  # a copy: saving never writes into the extension
+
+
+# -- running -------------------------------------------------------------------------------------
+def test_run_from_blender_then_load_images_and_open_report(tmp_path):
+    opened = tmp_path / "opened.txt"
+    browser = tmp_path / "browser.py"
+    browser.write_text(f"import sys\nopen({str(opened)!r}, 'w').write(sys.argv[1])\n")
+    out = run_bpy(f"""
+        import os, time
+        import numpy as np
+        sys.path.insert(0, {TESTS!r})
+        import layout_recorder as lr
+        from spectral_bench.addon import benchmark
+        from spectral_bench.batch import backends
+        s = bpy.context.window_manager.spectral_bench_run
+        s.scene_source = "ACTIVE"
+        s.backends_off = ",".join(n for n in backends.BACKENDS if n != "mitsuba")  # this test judges Mitsuba
+        s.spp, s.scale, s.passes, s.output_parent = 64, 0.125, 2, {str(tmp_path)!r}
+        try:
+            bpy.ops.spectral_bench.open_report()
+            missing = None
+        except RuntimeError as exc:
+            missing = str(exc)
         with bpy.context.temp_override(scene=bpy.data.scenes["ggx_copper_80"]):
             r = bpy.ops.spectral_bench.run_benchmark(wait=True)
             loaded = {{}}
-            for kind in ("render", "reference", "diff_abs", "flip"):
+            for kind in ("render", "reference", "diff_abs", "flip", "zscore"):
                 bpy.ops.spectral_bench.load_result(scene="ggx_copper_80", backend="mitsuba", kind=kind)
                 img = bpy.data.images["ggx_copper_80 mitsuba " + kind]
                 w, h = img.size
                 px = np.array(img.pixels[:], dtype=np.float32).reshape(h, w, 4)
                 loaded[kind] = px[::-1, :, :3].tolist()  # Blender stores rows bottom-up
-        print(json.dumps({{"r": list(r), "status": s.status, "out": s.output_dir, "loaded": loaded}}))
-    """)
+        results = lr.draw(bpy.types.SPECTRAL_BENCH_PT_benchmark_results, lr.Context())
+        rep = bpy.ops.spectral_bench.open_report()
+        t0 = time.time()
+        while not os.path.exists({str(opened)!r}) and time.time() - t0 < 30:
+            time.sleep(0.1)
+        print(json.dumps({{"r": list(r), "status": s.status, "out": s.output_dir, "loaded": loaded, "missing": missing,
+                          "rep": list(rep), "labels": [c[2].get("text") for c in results if c[1] == "label"]}}))
+    """, env={"BROWSER": f"{sys.executable} {browser} %s"})
+    assert "no report.html" in out["missing"]
     assert out["r"] == ["FINISHED"] and out["status"].startswith("passed: 1/1")
     res = f"{out['out']}/ggx_copper_80/results/mitsuba"
-    for kind, name in (("render", "render.exr"), ("reference", "reference.exr"), ("diff_abs", "diff_abs.exr")):
+    for kind, name in (("render", "render.exr"), ("reference", "reference.exr"), ("diff_abs", "diff_abs.exr"),
+                       ("zscore", "zscore.exr")):
         expected = exr.read_rgb(f"{res}/{name}")
         assert np.allclose(np.array(out["loaded"][kind]), expected, atol=1e-6), kind
     runs = json.loads(open(f"{out['out']}/metrics.json").read())["runs"]
     assert [r["scene"] for r in runs] == ["ggx_copper_80"] and runs[0]["status"] == "ok"
+    assert runs[0]["test"]["pass"] and runs[0]["reference"]["path"] == str(ROOT / "references" / "ggx_copper_80.exr")
+    assert any(t and t.startswith("reference (extension): mitsuba") for t in out["labels"])
+    assert out["rep"] == ["FINISHED"]
+    for _ in range(100):
+        if opened.exists() and opened.read_text():
+            break
+        time.sleep(0.1)
+    assert opened.read_text() == (Path(out["out"]) / "report.html").resolve().as_uri()
 
 
 def test_cancel_stops_the_run_and_keeps_finished_results(tmp_path):
     out = run_bpy(f"""
         import time
         from spectral_bench.addon import benchmark
+        from spectral_bench.batch import backends
         from spectral_bench.batch.report import results
         s = bpy.context.window_manager.spectral_bench_run
-        s.spp, s.scale, s.output_parent = 16, 0.125, {str(tmp_path)!r}
+        s.scene_source, s.canonical_scene = "CANONICAL", "__ALL__"
+        s.backends_off = ",".join(n for n in backends.BACKENDS if n != "mitsuba")
+        s.spp, s.scale, s.passes, s.use_flip, s.output_parent = 16, 0.125, 1, False, {str(tmp_path)!r}
         bpy.ops.spectral_bench.run_benchmark()   # returns at once; the run goes on in the background
-        job = benchmark._ACTIVE["job"]
+        job = benchmark.active_job()
         t0 = time.time()
         while job.done_jobs() < 1 and time.time() - t0 < 300:
             time.sleep(0.2)
         before = job.done_jobs()
-        bpy.ops.spectral_bench.cancel_benchmark()
-        time.sleep(1.0)
+        r = bpy.ops.spectral_bench.cancel_benchmark()
         after = results.load(s.output_dir)
-        print(json.dumps({{"before": before, "after": len(after["runs"]), "total": job.total,
-                          "running": job.running(), "status": s.status,
+        rows = benchmark.result_rows(s.output_dir)
+        print(json.dumps({{"before": before, "after": len(after["runs"]), "total": job.total, "r": list(r),
+                          "running": job.running(), "status": s.status, "rows": len(rows),
+                          "report": benchmark.report_path(s.output_dir) is not None,
                           "statuses": [r["status"] for r in after["runs"]]}}))
     """)
-    assert not out["running"] and out["status"].startswith("cancelled")
-    assert 1 <= out["before"] <= out["after"] < out["total"], out
-    assert all(st in ("ok", "failed", "unsupported", "skipped") for st in out["statuses"])
+    assert out["r"] == ["FINISHED"] and not out["running"] and out["status"].startswith("cancelled")
+    assert 1 <= out["before"] <= out["after"] < out["total"] == 10, out
+    assert out["rows"] == out["after"] and out["report"]  # the results view and report.html show what finished
+    assert all(st in ("ok", "failed", "unsupported", "skipped", "unjudged", "known", "fixed") for st in out["statuses"])
+
+
+def test_stokes_components_load_into_images(tmp_path):
+    out_dir = tmp_path / "o"
+    proc = run_batch("-r", "mitsuba", "-s", "polarizing_spheres", "--scale", "0.125", "--no-flip", "-o", out_dir)
+    assert (out_dir / "metrics.json").is_file(), proc.stderr[-2000:]
+    out = run_bpy(f"""
+        import numpy as np
+        s = bpy.context.window_manager.spectral_bench_run
+        s.output_dir = {str(out_dir)!r}
+        loaded = {{}}
+        for k in ("S0", "S1", "S2", "S3"):
+            bpy.ops.spectral_bench.load_result(scene="polarizing_spheres", backend="mitsuba", kind=k)
+            img = bpy.data.images["polarizing_spheres mitsuba " + k]
+            w, h = img.size
+            loaded[k] = np.array(img.pixels[:], dtype=np.float32).reshape(h, w, 4)[::-1, :, :3].tolist()
+        print(json.dumps(loaded))
+    """)
+    render = out_dir / "polarizing_spheres" / "results" / "mitsuba" / "render.exr"
+    for k in ("S0", "S1", "S2", "S3"):
+        expected = exr.read_rgb(render, prefix=f"{k}.")
+        assert np.allclose(np.array(out[k]), expected, atol=1e-6), k
+    assert np.abs(expected).max() > 0  # S3 of this scene is not all zero: the comparison means something
+
+
+def test_backends_listed_from_the_runner_and_toggled():
+    out = run_bpy("""
+        from spectral_bench.addon import benchmark
+        from spectral_bench.batch import backends
+        s = bpy.context.window_manager.spectral_bench_run
+        listed = [n for n, *_ in benchmark.backend_states(s)]
+        bpy.ops.spectral_bench.toggle_backend(backend="mitsuba")
+        off = benchmark.chosen_backends(s)
+        bpy.ops.spectral_bench.toggle_backend(backend="mitsuba")
+        on = benchmark.chosen_backends(s)
+        try:
+            bpy.ops.spectral_bench.toggle_backend(backend="nope")
+            bad = None
+        except RuntimeError as exc:
+            bad = str(exc)
+        print(json.dumps({"listed": listed, "known": list(backends.BACKENDS), "off": off, "on": on, "bad": bad}))
+    """)
+    assert out["listed"] == out["known"]
+    assert "mitsuba" not in out["off"] and "mitsuba" in out["on"]
+    assert "nope" in out["bad"]
 
 
 def test_register_unregister_leaves_no_trace():
@@ -145,12 +461,9 @@ def test_file_export_operators_write_loadable_folders(tmp_path):
 
 
 def test_sweep_chart_loads_into_an_image(tmp_path):
-    import subprocess, sys
-    from conftest import ROOT
     out = tmp_path / "o"
-    subprocess.run([sys.executable, str(ROOT / "batch" / "run.py"), "-r", "mitsuba", "-s", "ggx_copper_80", "--scale",
-                    "0.0625", "--sweep", "--ladder", "4,16", "--no-flip", "-o", str(out)], check=False, timeout=600,
-                   capture_output=True)
+    run_batch("-r", "mitsuba", "-s", "ggx_copper_80", "--scale", "0.0625", "--sweep", "--ladder", "4,16", "--no-flip",
+              "-o", out, timeout=600)
     res = run_bpy(f"""
         s = bpy.context.window_manager.spectral_bench_run
         s.output_dir = {str(out)!r}
@@ -159,3 +472,54 @@ def test_sweep_chart_loads_into_an_image(tmp_path):
         print(json.dumps({{"r": list(r), "size": list(img.size)}}))
     """)
     assert res["r"] == ["FINISHED"] and res["size"][0] > 100
+
+
+def test_reference_search_first_usable_folder_wins(tmp_path, golden):
+    """The order the extension passes folders in (the preferences' folder, then its own): a stale
+    reference in the first folder is passed over for a usable one in the next, and still reported
+    as stale when it is the only one; each reference's origin is named."""
+    import shutil
+    from spectral_bench.addon import reference_sources
+    from spectral_bench.batch import cli
+    from spectral_bench.batch.verdict import references
+    stale = tmp_path / "stale"
+    stale.mkdir()
+    shutil.copy(ROOT / "references" / "ggx_copper_50.exr", stale)
+    meta = json.loads((ROOT / "references" / "ggx_copper_50.json").read_text())
+    (stale / "ggx_copper_50.json").write_text(json.dumps(dict(meta, fingerprint="0" * 64)))
+    scene = golden["ggx_copper_50"]
+    search = reference_sources.folders("BOTH", stale)
+    assert [o for o, _ in search] == ["folder", "extension"]
+    used = references.load("ggx_copper_50", [f for _, f in search], scene=scene)
+    assert used.path == references.REFERENCE_DIR / "ggx_copper_50.exr" and references.check_usable(used, scene) is None
+    assert reference_sources.origin_of(used.path, search) == "extension"
+    only = references.load("ggx_copper_50", [stale], scene=scene)
+    assert only.path == stale / "ggx_copper_50.exr" and "stale" in references.check_usable(only, scene)
+    assert reference_sources.origin_of(only.path, search) == "folder"
+    assert references.load("ggx_copper_50", [tmp_path / "empty"], scene=scene) is None
+    assert reference_sources.folders("FOLDER", None) == [] and reference_sources.folders("EXTENSION", stale) == [
+        ("extension", references.REFERENCE_DIR)]
+    catalog = reference_sources.catalog(search)
+    assert [r["origin"] for r in catalog["ggx_copper_50"]] == ["folder", "extension"]
+    assert cli.parse(["--references", "a", "--references", "b"])["references"] == ["a", "b"]
+
+
+def test_references_save_noise_as_half_and_mean_exactly(tmp_path, golden):
+    """What the extension ships: the mean bit for bit as float32, the standard error as half (float32
+    where a value does not fit in half)."""
+    import OpenEXR
+    from spectral_bench.batch.verdict import references
+    rng = np.random.default_rng(3)
+    mean = rng.random((8, 8, 3)).astype(np.float32)
+    stderr = (1e-3 + rng.random((8, 8, 3)) * 1e-2).astype(np.float32)  # within half's normal range
+    scene = golden["ggx_copper_50"]
+    for name, err, want in (("small", stderr, OpenEXR.HALF), ("huge", stderr * 1e7, OpenEXR.FLOAT)):
+        folder = tmp_path / name
+        path = references.save(scene, ["R", "G", "B"], mean, err, {"spp": 4, "passes": 8}, folder)
+        with OpenEXR.File(str(path), separate_channels=True) as f:
+            types = {n: c.pixels.dtype for n, c in f.channels().items()}
+        assert all(types[c] == np.float32 for c in "RGB")
+        assert all(types[f"stderr.{c}"] == (np.float16 if want == OpenEXR.HALF else np.float32) for c in "RGB")
+        ref = references.load(scene["name"], folder, scene=scene)
+        assert np.array_equal(ref.mean, mean) and references.check_usable(ref, scene) is None
+        assert np.allclose(ref.stderr, err, rtol=2 ** -11, atol=0)

@@ -197,7 +197,7 @@ class Run:
         ladder = self.opts["ladder"] or list(sweep.DEFAULT_LADDER)
         sc = for_run(scene, dict(self.opts, spp=None))
         modes, why = sweep.sweep_modes(backend, sc, self.opts["sweep_modes"])
-        ref, broken = self.reference(name)
+        ref, broken = self.reference(name, scene)
         unusable = broken or references.check_usable(ref, scene)
         if not modes or unusable:
             self.sweeps.append({"scene": name, "backend": backend.name, "mode": None, "points": [],
@@ -241,10 +241,10 @@ class Run:
                     l["equal"] = table
         self.save()
 
-    def reference(self, name):
+    def reference(self, name, scene):
         """(reference or None, why it cannot judge or None); a broken reference file is a reason."""
         try:
-            ref = references.load(name, self.opts["references"])
+            ref = references.load(name, self.opts["references"], scene=scene)
         except Exception as exc:  # noqa: BLE001 - a bad reference must not stop the batch
             return None, f"reference unreadable: {exc}"
         return ref, None
@@ -278,7 +278,7 @@ class Run:
             # negative linear sRGB can be a legitimate out-of-gamut colour; negative S0 never is
             entry["flags"] = [f"{entry['sanity']['negative']} negative values"]
         previews.save_linear(res_dir / "render.png", test_all[..., :3])
-        ref, broken = self.reference(name)
+        ref, broken = self.reference(name, scene)
         unusable = broken or references.check_usable(ref, scene)
         ztest = None
         if unusable:
@@ -298,7 +298,8 @@ class Run:
         diff, z-score and FLIP images. Returns the in-memory test (for re-judging) or None."""
         test = test_all[..., :3]
         entry["reference"] = {"path": str(ref.path), "spp": ref.spp, "backend": ref.provenance.get("backend"),
-                              "mode": ref.provenance.get("mode"), "versions": ref.provenance.get("versions")}
+                              "mode": ref.provenance.get("mode"), "versions": ref.provenance.get("versions"),
+                              "date": ref.provenance.get("date")}
         if names != ref.names:
             entry["test"] = {"pass": False, "reason": f"render channels {names} differ from the reference's {ref.names}"}
             return None

@@ -42,16 +42,38 @@ class Reference:
         return self.provenance["spp"]
 
 
-def load(scene_name, directory=None):
-    """Reference or None if there is none."""
-    directory = Path(directory or REFERENCE_DIR)
-    exr_path, meta_path = directory / f"{scene_name}.exr", directory / f"{scene_name}.json"
-    if not exr_path.is_file() or not meta_path.is_file():
-        return None
+def directories(directory=None):
+    """The reference folders to search, in order: None -> references/; one path; or a list of
+    paths (the Blender extension passes the user's folder and its own)."""
+    if not directory:
+        return [REFERENCE_DIR]
+    if isinstance(directory, (str, Path)):
+        return [Path(directory)]
+    return [Path(d) for d in directory] or [REFERENCE_DIR]
+
+
+def load(scene_name, directory=None, scene=None):
+    """Reference or None if there is none. With several folders, the first holding a reference
+    usable for ``scene`` wins; if none is usable (or ``scene`` is None) the first found, so that
+    a stale reference is still reported as stale."""
+    first = None
+    for folder in directories(directory):
+        exr_path, meta_path = folder / f"{scene_name}.exr", folder / f"{scene_name}.json"
+        if not exr_path.is_file() or not meta_path.is_file():
+            continue
+        meta = json.loads(meta_path.read_text())
+        if scene is not None and meta.get("fingerprint") != fingerprint(scene):
+            first = first or (exr_path, meta)
+            continue
+        return _read(exr_path, meta)
+    return _read(*first) if first else None
+
+
+def _read(exr_path, meta):
     names, mean, stderr = exr.read_image_and_stderr(exr_path)
     if stderr is None:
         raise ValueError(f"{exr_path} has no stderr.<channel> noise channels: not a reference")
-    return Reference(names, mean, stderr, json.loads(meta_path.read_text()), exr_path)
+    return Reference(names, mean, stderr, meta, exr_path)
 
 
 def check_usable(ref, scene):
@@ -64,10 +86,23 @@ def check_usable(ref, scene):
     return None
 
 
+HALF_MAX = 65504.0
+
+
+def _noise_channel(stderr):
+    """The standard error as half floats (the mean stays float32): a third smaller references
+    with no verdict changed (benchmarks/reference_storage.py, benchmarks/REFERENCES.md); float32
+    where a value would not fit in half."""
+    finite = np.isfinite(stderr)
+    if finite.all() and float(np.max(np.abs(stderr), initial=0.0)) < HALF_MAX:
+        return stderr.astype(np.float16)
+    return stderr.astype(np.float32)
+
+
 def save(scene, names, mean, stderr, provenance, directory=None):
     directory = Path(directory or REFERENCE_DIR)
     directory.mkdir(parents=True, exist_ok=True)
-    extra = {f"stderr.{n}": stderr[..., i].astype(np.float32) for i, n in enumerate(names)}
+    extra = {f"stderr.{n}": _noise_channel(stderr[..., i]) for i, n in enumerate(names)}
     exr.write_image(directory / f"{scene['name']}.exr", names, mean, extra)
     meta = dict(provenance, scene=scene["name"], fingerprint=fingerprint(scene))
     (directory / f"{scene['name']}.json").write_text(json.dumps(meta, indent=1, sort_keys=True) + "\n")
