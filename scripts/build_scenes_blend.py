@@ -205,18 +205,47 @@ def build():
     light = add_area_light(first, "light", 1.0, (0, 0, 1.5), "cie_d65", 4.0)
     camera = add_camera(first, "copper_camera")
     for angle, scene in zip((50, 60, 70, 80), copper_scenes):
-        add_object(scene, f"copper_plate_{angle}", square, copper, "RECTANGLE", rotation=(math.radians(angle), 0, 0))
+        plate = add_object(scene, f"copper_plate_{angle}", square, copper, "RECTANGLE",
+                           rotation=(math.radians(angle), 0, 0))
         if scene is not first:
             for obj in (floor, light, camera):
                 scene.collection.objects.link(obj)
             scene.camera = camera
+        # the same plate, light and camera without the floor: direct light is all the plate gets,
+        # so every pixel has a closed form (the GGX quadrature probe, batch/verdict/probes/ggx.py)
+        alone = new_scene(f"ggx_copper_{angle}_isolated", "reflectance", 64,
+                          f"ggx_copper_{angle} without its floor: the copper plate lit by the D65 area light alone")
+        for obj in (plate, light, camera):
+            alone.collection.objects.link(obj)
+        alone.camera = camera
+    # grazing view and grazing light (80 degrees from the normal) on a lone plate: where the
+    # shadowing-masking of both directions matters (separable and height-correlated Smith differ
+    # by 4 % here, by < 0.1 % in the copper scenes above)
+    grazing = new_scene("ggx_copper_grazing", "reflectance", 64,
+                        "Rough GGX copper plate (alpha 0.2) seen and lit at 80 degrees from its normal, D65 area light")
+    add_object(grazing, "copper_plate_grazing", square, copper, "RECTANGLE")
+    elevation = math.radians(10.0)
+    light_pos = Vector((0.0, 3.0 * math.cos(elevation), 3.0 * math.sin(elevation)))
+    glight = add_area_light(grazing, "grazing_light", 1.0, tuple(light_pos), "cie_d65", 4.0)
+    glight.rotation_euler = (-light_pos).to_track_quat("-Z", "Y").to_euler()
+    add_camera(grazing, "grazing_camera", origin=(0.0, -4.0 * math.cos(elevation), 4.0 * math.sin(elevation)))
     scene = new_scene("ggx_glass", "reflectance", 256,
                       "Rough GGX glass sphere (alpha 0.2, IOR 1.5046) under a D65 area light, clear of the sphere")
     add_object(scene, "glass_sphere", sphere, glass, "SPHERE")
     # The thesis' light touched the sphere's top (z = 1.000002 vs 1.0), which made the image
     # ill-conditioned; ours leaves a 0.25 gap.
     add_area_light(scene, "glass_light", 2.0, (0, 0, 1.25), "cie_d65", 5.0)
-    add_camera(scene, "glass_camera")
+    glass_camera = add_camera(scene, "glass_camera")
+    glass_light = bpy.data.objects["glass_light"]
+    # the thesis' Figure 3.5: the same sphere with the Beckmann distribution of the same alpha
+    beckmann = material("beckmann_glass", "DIELECTRIC", int_ior=1.5046, ext_ior=1.000277,
+                        distribution="BECKMANN", alpha=0.2)
+    twin = new_scene("beckmann_glass", "reflectance", 256,
+                     "ggx_glass with a Beckmann distribution of the same alpha (0.2), as in the thesis' Figure 3.5")
+    add_object(twin, "beckmann_glass_sphere", sphere, beckmann, "SPHERE")
+    for obj in (glass_light, glass_camera):
+        twin.collection.objects.link(obj)
+    twin.camera = glass_camera
     build_spectral_accuracy(square)
     build_polarization(square, sphere)
     for s in list(bpy.data.scenes):

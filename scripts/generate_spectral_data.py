@@ -8,14 +8,21 @@ Sources (colour-science 0.4.6):
   ColorChecker patches' reflectances measured by N. Ohta (380-780 nm, 5 nm).
 - cie_1931_2deg_cmfs.json: ``colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"]``
   (360-830 nm, 1 nm), used by the analytic probes.
+- conductors.json: the complex IOR (eta, k) of the IR's named conductors, Mitsuba 3's own tables
+  (mitsuba 3.9.1, mitsuba/data/ior/<name>.eta.spd and .k.spd, wavelength in nm; their headers name
+  their sources), so that every writer and the probes use the data Mitsuba renders with.
 
     .venv/bin/python scripts/generate_spectral_data.py
 """
 import json
 import re
+import sys
 from pathlib import Path
 
 import colour
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+import pkg_bootstrap  # noqa: E402
 
 ILLUMINANTS = ["A", "D50", "D55", "D65", "D75", "E", "FL2", "FL7", "FL11"]
 DATA = Path(__file__).resolve().parents[1] / "exporters" / "data"
@@ -55,6 +62,22 @@ def main():
         "x_bar": [round(float(v), 8) for v in cmfs.values[:, 0]],
         "y_bar": [round(float(v), 8) for v in cmfs.values[:, 1]],
         "z_bar": [round(float(v), 8) for v in cmfs.values[:, 2]]})
+    write("conductors.json", conductors())
+
+
+def read_spd(path):
+    rows = [line.split() for line in path.read_text().splitlines() if line.strip() and not line.lstrip().startswith("#")]
+    return {"wavelengths": [float(r[0]) for r in rows], "values": [float(r[1]) for r in rows]}
+
+
+def conductors():
+    import mitsuba
+    pkg_bootstrap.package()
+    from spectral_bench.exporters.spectra import NAMED_CONDUCTORS
+    folder = Path(mitsuba.__file__).parent / "data" / "ior"
+    return {"source": f"mitsuba {mitsuba.__version__}, mitsuba/data/ior/<name>.eta.spd and <name>.k.spd (nm)",
+            "conductors": {n: {"eta": read_spd(folder / f"{n}.eta.spd"), "k": read_spd(folder / f"{n}.k.spd")}
+                           for n in NAMED_CONDUCTORS}}
 
 
 if __name__ == "__main__":

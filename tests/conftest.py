@@ -12,7 +12,8 @@ import pkg_bootstrap  # noqa: E402
 
 pkg_bootstrap.package()
 GOLDEN = ROOT / "golden" / "ir"
-REFLECTANCE = ["ggx_copper_50", "ggx_copper_60", "ggx_copper_70", "ggx_copper_80", "ggx_glass"]
+REFLECTANCE = ["beckmann_glass", "ggx_copper_50", "ggx_copper_50_isolated", "ggx_copper_60", "ggx_copper_60_isolated",
+               "ggx_copper_70", "ggx_copper_70_isolated", "ggx_copper_80", "ggx_copper_80_isolated", "ggx_copper_grazing", "ggx_glass"]
 SPECTRAL_ACCURACY = ["macbeth_chart_D50", "macbeth_chart_D65"]
 POLARIZATION = ["polarizing_plane_0", "polarizing_plane_90", "polarizing_spheres"]
 ALL_SCENES = sorted(REFLECTANCE + SPECTRAL_ACCURACY + POLARIZATION)

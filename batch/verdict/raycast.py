@@ -24,6 +24,29 @@ def camera_rays(camera, width, height, points="centers"):
     return m[:3, 3], d / np.linalg.norm(d, axis=-1, keepdims=True)
 
 
+def camera_rays_at(camera, width, height, px, py):
+    """Origin and unit directions of rays through continuous image positions (px, py) in pixel
+    units (0 at the left/top edge, width/height at the right/bottom edge), any array shape."""
+    m = np.asarray(camera["to_world"], dtype=np.float64)
+    t = np.tan(np.radians(camera["fov"]) / 2)
+    tx, ty = (t, t * height / width) if camera.get("fov_axis", "x") == "x" else (t * width / height, t)
+    px, py = np.broadcast_arrays(np.asarray(px, dtype=np.float64), np.asarray(py, dtype=np.float64))
+    local = np.stack([(2 * px / width - 1) * tx, (1 - 2 * py / height) * ty, -np.ones_like(px)], axis=-1)
+    d = local @ m[:3, :3].T
+    return m[:3, 3], d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+def hit_plane(shape, origin, dirs):
+    """Distance to the infinite plane of a rectangle (inf where parallel or behind)."""
+    m = np.asarray(shape["to_world"], dtype=np.float64)
+    inv = np.linalg.inv(m)
+    o_local = (inv @ np.append(origin, 1.0))[:3]
+    d_local = dirs @ inv[:3, :3].T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = -o_local[2] / d_local[..., 2]
+    return np.where(np.isfinite(t) & (t > 1e-9), t, np.inf)
+
+
 def hit_rectangle(shape, origin, dirs, margin=1.0):
     """Distance t to the rectangle (inf where missed) for rays origin + t * dirs; ``margin``
     < 1 shrinks the rectangle (0.7: its inner 70 %)."""
