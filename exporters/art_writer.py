@@ -16,8 +16,9 @@ spectrum came out 10 % darker under ``-s46e`` (identical under the default 8 sam
 illuminants with an ART table use it.
 
 What ART cannot express is returned per object and field, never silently replaced:
-upstream ART has no GGX or Beckmann microfacets (Blinn only), named conductors only for Ag, Al,
-Au, Cu and Se, and its outside medium is vacuum.
+upstream ART has no GGX or Beckmann microfacets (Blinn only), and its outside medium is vacuum.
+Named conductors are written with the IR's own eta/k tables (Mitsuba's data, exporters/data),
+not ART's material presets, so both renderers render the same metal.
 """
 from pathlib import Path
 
@@ -31,8 +32,6 @@ ART_ILLUMINANTS = {"cie_a": "CIE_ILLUMINANT_A", "cie_d50": "CIE_ILLUMINANT_D50",
                    "cie_d65": "CIE_ILLUMINANT_D65", "cie_d75": "CIE_ILLUMINANT_D75", "cie_fl2": "CIE_ILLUMINANT_FL2",
                    "cie_fl7": "CIE_ILLUMINANT_FL7", "cie_fl11": "CIE_ILLUMINANT_FL11"}
 ART_TABLE_AT_560NM = 100.0
-ART_CONDUCTORS = {"Ag": "SILVER_MATERIAL", "Al": "ALUMINIUM_MATERIAL", "Au": "GOLD_MATERIAL",
-                  "Cu": "COPPER_MATERIAL", "Se": "SELENIUM_MATERIAL"}
 
 
 def _num(x):
@@ -79,15 +78,8 @@ class _Writer:
                                          "(use --art-ggx with an ART build that has GGX_MICROFACET_DISTRIBUTION_CONST)"))
                 return None
         if b["type"] == "conductor":
-            if "material" in b:
-                if b["material"] not in ART_CONDUCTORS:
-                    self.unsupported.append((name, "bsdf.material",
-                                             f"ART has no named conductor {b['material']!r} "
-                                             f"(has {', '.join(sorted(ART_CONDUCTORS))})"))
-                    return None
-                material = ART_CONDUCTORS[b["material"]]
-            else:
-                material = f"STANDARD_MATERIAL({self.colour(b['eta'])}, {self.colour(b['k'])})"
+            eta, k = spectra.named_conductor(b["material"]) if "material" in b else (b["eta"], b["k"])
+            material = f"STANDARD_MATERIAL({self.colour(eta)}, {self.colour(k)})"
         else:
             ext = b.get("ext_ior", ir.AIR_IOR)
             if abs(ext - 1.0) > 1e-3:

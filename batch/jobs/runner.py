@@ -182,11 +182,9 @@ class Run:
     def run_stability(self, scenes, made):
         from ..studies import stability
         golden = {n: s for n, s in scenes if isinstance(s, dict)}
-        if not {"ggx_copper_80", "polarizing_plane_0"} <= set(golden):
-            self.stability = [{"sweep": "all", "status": "skipped",
-                               "problems": ["needs ggx_copper_80 and polarizing_plane_0 in the input"]}]
-            return
-        self.stability = []
+        self.stability = [{"sweep": s.name, "status": "skipped", "problems": [],
+                           "reason": f"needs {s.base} in the input"}
+                          for s in stability.STRIPS if isinstance(s.base, str) and s.base not in golden]
         for backend in made.values():
             if backend.availability()[0]:
                 self.stability += stability.run(backend, golden, self.out / "stability", timeout=self.opts["timeout"])

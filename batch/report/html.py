@@ -108,9 +108,11 @@ def write(out_dir):
     if stab:
         parts.append("<h2>Stability</h2>")
         for name in sorted({r["sweep"] for r in stab}):
-            if (out / "stability" / f"{name}.png").is_file():
-                parts.append(f"<h3>{html.escape(name)}</h3><img class='strip' src='stability/{name}.png' alt='{name}' "
-                             "style='image-rendering:pixelated;width:90%'>")
+            parts.append(f"<h3>{html.escape(name)}</h3>")
+            for backend in sorted({r.get("backend") for r in stab if r["sweep"] == name and r.get("backend")}):
+                if (out / "stability" / backend / f"{name}.png").is_file():
+                    parts.append(f"<p>{html.escape(backend)}</p><img class='strip' src='stability/{backend}/{name}.png' "
+                                 f"alt='{name} {backend}' style='image-rendering:pixelated;width:90%'>")
             cells = "".join(f"<tr class='{r['status']}'><td>{r.get('value', '')}</td><td>{r.get('backend', '')}</td>"
                             f"<td>{r['status']}</td><td>{_fmt(r.get('mean'))}</td>"
                             f"<td>{html.escape('; '.join(r.get('problems') or []) or r.get('reason', ''))}</td></tr>"

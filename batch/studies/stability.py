@@ -1,27 +1,31 @@
-"""Stability case: parameter sweeps where implementations typically break, each rendered as a
-strip of small images and checked for NaN, Inf, negative values, energy gain in a white furnace,
-and jumps at the limits. Every render is judged on its own; failures are reported per value.
+"""Stability case: parameter strips where implementations typically break, each value rendered as a
+small image and checked for NaN, Inf, negative values, energy gain in a white furnace, and jumps
+at the limits. Every check is a test against the render's own noise (its per-pixel standard error
+from independent passes, and the spread of a region's pixels), with the tests of one strip sharing
+the false-alarm rate stats.ALPHA (Sidak): no tolerance is asserted.
 
-Sweeps (built from the canonical scenes' IR, so they follow scenes.blend):
+A strip is data (STRIPS): a name, the base scene (a canonical scene by name, or a generated
+furnace), the parameter values, a function that sets the value on a copy of the base, and the
+checks that apply:
 - ggx_grazing: the copper plate of ggx_copper_80 turned 80..89 degrees (grazing view and light).
 - roughness_furnace: a rough GGX dielectric sphere (n = 1.5) alone in a uniform environment of
   radiance 1, alpha 0.001..1: a non-absorbing object can only lose energy (single-scattering
-  microfacets lose some at high alpha), so no pixel may exceed 1 beyond noise; alpha -> 0 must
-  approach the smooth sphere (which is exactly 1 everywhere: lossless).
-- ior_furnace: a smooth dielectric sphere in the same furnace, n = 1.0001..3: exactly 1 at every
-  pixel for every n (the limit n -> 1 is an invisible sphere).
+  microfacets lose some at high alpha), so the sphere may not be brighter than the environment
+  beyond its noise; alpha -> 0 must approach the smooth sphere.
+- ior_furnace: a smooth dielectric sphere in the same furnace, n = 1.0001..3: lossless, so exactly
+  the environment for every n (the limit n -> 1 is an invisible sphere).
 - polarizer_malus: the Brewster plane seen through the polariser at 0..90 degrees: the Fresnel
   probe (Malus' law) at every angle.
 """
 import copy
+from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
 from ...exporters import ir
-from ..verdict import compare, probes
 from .. import exr
-
-Z = 5.0  # the furnace sphere's mean may exceed 1 by this many standard errors before it counts as gain
+from ..verdict import probes, raycast, stats
 
 
 def _furnace_sphere(bsdf):
@@ -36,68 +40,133 @@ def _furnace_sphere(bsdf):
                          "bsdf": bsdf, "emitter": None}]}
 
 
-def definitions(golden):
-    """{sweep name: [(parameter value, IR scene)]}."""
+def _turn_plate(sc, angle):
+    a = np.radians(angle)
+    plate = next(o for o in sc["objects"] if o["name"].startswith("copper_plate"))
+    plate["shape"]["to_world"] = [[1, 0, 0, 0], [0, np.cos(a), -np.sin(a), 0], [0, np.sin(a), np.cos(a), 0], [0, 0, 0, 1]]
+
+
+def _set_alpha(sc, alpha):
+    sc["objects"][0]["bsdf"]["roughness"]["alpha"] = alpha
+
+
+def _set_ior(sc, n):
+    sc["objects"][0]["bsdf"]["int_ior"] = n
+
+
+def _set_polariser(sc, angle):
+    sc["camera"]["polarizer"]["angle"] = float(angle)
+
+
+@dataclass
+class Strip:
+    name: str
+    base: object            # a canonical scene's name, or an IR scene
+    values: tuple
+    apply: Callable         # (scene copy, value) -> None
+    checks: tuple           # of "finite", "negative", "gain", "lossless", "smooth_limit", "probes"
+    size: int = 32
+
+
+ROUGH_GLASS = _furnace_sphere({"type": "dielectric", "int_ior": 1.5, "ext_ior": 1.0,
+                               "roughness": {"distribution": "ggx", "alpha": 0.1}})
+SMOOTH_GLASS = _furnace_sphere({"type": "dielectric", "int_ior": 1.5, "ext_ior": 1.0})
+
+STRIPS = [
+    Strip("ggx_grazing", "ggx_copper_80", tuple(range(80, 90)), _turn_plate, ("finite",), 64),
+    Strip("roughness_furnace", ROUGH_GLASS, (0.001, 0.01, 0.05, 0.1, 0.2, 0.4, 0.7, 1.0), _set_alpha,
+          ("finite", "negative", "gain", "smooth_limit")),
+    Strip("ior_furnace", SMOOTH_GLASS, (1.0001, 1.01, 1.1, 1.33, 1.5, 2.0, 2.5, 3.0), _set_ior,
+          ("finite", "negative", "gain", "lossless")),
+    Strip("polarizer_malus", "polarizing_plane_0", (0, 15, 30, 45, 60, 75, 90), _set_polariser, ("finite", "probes"), 64),
+]
+
+
+def definitions(golden, strips=None):
+    """{strip name: (Strip, [(value, IR scene)])} for the strips whose base scene is available."""
     out = {}
-    base = golden["ggx_copper_80"]
-    strip = []
-    for angle in range(80, 90):
-        sc = copy.deepcopy(base)
-        a = np.radians(angle)
-        plate = next(o for o in sc["objects"] if o["name"].startswith("copper_plate"))
-        plate["shape"]["to_world"] = [[1, 0, 0, 0], [0, np.cos(a), -np.sin(a), 0], [0, np.sin(a), np.cos(a), 0], [0, 0, 0, 1]]
-        strip.append((angle, sc))
-    out["ggx_grazing"] = strip
-    out["roughness_furnace"] = [(alpha, _furnace_sphere(
-        {"type": "dielectric", "int_ior": 1.5, "ext_ior": 1.0, "roughness": {"distribution": "ggx", "alpha": alpha}}))
-        for alpha in (0.001, 0.01, 0.05, 0.1, 0.2, 0.4, 0.7, 1.0)]
-    out["ior_furnace"] = [(n, _furnace_sphere({"type": "dielectric", "int_ior": n, "ext_ior": 1.0}))
-                          for n in (1.0001, 1.01, 1.1, 1.33, 1.5, 2.0, 2.5, 3.0)]
-    out["polarizer_malus"] = []
-    for angle in (0, 15, 30, 45, 60, 75, 90):
-        sc = copy.deepcopy(golden["polarizing_plane_0"])
-        sc["camera"]["polarizer"]["angle"] = float(angle)
-        out["polarizer_malus"].append((angle, sc))
-    for strip in out.values():
-        for _, sc in strip:
-            sc["render"]["width"] = sc["render"]["height"] = 32 if sc["name"] == "furnace" else 64
+    for strip in strips or STRIPS:
+        base = golden.get(strip.base) if isinstance(strip.base, str) else strip.base
+        if base is None:
+            continue
+        scenes = []
+        for value in strip.values:
+            sc = copy.deepcopy(base)
+            strip.apply(sc, value)
+            sc["render"]["width"] = sc["render"]["height"] = strip.size
             sc["needs"] = ir.derived_needs({k: v for k, v in sc.items() if k != "needs"})
+            scenes.append((value, sc))
+        out[strip.name] = (strip, scenes)
     return out
 
 
-def check(sweep, value, scene, names, img, stderr=None):
-    """Problems of one render of a sweep: a list of strings (empty: stable)."""
+def sphere_region(scene, w, h):
+    """Whole pixels on the furnace sphere, and whole pixels of the environment alone."""
+    objs = scene["objects"]
+    origin, dirs = raycast.camera_rays(scene["camera"], w, h, "corners")
+    who, _ = raycast.nearest(objs, origin, dirs)
+
+    def whole(v):
+        return v[:-1, :-1] & v[1:, :-1] & v[:-1, 1:] & v[1:, 1:]
+    return whole(who == 0), whole(who == -1)
+
+
+def _ratio(img, se, sphere, env):
+    """Sphere mean over environment mean per channel, with its standard error (the region's pixel
+    spread; both regions' noise)."""
+    s_px, e_px = img[sphere][:, :3].astype(np.float64), img[env][:, :3].astype(np.float64)
+    ms, me = s_px.mean(axis=0), e_px.mean(axis=0)
+    ss, se_e = s_px.std(axis=0, ddof=1) / np.sqrt(len(s_px)), e_px.std(axis=0, ddof=1) / np.sqrt(len(e_px))
+    r = ms / me
+    return r, r * np.sqrt((ss / ms) ** 2 + (se_e / me) ** 2), min(len(s_px), len(e_px)) - 1
+
+
+def check(strip, value, scene, names, img, stderr=None, tests=1):
+    """Problems of one render of a strip ([] when stable) and whether anything could be judged.
+    ``tests``: how many tests the strip makes in all (Sidak)."""
+    checks = strip.checks if isinstance(strip, Strip) else next(s.checks for s in STRIPS if s.name == strip)
+    threshold = stats.sidak_threshold(stats.ALPHA, tests)
     rgb = img[..., :3]
-    s = compare.image_sanity(rgb)
-    problems = [f"{s['nan']} NaN" if s["nan"] else "", f"{s['inf']} Inf" if s["inf"] else ""]
-    noise = stderr[..., :3] if stderr is not None else np.zeros_like(rgb)
-    if (rgb < -Z * noise - 1e-6).any() and sweep.endswith("furnace"):
-        problems.append(f"{int((rgb < -Z * noise - 1e-6).sum())} negative values")
-    if sweep.endswith("furnace"):
-        # "1" is the environment as this render shows it: the image corners see only the
-        # environment (a flat spectrum of 1 is not RGB (1, 1, 1): equal-energy white is not D65)
-        corners = np.concatenate([rgb[:3, :3], rgb[:3, -3:], rgb[-3:, :3], rgb[-3:, -3:]]).reshape(-1, 3)
-        white = corners.mean(axis=0)
-        ratio = rgb / white
-        # energy gain is a property of the expectation: judge the sphere's mean against its own
-        # standard error (independent pixels); single pixels are heavy-tailed (caustic paths)
-        h, w = ratio.shape[:2]
-        centre = ratio[h // 4: 3 * h // 4, w // 4: 3 * w // 4].reshape(-1, 3)
-        m, se = centre.mean(axis=0), centre.std(axis=0, ddof=1) / np.sqrt(len(centre))
-        if (m > 1.0 + Z * se + 1e-3).any():
-            problems.append(f"energy gain: the sphere's mean is {float(m.max()):.4f}x the environment "
-                            f"(+{float(((m - 1) / np.maximum(se, 1e-12)).max()):.1f} standard errors)")
-        if sweep == "ior_furnace" and abs(float(ratio.mean()) - 1.0) > 0.02:
-            problems.append(f"a lossless sphere in a furnace must equal the environment; mean {float(ratio.mean()):.4f}x")
-    if sweep == "polarizer_malus":
-        p = next((p for p in probes.evaluate(scene, names, img) if p["name"].startswith("brewster")), None)
-        if p is None or p["pass"] is False:
-            problems.append(f"Fresnel/Malus probe failed: {p and p['error']}")
-    return [p for p in problems if p]
+    problems, judged = [], False
+    if "finite" in checks:
+        judged = True
+        nan, inf = int(np.isnan(rgb).sum()), int(np.isinf(rgb).sum())
+        problems += [f"{nan} NaN"] * bool(nan) + [f"{inf} Inf"] * bool(inf)
+    if "negative" in checks and stderr is not None:
+        # a flat spectrum's sRGB has no negative component: a pixel below zero beyond its own
+        # noise (one-sided, Sidak over the image's pixels and channels) is a bug
+        z = -rgb / np.maximum(stderr[..., :3], 1e-300)
+        p = stats.one_sided_p(z, 1)
+        bad = int(np.sum(p < stats.sidak_threshold(stats.ALPHA, rgb.size)))
+        judged = True
+        if bad:
+            problems.append(f"{bad} negative values beyond their noise")
+    if {"gain", "lossless"} & set(checks):
+        sphere, env = sphere_region(scene, img.shape[1], img.shape[0])
+        if sphere.sum() >= 4 and env.sum() >= 4:
+            judged = True
+            r, r_se, dof = _ratio(img, stderr, sphere, env)
+            if "gain" in checks:
+                p = stats.one_sided_p((r - 1.0) / r_se, dof)
+                if np.min(p) < threshold:
+                    problems.append(f"energy gain: the sphere is {float(r.max()):.4f}x the environment "
+                                    f"(+{float(((r - 1) / r_se).max()):.1f} standard errors)")
+            if "lossless" in checks:
+                p = stats.two_sided_p((r - 1.0) / r_se, dof)
+                if np.min(p) < threshold:
+                    problems.append(f"a lossless sphere must equal the environment: {float(r.mean()):.4f}x "
+                                    f"({float(np.abs((r - 1) / r_se).max()):.1f} standard errors)")
+    if "probes" in checks:
+        p = next((p for p in probes.evaluate(scene, names, img, stderr=stderr) if p["name"].startswith("brewster")), None)
+        if p is not None and p["pass"] is not None:
+            judged = True
+            if p["pass"] is False:
+                problems.append(f"Fresnel/Malus probe failed: z = {p['z']:.1f}")
+    return problems, judged
 
 
 def strip_image(path, images):
-    """The sweep's renders side by side (sRGB previews), labelled by order."""
+    """The strip's renders side by side (sRGB previews), labelled by order."""
     from ..report.previews import srgb_encode
     from PIL import Image
     h = max(i.shape[0] for _, i in images)
@@ -105,48 +174,72 @@ def strip_image(path, images):
     Image.fromarray((np.concatenate(tiles, axis=1) * 255 + 0.5).astype(np.uint8)).save(path)
 
 
+def _render(backend, sc, folder, passes, seed, timeout):
+    mode, why = backend.mode_for(sc)
+    if mode is None:
+        return mode, why, None
+    path = backend.export(sc, folder / "scene")
+    backend.render(path, mode, sc["render"]["spp"], folder / "render.exr", passes=passes, seed=seed, timeout=timeout)
+    return mode, None, exr.read_image_and_stderr(folder / "render.exr")
+
+
 def run(backend, golden, out_dir, passes=4, seed=0, timeout=600):
-    """Render every sweep with ``backend``; returns the result rows and writes strip images."""
+    """Render every strip with ``backend`` into out_dir/<backend>/; returns the result rows and
+    writes the strip images out_dir/<backend>/<strip>.png."""
+    out_dir = out_dir / backend.name
     out_dir.mkdir(parents=True, exist_ok=True)
     rows = []
-    for name, strip in definitions(golden).items():
-        images = []
-        for value, sc in strip:
-            mode, why = backend.mode_for(sc)
-            row = {"sweep": name, "value": value, "backend": backend.name, "mode": mode, "problems": []}
-            if mode is None:
-                row.update(status="unsupported", reason=why)
-                rows.append(row)
-                continue
-            folder = out_dir / name / f"{value:g}"
+    for name, (strip, scenes) in definitions(golden).items():
+        images, strip_rows = [], []
+        tests = len(scenes) * 3 + (3 if "smooth_limit" in strip.checks else 0)
+        for value, sc in scenes:
+            row = {"sweep": name, "value": value, "backend": backend.name, "mode": None, "problems": []}
             try:
-                path = backend.export(sc, folder / "scene")
-                backend.render(path, mode, sc["render"]["spp"], folder / "render.exr", passes=passes, seed=seed,
-                               timeout=timeout)
-                names, img, stderr = exr.read_image_and_stderr(folder / "render.exr")
-                row["problems"] = check(name, value, sc, names, img, stderr)
-                row["status"] = "failed" if row["problems"] else "ok"
+                mode, why, result = _render(backend, sc, out_dir / name / f"{value:g}", passes, seed, timeout)
+                row["mode"] = mode
+                if mode is None:
+                    row.update(status="unsupported", reason=why)
+                    strip_rows.append(row)
+                    continue
+                names, img, stderr = result
+                row["problems"], judged = check(strip, value, sc, names, img, stderr, tests)
+                row["status"] = "failed" if row["problems"] else ("ok" if judged else "unjudged")
                 row["mean"] = float(img[..., :3].mean())
-                if name.endswith("furnace"):
-                    corners = np.concatenate([img[:3, :3, :3], img[-3:, -3:, :3]]).reshape(-1, 3).mean(axis=0)
-                    row["mean"] = float((img[..., :3] / corners).mean())  # relative to the environment
-                images.append((value, img))
+                if {"gain", "lossless"} & set(strip.checks):
+                    sphere, env = sphere_region(sc, img.shape[1], img.shape[0])
+                    row["mean"] = float(_ratio(img, stderr, sphere, env)[0].mean())  # sphere / environment
+                images.append((value, img, stderr, sc))
             except Exception as exc:  # noqa: BLE001 - report per value, go on
                 row.update(status="failed", problems=[f"render failed: {exc}"])
-            rows.append(row)
-        if name == "roughness_furnace" and images:
-            smooth = _furnace_sphere({"type": "dielectric", "int_ior": 1.5, "ext_ior": 1.0})
-            smooth["render"]["width"] = smooth["render"]["height"] = 32
-            path = backend.export(smooth, out_dir / name / "smooth" / "scene")
-            backend.render(path, backend.mode_for(smooth)[0], 64, out_dir / name / "smooth" / "render.exr",
-                           passes=passes, seed=seed, timeout=timeout)
-            _, limit = exr.read_image(out_dir / name / "smooth" / "render.exr")
-            first = next(r for r in rows if r["sweep"] == name and r["value"] == images[0][0])
-            jump = abs(float(images[0][1][..., :3].mean()) - float(limit[..., :3].mean()))
-            first["limit_jump"] = jump
-            if jump > 0.01:
-                first["problems"].append(f"alpha {images[0][0]} differs from the smooth limit by {jump:.4f}")
-                first["status"] = "failed"
+            strip_rows.append(row)
+        if "smooth_limit" in strip.checks and images:
+            _smooth_limit(backend, strip, images[0], strip_rows, out_dir / name / "smooth", passes, seed, timeout, tests)
         if images:
-            strip_image(out_dir / f"{name}.png", images)
+            strip_image(out_dir / f"{name}.png", [(v, i) for v, i, _, _ in images])
+        rows += strip_rows
     return rows
+
+
+def _smooth_limit(backend, strip, first, strip_rows, folder, passes, seed, timeout, tests):
+    """alpha -> 0 must meet the smooth surface: the roughest-but-one render against the smooth one,
+    the difference of the sphere's means against both noises."""
+    value, img, stderr, sc = first
+    smooth = copy.deepcopy(sc)
+    smooth["objects"][0]["bsdf"].pop("roughness", None)
+    smooth["needs"] = ir.derived_needs({k: v for k, v in smooth.items() if k != "needs"})
+    mode, why, result = _render(backend, smooth, folder, passes, seed + 1000, timeout)
+    row = next(r for r in strip_rows if r["value"] == value)
+    if result is None:
+        row.setdefault("notes", []).append(f"smooth limit not rendered: {why}")
+        return
+    _, limit, _ = result
+    sphere, env = sphere_region(sc, img.shape[1], img.shape[0])
+    a, b = img[sphere][:, :3].astype(np.float64), limit[sphere][:, :3].astype(np.float64)
+    diff = a.mean(axis=0) - b.mean(axis=0)
+    se = np.sqrt(a.var(axis=0, ddof=1) / len(a) + b.var(axis=0, ddof=1) / len(b))
+    z = diff / np.maximum(se, 1e-300)
+    row["limit_jump"] = float(np.abs(diff).max())
+    if np.min(stats.two_sided_p(z, len(a) - 1)) < stats.sidak_threshold(stats.ALPHA, tests):
+        row["problems"].append(f"alpha {value} differs from the smooth limit by {row['limit_jump']:.4f} "
+                               f"({float(np.abs(z).max()):.1f} standard errors)")
+        row["status"] = "failed"
