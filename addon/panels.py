@@ -63,6 +63,10 @@ class SPECTRAL_BENCH_PT_material(_Base, bpy.types.Panel):
             else:
                 _draw_spectrum(self.layout, a.eta, "eta", "material.eta")
                 _draw_spectrum(self.layout, a.k, "k", "material.k")
+            self.layout.prop(a, "thin_film")
+            if a.thin_film:
+                for key in ("film_ior", "film_thickness", "film_ext_ior"):
+                    self.layout.prop(a, key)
         elif a.kind == "DIELECTRIC":
             self.layout.prop(a, "int_ior")
             self.layout.prop(a, "ext_ior")

@@ -59,6 +59,13 @@ class MaterialProps(bpy.types.PropertyGroup):
     distribution: EnumProperty(name="Microfacets", items=DISTRIBUTIONS, default="SMOOTH")
     alpha: FloatProperty(name="Alpha", default=0.1, soft_min=0.0, soft_max=1.0, precision=4,
                          description="Microfacet width alpha (Blender roughness r is alpha = r^2)")
+    thin_film: BoolProperty(name="Thin Film", default=False,
+                            description="A dielectric film on the conductor (thin-film interference, iridescence)")
+    film_ior: FloatProperty(name="Film IOR", default=1.33, soft_min=1.0, soft_max=3.0, precision=4)
+    film_thickness: FloatProperty(name="Film Thickness (nm)", default=550.0, soft_min=0.0, soft_max=2000.0,
+                                  precision=1, description="0 is the bare conductor")
+    film_ext_ior: FloatProperty(name="Exterior IOR", default=1.0, soft_min=1.0, soft_max=3.0, precision=6,
+                                description="Index of the medium above the film (1: vacuum, as for a bare conductor)")
 
 
 class LightProps(bpy.types.PropertyGroup):

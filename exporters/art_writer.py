@@ -16,9 +16,9 @@ spectrum came out 10 % darker under ``-s46e`` (identical under the default 8 sam
 illuminants with an ART table use it.
 
 What ART cannot express is returned per object and field, never silently replaced:
-upstream ART has no GGX or Beckmann microfacets (Blinn only), and its outside medium is vacuum.
-Named conductors are written with the IR's own eta/k tables (Mitsuba's data, exporters/data),
-not ART's material presets, so both renderers render the same metal.
+upstream ART has no GGX or Beckmann microfacets (Blinn only), no thin-film interference, and its
+outside medium is vacuum. Named conductors are written with the IR's own eta/k tables (Mitsuba's
+data, exporters/data), not ART's material presets, so both renderers render the same metal.
 """
 from pathlib import Path
 
@@ -67,6 +67,10 @@ class _Writer:
         b, name = obj["bsdf"], obj["name"]
         if b["type"] == "diffuse":
             return f"LAMBERT_REFLECTOR({self.colour(b['reflectance'])})"
+        if b.get("thin_film") is not None:
+            self.unsupported.append((name, "bsdf.thin_film", "ART has no thin-film interference (upstream "
+                                     "ART 2.1.2 has no iridescent surface; thesis 3.3.5)"))
+            return None
         rough = b.get("roughness")
         surface = "SMOOTH_FRESNEL_SURFACE"
         if rough is not None and rough["alpha"] > 0:

@@ -56,6 +56,9 @@ def material_bsdf(mat):
             out["material"] = a.conductor
         else:
             out["eta"], out["k"] = spectrum(a.eta), spectrum(a.k)
+        if a.thin_film:
+            out["thin_film"] = {"ior": _clean(a.film_ior), "thickness": _clean(a.film_thickness),
+                                "ext_ior": _clean(a.film_ext_ior)}
     elif a.kind == "DIELECTRIC":
         out = {"type": "dielectric", "int_ior": _clean(a.int_ior), "ext_ior": _clean(a.ext_ior)}
     if a.distribution != "SMOOTH":

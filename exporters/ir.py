@@ -16,6 +16,13 @@ Conventions (every writer follows them):
   camera (0 = horizontal, 90 = vertical; ART's 0 degrees is horizontal too). ``render.output``
   "stokes" adds S0..S3 in the same frame: S1 > 0 is horizontal, S2 > 0 is +45 degrees; a
   polarisation direction at angle a has S1/S0 = cos 2a, S2/S0 = sin 2a (Mitsuba 3's frame, measured).
+- Thin film (``bsdf.thin_film`` of a conductor, absent when unused): a dielectric film of real
+  index ``ior`` and ``thickness`` in nm on the conductor, seen from an exterior medium of real
+  index ``ext_ior`` (optional, default 1.0). The conductor's eta/k are absolute indices and a
+  conductor without a film has vacuum outside (Mitsuba's conductor has no exterior index), so
+  the default keeps thickness 0 identical to the bare conductor. The film's reflectance is the
+  Airy sum of both interfaces (batch/verdict/airy.py); rough films use it as the microfacet
+  Fresnel factor (Belcour and Barla 2017).
 - Pixel filter is a box: each pixel is the plain integral over its area, so pixels are
   independent and a reference downsamples exactly to any integer factor (see batch/verdict/compare.py).
 """
@@ -52,6 +59,8 @@ def derived_needs(scene):
         bsdf = obj.get("bsdf") or {}
         if bsdf.get("type") == "conductor" and "material" in bsdf:
             needs.add("spectral")  # a named conductor is a measured eta/k table
+        if bsdf.get("thin_film") is not None:
+            needs.update(("thin_film", "spectral"))  # interference colours exist per wavelength only
         for key in ("reflectance", "eta", "k"):
             if spectral(bsdf.get(key)):
                 needs.add("spectral")

@@ -13,6 +13,7 @@ from . import ir, mesh_io, mitsuba_plugins, spectra
 # Blender/OpenGL cameras look down -Z with +Y up; Mitsuba's look down +Z with +X to the
 # image's left. Mitsuba to_world = IR to_world @ diag(-1, 1, -1).
 _CAMERA_FLIP = np.diag([-1.0, 1.0, -1.0, 1.0])
+THIN_FILM_PLUGIN = "sb_thin_film_conductor"  # a conductor with bsdf.thin_film
 POLARIZER_DISTANCE = 0.05  # scene units in front of the lens (the sensor's near clip is 0.01)
 
 
@@ -53,7 +54,21 @@ class _Writer:
             node = ET.SubElement(parent, "bsdf", type="diffuse")
             self.spectrum(node, "reflectance", b["reflectance"], f"{stem}_reflectance")
             return
-        if b["type"] == "conductor":
+        if b["type"] == "conductor" and b.get("thin_film") is not None:
+            # this project's Python plugin (exporters/mitsuba_plugins/thin_film_conductor.py);
+            # smooth or rough in one plugin: a distribution is written only when rough
+            node = ET.SubElement(parent, "bsdf", type=THIN_FILM_PLUGIN)
+            self.plugins.add(THIN_FILM_PLUGIN)
+            film = b["thin_film"]
+            for key, value in (("film_ior", film["ior"]), ("film_thickness", film["thickness"]),
+                               ("ext_ior", film.get("ext_ior", 1.0))):
+                ET.SubElement(node, "float", name=key, value=repr(float(value)))
+            if "material" in b:
+                ET.SubElement(node, "string", name="material", value=b["material"])
+            else:
+                self.spectrum(node, "eta", b["eta"], f"{stem}_eta")
+                self.spectrum(node, "k", b["k"], f"{stem}_k")
+        elif b["type"] == "conductor":
             node = ET.SubElement(parent, "bsdf", type="roughconductor" if is_rough else "conductor")
             if "material" in b:
                 ET.SubElement(node, "string", name="material", value=b["material"])

@@ -130,6 +130,15 @@ def bsdf_problems(bsdf):
         for key in ("eta", "k"):
             if key in bsdf:
                 yield from spectra.check(bsdf[key], key)
+        film = bsdf.get("thin_film")
+        if film is not None:
+            d = film["thickness"]
+            if not _finite(d) or d < 0:
+                yield "thin_film.thickness", f"must be a finite thickness >= 0 nm, got {d!r}"
+            for key in ("ior", "ext_ior"):
+                v = film.get(key, 1.0)
+                if not _finite(v) or v <= 0:
+                    yield f"thin_film.{key}", f"must be a finite IOR > 0, got {v!r}"
     if kind == "dielectric":
         for key in ("int_ior", "ext_ior"):
             v = bsdf.get(key, ir.AIR_IOR)

@@ -185,6 +185,54 @@ def build_polarization(square, sphere):
     add_camera(scene, "spheres_camera", origin=(0, -7, 4))
 
 
+IRIDESCENT_X = (-3.6, -1.2, 1.2, 3.6)  # four unit spheres in a row, left to right in the image
+
+
+def build_iridescence(square, sphere):
+    """Section 3.3.5: four slightly rough (Beckmann alpha 0.1, the thesis plugin's default
+    distribution) conductor spheres with and without a dielectric thin film, under uniform
+    daylight, a grey backdrop behind them; and a lone smooth filmed sphere for the Airy probe."""
+    resolution = (800, 256)
+
+    def row(name, description, materials):
+        scene = new_scene(name, "iridescence", 64, description, resolution=resolution)
+        scene.world = uniform_world(f"uniform_{name}", "NAMED", "cie_d65")
+        scene.world.spectral_bench.radiance.scale = 0.8
+        for k, (x, mat) in enumerate(zip(IRIDESCENT_X, materials)):
+            add_object(scene, f"{name}_sphere_{k + 1}", sphere, mat, "SPHERE", location=(x, 0, 0))
+        add_object(scene, f"{name}_backdrop", square, material("backdrop_0.6", "DIFFUSE", reflectance=0.6),
+                              "RECTANGLE", location=(0, 3, 0), rotation=(math.radians(90), 0, 0), scale=10.0)
+        add_camera(scene, f"{name}_camera", origin=(0, -12, 0))
+
+    def base(name, film=None, conductor=None, distribution="BECKMANN", alpha=0.1):
+        fields = dict(distribution=distribution, alpha=alpha)
+        if conductor:
+            fields.update(conductor_named=True, conductor=conductor)
+        else:
+            fields.update(conductor_named=False, eta=1.9, k=1.5)
+        if film is not None:
+            fields.update(thin_film=True, film_ior=film[0], film_thickness=film[1], film_ext_ior=1.0)
+        return material(name, "CONDUCTOR", **fields)
+
+    row("iridescent_spheres_height", "Conductor spheres (eta 1.9, k 1.5; Beckmann alpha 0.1) under films of index "
+        "1.33, 300, 550 and 1500 nm thick, and without a film (left to right), uniform D65",
+        [base(f"film_1.33_{d}nm", (1.33, float(d))) for d in (300, 550, 1500)] + [base("film_none")])
+    row("iridescent_spheres_film", "Conductor spheres (eta 1.9, k 1.5; Beckmann alpha 0.1) under 550 nm films of "
+        "index 1.2, 1.5, 1.8 and 2.8 (left to right), uniform D65",
+        [base(f"film_{n}_550nm", (n, 550.0)) for n in (1.2, 1.5, 1.8, 2.8)])
+    row("iridescent_spheres_materials", "Copper with and without a 550 nm film of index 1.33, then mercury with and "
+        "without it (left to right; Beckmann alpha 0.1), uniform D65",
+        [base("Cu_film_1.33_550nm", (1.33, 550.0), "Cu"), base("Cu_bare", None, "Cu"),
+         base("Hg_film_1.33_550nm", (1.33, 550.0), "Hg"), base("Hg_bare", None, "Hg")])
+    scene = new_scene("iridescent_sphere_smooth", "iridescence", 64,
+                      "A lone smooth conductor sphere (eta 1.9, k 1.5) under a 550 nm film of index 1.33 in a "
+                      "uniform D65 environment: the Airy probe's scene", resolution=(256, 256))
+    scene.world = uniform_world("uniform_d65_smooth", "NAMED", "cie_d65")
+    add_object(scene, "smooth_film_sphere", sphere, base("smooth_film_1.33_550nm", (1.33, 550.0), distribution="SMOOTH"),
+               "SPHERE")
+    add_camera(scene, "smooth_film_camera", origin=(0, -4, 0))
+
+
 def build():
     bpy.ops.wm.read_factory_settings(use_empty=True)
     pkg_bootstrap.package().register()
@@ -248,6 +296,7 @@ def build():
     twin.camera = glass_camera
     build_spectral_accuracy(square)
     build_polarization(square, sphere)
+    build_iridescence(square, sphere)
     for s in list(bpy.data.scenes):
         if not s.spectral_bench.case or s.name == "Scene":
             bpy.data.scenes.remove(s)

@@ -16,7 +16,9 @@ REFLECTANCE = ["beckmann_glass", "ggx_copper_50", "ggx_copper_50_isolated", "ggx
                "ggx_copper_70", "ggx_copper_70_isolated", "ggx_copper_80", "ggx_copper_80_isolated", "ggx_copper_grazing", "ggx_glass"]
 SPECTRAL_ACCURACY = ["macbeth_chart_D50", "macbeth_chart_D65"]
 POLARIZATION = ["polarizing_plane_0", "polarizing_plane_90", "polarizing_spheres"]
-ALL_SCENES = sorted(REFLECTANCE + SPECTRAL_ACCURACY + POLARIZATION)
+IRIDESCENCE = ["iridescent_sphere_smooth", "iridescent_spheres_film", "iridescent_spheres_height",
+               "iridescent_spheres_materials"]
+ALL_SCENES = sorted(REFLECTANCE + SPECTRAL_ACCURACY + POLARIZATION + IRIDESCENCE)
 
 
 @pytest.fixture(scope="session")

@@ -20,7 +20,10 @@ def test_every_sweep_value_is_rendered_and_stable(stability_run):
     proc, out, data = stability_run
     rows = data["stability"]
     sweeps = {r["sweep"] for r in rows}
-    assert sweeps == {"ggx_grazing", "roughness_furnace", "ior_furnace", "polarizer_malus"}
+    assert sweeps == {"ggx_grazing", "roughness_furnace", "ior_furnace", "polarizer_malus", "film_thickness_furnace",
+                      "film_ior_furnace"}
+    assert len([r for r in rows if r["sweep"].startswith("film_")]) == 18
+    assert all("limit_z" in r for r in rows if r["sweep"].startswith("film_") and r["value"] in (0.0, 1.0001))
     assert len([r for r in rows if r["sweep"] == "ggx_grazing"]) == 10
     bad = [r for r in rows if r["status"] != "ok"]
     assert not bad, bad

@@ -21,7 +21,7 @@ WORKER = Path(__file__).resolve().parent / "mitsuba_worker.py"
 NATIVE = {"spectral", "polarization"}
 # phenomena this project's Python plugins add (exporters/mitsuba_plugins): they load through the
 # Python API only, not through the mitsuba executable
-PLUGIN_NEEDS = set()
+PLUGIN_NEEDS = {"thin_film"}
 
 
 class BackendFailure(RuntimeError):

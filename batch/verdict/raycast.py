@@ -6,10 +6,10 @@ probe is only derived for scenes made of them. Conventions are the IR's (exporte
 import numpy as np
 
 
-def camera_rays(camera, width, height, points="centers"):
+def camera_rays(camera, width, height, points="centers", rows=None):
     """Origins (3,) and unit directions of rays through pixel centers (H, W, 3), pixel corners
     (H+1, W+1, 3), or a point (ox, oy) in [0, 1)^2 inside every pixel (H, W, 3). Pixel (0, 0)
-    is the top-left one."""
+    is the top-left one. ``rows`` (a range of pixel rows) limits the result to those rows."""
     m = np.asarray(camera["to_world"], dtype=np.float64)
     t = np.tan(np.radians(camera["fov"]) / 2)
     tx, ty = (t, t * height / width) if camera.get("fov_axis", "x") == "x" else (t * width / height, t)
@@ -18,6 +18,8 @@ def camera_rays(camera, width, height, points="centers"):
     else:
         ox, oy = (0.5, 0.5) if points == "centers" else points
         xs, ys = (np.arange(width) + ox) / width, (np.arange(height) + oy) / height
+    if rows is not None:
+        ys = ys[rows.start:rows.stop]
     gx, gy = np.meshgrid((2 * xs - 1) * tx, (1 - 2 * ys) * ty)
     local = np.stack([gx, gy, -np.ones_like(gx)], axis=-1)
     d = local @ m[:3, :3].T

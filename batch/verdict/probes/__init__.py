@@ -5,17 +5,18 @@ a closed form, independently of any renderer (plain numpy; colour-science for CI
 - fresnel.py: a smooth dielectric reflecting an area light through a polariser (Fresnel, Malus,
   Brewster) and the degree of polarisation;
 - ggx.py: rough conductor plates lit only by area lights (quadrature of the microfacet BRDF);
-- stokes.py: the validity of Stokes output (S0 >= |(S1, S2, S3)|).
+- stokes.py: the validity of Stokes output (S0 >= |(S1, S2, S3)|);
+- thin_film.py: a smooth filmed conductor sphere in a uniform environment (Airy reflectance).
 
 Each probe is a dict {name, expected, measured, error, unit, pass}; ``pass`` is None when the
 probe cannot be measured at the render's resolution (fewer than MIN_PIXELS whole pixels).
 """
-from . import fresnel, ggx, lambert, stokes
+from . import fresnel, ggx, lambert, stokes, thin_film
 from .common import MIN_PIXELS, Measurement  # noqa: F401 - part of the interface
 
 # Every probe: a function of one Measurement returning a list of probe records; a probe that does
 # not apply to the scene returns [].
-PROBES = [lambert.patches, fresnel.brewster, ggx.plates, stokes.validity]
+PROBES = [lambert.patches, fresnel.brewster, ggx.plates, stokes.validity, thin_film.smooth_film]
 
 
 def evaluate(scene, names, image, reference=None, stderr=None, passes=None, observers=()):
