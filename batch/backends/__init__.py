@@ -15,9 +15,12 @@ The interface every backend implements (plain objects; no base class needed):
         wall_s, resolution, channels, versions. Raises BackendFailure.
 """
 from .art_backend import ArtBackend
+from .cycles_backend import CyclesBackend
+from .luxcore_backend import LuxCoreBackend
 from .mitsuba_backend import BackendFailure, MitsubaBackend  # noqa: F401 - BackendFailure is part of the interface
 
-BACKENDS = {"mitsuba": MitsubaBackend, "art": ArtBackend}
+# spectral backends first; the RGB ones (Cycles, LuxCore) measure what reducing spectra to RGB costs
+BACKENDS = {"mitsuba": MitsubaBackend, "art": ArtBackend, "cycles": CyclesBackend, "luxcore": LuxCoreBackend}
 
 
 def get(name, **options):
