@@ -11,7 +11,7 @@ environment) is compared with each prediction in standard errors.
 
     .venv/bin/python benchmarks/rgb_microfacet_check.py [--spp 1024] [--write]
 
---write appends the table to benchmarks/RGB.md.
+--write puts the table in benchmarks/RGB.md (section "Which GGX each renderer implements").
 """
 import argparse
 import copy
@@ -126,10 +126,12 @@ def main(argv=None):
     text = "\n".join(rows)
     print(text)
     if args.write:
-        out = Path(__file__).resolve().parent / "RGB.md"
-        with open(out, "a") as fh:
-            fh.write(f"\n### GGX albedo of a rough conductor (eta {ETA}, k {K}) under a uniform environment "
-                     f"({args.spp} spp, {args.passes} passes; benchmarks/rgb_microfacet_check.py)\n\n{text}\n")
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        from record import replace_section
+        replace_section(Path(__file__).resolve().parent / "RGB.md", "Which GGX each renderer implements",
+                        f"A rough conductor (eta {ETA}, k {K}) under a uniform environment, {args.spp} spp, "
+                        f"{args.passes} passes (`benchmarks/rgb_microfacet_check.py --write`): the measured albedo "
+                        f"against three closed forms, in the render's own standard errors.\n\n{text}")
 
 
 if __name__ == "__main__":
