@@ -126,6 +126,11 @@ def interleaved(args):
     return "\n".join(rows)
 
 
+def _table_only(markdown):
+    """The table lines of a summary section (its own level-2 heading stays out of RGB.md)."""
+    return "\n".join(l for l in markdown.splitlines() if l.startswith("|")) + "\n"
+
+
 def main(argv=None):
     pkg_bootstrap.package()
     from spectral_bench.batch.report import summary
@@ -148,14 +153,15 @@ def main(argv=None):
             f"{platform.system()}, {os.cpu_count()} cores (shared with other sessions: times are indicative; the "
             f"ratios come from interleaved repeats). Scale {args.scale}, {args.passes} passes, each scene's own spp. "
             f"Versions: {json.dumps(versions)}.", "",
-            "### Every scene: error against the spectral reference", summary.rgb_comparison(runs),
-            "### Polarisation scenes with --approximate", summary.rgb_comparison(approx["runs"]),
-            "### ColorChecker under D50, CIEDE2000 per patch against the spectral truth",
+            "### Every scene: RMSE against the spectral reference, mean dE00 of the patch probes, status", "",
+            _table_only(summary.rgb_comparison(runs)),
+            "### Polarisation scenes with --approximate", "", _table_only(summary.rgb_comparison(approx["runs"])),
+            "### ColorChecker under D50, CIEDE2000 per patch against the spectral truth", "",
             chart_table(out / "main", runs, "macbeth_chart_D50"), "",
-            "### ColorChecker under D65, CIEDE2000 per patch", chart_table(out / "main", runs, "macbeth_chart_D65"), "",
-            "### GGX copper against the Mitsuba references", copper_table(out / "main", runs), "",
-            "### Render times of this run (s, one job each)", timing_table(runs), "",
-            f"### Interleaved timing ({args.repeats} repeats each, medians of the render time)", interleaved(args), ""]
+            "### ColorChecker under D65, CIEDE2000 per patch", "", chart_table(out / "main", runs, "macbeth_chart_D65"), "",
+            "### GGX copper against the Mitsuba references", "", copper_table(out / "main", runs), "",
+            "### Render times of this run (s, one job each)", "", timing_table(runs), "",
+            f"### Interleaved timing ({args.repeats} repeats each, medians of the render time)", "", interleaved(args), ""]
     body = "\n".join(text)
     print(body)
     print(f"outputs: {out}")
