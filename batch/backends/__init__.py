@@ -12,7 +12,10 @@ The interface every backend implements (plain objects; no base class needed):
         writes the mean image (R, G, B, then any further channels such as S0.R ... S3.B) and, with
         passes >= 2, the standard error of that mean per pixel as stderr.<channel> from the
         pass-to-pass spread; info holds variant/mode, spp, passes, seed, time_s (render only),
-        wall_s, resolution, channels, versions. Raises BackendFailure.
+        wall_s, resolution, channels, versions (an RGB backend adds ``approximated``: what an
+        ``rgb-approx`` mode rendered differently). Raises BackendFailure.
+Constructors take ``executable`` (and: Mitsuba ``force_variant``, ART ``ggx``, Cycles and LuxCore
+``approximate``, from --approximate).
 """
 from .art_backend import ArtBackend
 from .cycles_backend import CyclesBackend
