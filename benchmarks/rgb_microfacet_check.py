@@ -14,7 +14,6 @@ environment) is compared with each prediction in standard errors.
 --write puts the table in benchmarks/RGB.md (section "Which GGX each renderer implements").
 """
 import argparse
-import copy
 import math
 import sys
 import tempfile

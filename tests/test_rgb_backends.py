@@ -16,7 +16,7 @@ from conftest import metrics, run_batch
 from spectral_bench.batch import backends, exr
 from spectral_bench.batch.studies import rgb_error
 from spectral_bench.batch.verdict import compare, stats
-from spectral_bench.exporters import colorimetry, ir, luxcore_writer, rgb_reduction, rgb_scene, spectra
+from spectral_bench.exporters import colorimetry, ir, rgb_reduction, rgb_scene, spectra
 
 RGB = ["cycles", "luxcore"]
 # |dE00 measured - dE00 predicted by the rule| per ColorChecker patch at 155x105, 64 spp, 4 passes:

@@ -15,7 +15,9 @@ intern/cycles/kernel/svm/closure.h for the roughness conventions):
   Filter Glossy, caustics on, light threshold 0, view transform Standard, look None, exposure 0,
   gamma 1 (EXR output is scene-linear Linear Rec.709, i.e. linear sRGB with a D65 white).
 - Bounces: Cycles' max_bounces 0 is direct lighting, Mitsuba's max_depth 2, so every bounce
-  limit is max_depth - 2.
+  limit is max_depth - 2 (checked: a floor lit by a uniform environment and through a wall gives
+  Mitsuba's region mean within 0.3 % at max_depth 2, 3 and 4; LuxCore's total depth d within
+  0.6 %).
 - Diffuse: Diffuse BSDF (roughness 0: Lambert). Conductor: Metallic BSDF, fresnel_type
   PHYSICAL_CONDUCTOR, IOR = eta_rgb, Extinction = k_rgb. Dielectric: Glass BSDF, IOR = int/ext.
   Roughness: Cycles squares its Roughness input (alpha = r^2), so r = sqrt(alpha); distribution
