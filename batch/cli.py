@@ -12,13 +12,14 @@ from pathlib import Path
 
 from .backends import BACKENDS
 
-FORMATS = ("mitsuba", "art", "json")
+FORMATS = ("mitsuba", "art", "json", "cycles", "luxcore")
 
 DEFAULTS = {
     "input": None, "case": None, "scene": None, "renderer": None, "exec": None, "spp": None, "scale": 1.0,
     "out": None, "export_only": False, "format": None, "log": None, "visualize": False, "settings": None,
     "variant": None, "alpha": 0.01, "block": None, "min_samples": 65536, "timeout": 1800, "passes": 2, "seed": 0, "flip": True,
     "references": None, "known": None, "list": False, "art_ggx": False, "sweep": False, "ladder": None, "sweep_modes": None, "stability": False,
+    "approximate": False,
 }
 
 
@@ -49,7 +50,8 @@ def parser():
     ap.add_argument("-o", "--out", metavar="DIR", help="output folder (default: outputs-YYYYmmdd-HHMMSS)")
     ap.add_argument("--export-only", action="store_true", help="export scenes, render nothing")
     ap.add_argument("--format", action="append", choices=FORMATS,
-                    help="export format for --export-only (repeatable; default: all)")
+                    help="export format for --export-only (repeatable; default: mitsuba, art, json; "
+                         "cycles writes a .blend, luxcore its .scn/.cfg)")
     ap.add_argument("-l", "--log", metavar="FILE", help="also write the log to FILE")
     ap.add_argument("-v", "--visualize", action="store_true", help="open the results when done")
     ap.add_argument("--settings", metavar="FILE", help="settings file (TOML or JSON)")
@@ -76,6 +78,10 @@ def parser():
                     help="backend modes to sweep (e.g. llvm_ad_spectral,scalar_spectral,llvm_ad_rgb)")
     ap.add_argument("--stability", action="store_true",
                     help="also run the stability case (grazing GGX, roughness and IOR furnaces, Malus)")
+    ap.add_argument("--approximate", action="store_true",
+                    help="RGB backends (cycles, luxcore): render what they cannot express (polariser, Stokes output, "
+                         "a missing microfacet distribution) as an explicitly labelled approximation (mode rgb-approx) "
+                         "instead of reporting it unsupported")
     ap.add_argument("--art-ggx", action="store_true",
                     help="write GGX_MICROFACET_DISTRIBUTION_CONST for an ART build that has GGX (upstream has Blinn only)")
     return ap

@@ -7,3 +7,18 @@ def prepend(path, head, text):
     old = path.read_text() if path.exists() else ""
     old = old[len(head):] if old.startswith(head) else ""
     path.write_text(head + text + "\n" + old)
+
+
+def replace_section(path, heading, text):
+    """Put ``text`` under the level-2 ``heading`` of a Markdown file, replacing what was there
+    (up to the next level-2 heading); a missing section is appended."""
+    path = Path(path)
+    old = path.read_text() if path.exists() else ""
+    marker = f"## {heading}\n"
+    block = marker + "\n" + text.strip() + "\n\n"
+    if marker not in old:
+        path.write_text(old.rstrip() + ("\n\n" if old else "") + block)
+        return
+    before, rest = old.split(marker, 1)
+    after = rest.split("\n## ", 1)[1] if "\n## " in rest else ""
+    path.write_text(before + block + ("## " + after if after else ""))

@@ -4,12 +4,16 @@ from pathlib import Path
 import numpy as np
 
 
-def write_ply(path, vertices, faces):
+def write_ply(path, vertices, faces, normals=None):
+    """Binary PLY; ``normals`` (per vertex, optional) are written as nx, ny, nz."""
     v = np.asarray(vertices, dtype="<f4").reshape(-1, 3)
     f = np.asarray(faces, dtype="<i4").reshape(-1, 3)
+    extra = "" if normals is None else "property float nx\nproperty float ny\nproperty float nz\n"
     header = ("ply\nformat binary_little_endian 1.0\n"
-              f"element vertex {len(v)}\nproperty float x\nproperty float y\nproperty float z\n"
+              f"element vertex {len(v)}\nproperty float x\nproperty float y\nproperty float z\n{extra}"
               f"element face {len(f)}\nproperty list uchar int vertex_indices\nend_header\n")
+    if normals is not None:
+        v = np.ascontiguousarray(np.concatenate([v, np.asarray(normals, dtype="<f4").reshape(-1, 3)], axis=1))
     face_rec = np.zeros(len(f), dtype=[("n", "u1"), ("i", "<i4", 3)])
     face_rec["n"], face_rec["i"] = 3, f
     path = Path(path)
@@ -38,14 +42,16 @@ def read_obj(path):
 
 
 def read_ply(path):
-    """Vertices and faces of a PLY written by write_ply (binary little endian, x y z, triangles)."""
+    """Vertices and faces of a PLY written by write_ply (binary little endian, x y z [nx ny nz], triangles)."""
     data = Path(path).read_bytes()
     end = data.index(b"end_header\n") + len(b"end_header\n")
     header = data[:end].decode("ascii").splitlines()
     nv = int(next(l for l in header if l.startswith("element vertex")).split()[-1])
     nf = int(next(l for l in header if l.startswith("element face")).split()[-1])
-    v = np.frombuffer(data, dtype="<f4", count=nv * 3, offset=end).reshape(nv, 3)
-    rec = np.frombuffer(data, dtype=[("n", "u1"), ("i", "<i4", 3)], count=nf, offset=end + nv * 12)
+    face_at = next(i for i, l in enumerate(header) if l.startswith("element face"))
+    props = sum(1 for l in header[:face_at] if l.startswith("property float"))  # x y z (nx ny nz)
+    v = np.frombuffer(data, dtype="<f4", count=nv * props, offset=end).reshape(nv, props)[:, :3]
+    rec = np.frombuffer(data, dtype=[("n", "u1"), ("i", "<i4", 3)], count=nf, offset=end + nv * 4 * props)
     return v.tolist(), rec["i"].tolist()
 
 

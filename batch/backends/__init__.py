@@ -12,12 +12,18 @@ The interface every backend implements (plain objects; no base class needed):
         writes the mean image (R, G, B, then any further channels such as S0.R ... S3.B) and, with
         passes >= 2, the standard error of that mean per pixel as stderr.<channel> from the
         pass-to-pass spread; info holds variant/mode, spp, passes, seed, time_s (render only),
-        wall_s, resolution, channels, versions. Raises BackendFailure.
+        wall_s, resolution, channels, versions (an RGB backend adds ``approximated``: what an
+        ``rgb-approx`` mode rendered differently). Raises BackendFailure.
+Constructors take ``executable`` (and: Mitsuba ``force_variant``, ART ``ggx``, Cycles and LuxCore
+``approximate``, from --approximate).
 """
 from .art_backend import ArtBackend
+from .cycles_backend import CyclesBackend
+from .luxcore_backend import LuxCoreBackend
 from .mitsuba_backend import BackendFailure, MitsubaBackend  # noqa: F401 - BackendFailure is part of the interface
 
-BACKENDS = {"mitsuba": MitsubaBackend, "art": ArtBackend}
+# spectral backends first; the RGB ones (Cycles, LuxCore) measure what reducing spectra to RGB costs
+BACKENDS = {"mitsuba": MitsubaBackend, "art": ArtBackend, "cycles": CyclesBackend, "luxcore": LuxCoreBackend}
 
 
 def get(name, **options):

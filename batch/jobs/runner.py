@@ -58,6 +58,8 @@ def make_backend(name, opts):
         kwargs["force_variant"] = opts["variant"]
     if name == "art":
         kwargs["ggx"] = bool(opts["art_ggx"])
+    if name in ("cycles", "luxcore"):
+        kwargs["approximate"] = bool(opts.get("approximate"))
     return backends.get(name, **kwargs)
 
 
@@ -118,6 +120,7 @@ class Run:
     # -- export only ------------------------------------------------------------------------
     def export_only(self, scenes):
         formats = self.opts["format"] or ["mitsuba", "art", "json"]
+        rgb = {f: make_backend(f, self.opts) for f in formats if f in ("cycles", "luxcore")}
         progress = Progress(len(scenes) * len(formats))
         for name, scene in scenes:
             for fmt in formats:
@@ -134,6 +137,13 @@ class Run:
                         elif fmt == "art":
                             path, missing = art_writer.write(sc, target, ggx=bool(self.opts["art_ggx"]))
                             reason = "; ".join(f"{o}.{f}: {m}" for o, f, m in missing)
+                        elif fmt in rgb:
+                            mode, why = rgb[fmt].mode_for(sc)
+                            if mode is None:
+                                self.add(_entry(name, sc, fmt, mode="export", status="unsupported", reason=why))
+                                progress.step(f"{name} ({fmt})")
+                                continue
+                            path = rgb[fmt].export(sc, target)
                         else:
                             path = backends.get("mitsuba").export(sc, target)
                         # an export that leaves something out says so: "unsupported", not "ok"
@@ -269,6 +279,8 @@ class Run:
             return entry
         entry.update(time_s=info["time_s"], wall_s=info["wall_s"], spp=info["spp"], passes=info.get("passes", 1),
                      image=str(image.relative_to(self.out)), versions=info.get("versions"))
+        if info.get("approximated"):
+            entry["approximated"] = info["approximated"]  # what an -approx mode rendered differently
         names, test_all, stderr = exr.read_image_and_stderr(image)
         entry["channels"] = names
         entry["sanity"] = compare.image_sanity(test_all)

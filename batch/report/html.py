@@ -97,6 +97,10 @@ def write(out_dir):
              f"<h1>Spectral benchmark results</h1><p>{html.escape(out.name)}, started {data.get('started', '')}. "
              "A render passes when it agrees with its reference within the reference's noise and every "
              "analytic probe holds.</p>", "<h2>Summary</h2>", _summary(runs)]
+    summary_text = (out / "summary.md").read_text() if (out / "summary.md").exists() else ""
+    if "## RGB renderers against the spectral references" in summary_text:
+        rgb = summary_text.split("## RGB renderers against the spectral references")[1].split("\n## ")[0]
+        parts += ["<h2>RGB renderers against the spectral references</h2>", "<pre>" + html.escape(rgb.strip()) + "</pre>"]
     charts = sorted({l["chart"] for l in sweeps if l.get("chart")})
     if charts:
         parts.append("<h2>Speed against accuracy</h2>")

@@ -63,6 +63,41 @@ def stability_table(rows):
     return "\n".join(out) + "\n"
 
 
+RGB_BACKENDS = ("cycles", "luxcore")
+SPECTRAL_BACKENDS = ("mitsuba", "art")
+
+
+def _rgb_cell(r):
+    if r is None:
+        return ""
+    if r["status"] in ("unsupported", "skipped"):
+        return r["status"]
+    m = r.get("metrics") or {}
+    de = next((p["measured"] for p in r.get("probes") or [] if p["name"] == "lambert mean dE00"), None)
+    parts = [f"RMSE {_num(m.get('rmse'), '{:.3g}')}" if m.get("rmse") is not None else "",
+             f"dE00 {de:.2f}" if isinstance(de, (int, float)) else "", r["status"]]
+    return ", ".join(p for p in parts if p)
+
+
+def rgb_comparison(runs):
+    """Per case and scene, each backend's error against the spectral reference (RMSE), the mean
+    CIEDE2000 of the Lambertian patch probes where the scene has them, and its status: the RGB
+    renderers (Cycles, LuxCore) next to the spectral ones (Mitsuba, ART). Empty without RGB runs."""
+    runs = [r for r in runs if r.get("mode") != "export"]
+    if not any(r["backend"] in RGB_BACKENDS for r in runs):
+        return ""
+    order = [b for b in SPECTRAL_BACKENDS + RGB_BACKENDS if any(r["backend"] == b for r in runs)]
+    by = {(r["scene"], r["backend"]): r for r in runs}
+    scenes = sorted({(r.get("case") or "", r["scene"]) for r in runs})
+    rows = ["", "## RGB renderers against the spectral references", "",
+            "What reducing spectra to RGB costs (exporters/rgb_reduction.py): each backend's RMSE against the "
+            "scene's spectral reference, the mean CIEDE2000 of its Lambertian patch probes, and its status.", "",
+            "| case | scene | " + " | ".join(order) + " |", "|---|---|" + "---|" * len(order)]
+    for case, scene in scenes:
+        rows.append(f"| {case} | {scene} | " + " | ".join(_rgb_cell(by.get((scene, b))) for b in order) + " |")
+    return "\n".join(rows) + "\n"
+
+
 def write(out_dir, runs, elapsed_s, sweeps=None, stability=None):
     c = counts(runs)
     head = ", ".join(f"{n} {s}" for s, n in sorted(c.items(), key=lambda kv: ORDER.get(kv[0], 9)))
@@ -71,6 +106,6 @@ def write(out_dir, runs, elapsed_s, sweeps=None, stability=None):
             "the reference's; block test, Sidak-corrected) and the analytic probes (ground truth from no renderer). "
             "known: fails exactly as a recorded deviation (known_deviations.toml); unjudged: nothing could judge it. "
             "Images and diffs: `<scene>/results/<backend>/`; all numbers: `metrics.json`.\n\n"
-            + table(runs) + "\n" + sweeps_table(sweeps) + stability_table(stability))
+            + table(runs) + "\n" + rgb_comparison(runs) + sweeps_table(sweeps) + stability_table(stability))
     Path(out_dir, "summary.md").write_text(text)
     return text

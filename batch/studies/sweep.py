@@ -128,6 +128,8 @@ def sweep_modes(backend, scene, requested=None):
     mode, why = backend.mode_for(scene)
     if mode is None:
         return [], why
+    if backend.name in ("cycles", "luxcore"):
+        return [mode], None  # an RGB backend has one mode (--sweep-modes names Mitsuba variants)
     if requested:
         return list(requested), None
     modes = [mode]

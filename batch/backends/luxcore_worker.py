@@ -1,0 +1,101 @@
+"""LuxCoreRender (pyluxcore) as a child process: render an exported render.cfg in independent
+passes and save them (the backend writes their mean and standard error as EXR).
+
+    python batch/backends/luxcore_worker.py --cfg render.cfg --spp 64 --passes 2 --seed 0 \
+        --timeout 1800 --out passes.npy --result result.json
+
+This process imports nothing but pyluxcore and numpy, pyluxcore first: pyluxcore 2.11.2 bundles
+its own OpenEXR/TBB (tbbmalloc_proxy replaces malloc), and with the OpenEXR Python package loaded
+first the process aborted at start ("free(): invalid pointer", measured).
+
+Process model (shared/notes/luxcore-facts.md): no Python log callback is ever registered
+(``pyluxcore.Init()`` keeps LuxCore's own logger; a Python handler left registered aborted the
+interpreter at exit), and ``RenderSession.WaitForDone`` is never called (it did not return with a
+halt condition): the session is polled with UpdateStats()/HasDone() and stopped at the deadline,
+which makes this process exit with status 3 (the backend also kills it after its own limit).
+
+Samples: PATHCPU with the RANDOM sampler (independent uniform samples in each pixel; seeded,
+so passes with distinct seeds are independent). Its ``batch.haltspp`` is checked only when the
+session is polled, so a render overshoots by what it renders between two polls: polled every
+millisecond, 16 spp asked gave 16.7 samples per pixel on average, 64 gave 65.2 (measured at
+32x32). LuxCore normalises each pixel by its own sample count, so every pixel stays an unbiased
+mean; the samples actually taken (total sample count / pixels) are reported as the spp.
+(TILEPATHCPU renders an exact a^2 samples per pixel, but its sampler ignores the seed: two passes
+are identical, measured.)
+"""
+import argparse
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+POLL_S = 0.001
+TIMEOUT_EXIT = 3
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--cfg", required=True)
+    ap.add_argument("--mode", default="rgb")
+    ap.add_argument("--spp", type=int, required=True)
+    ap.add_argument("--passes", type=int, default=1)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--timeout", type=float, default=1800)
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--result", required=True)
+    args = ap.parse_args(argv)
+    t0 = time.perf_counter()
+    deadline = t0 + args.timeout
+    import pyluxcore
+    import numpy as np
+
+    folder = Path(args.cfg).resolve().parent
+    pyluxcore.Init()  # LuxCore's own logger (stdout); no Python callback
+    pyluxcore.ClearFileNameResolverPaths()
+    pyluxcore.AddFileNameResolverPath(str(folder))
+    base = pyluxcore.Properties(str(folder / Path(args.cfg).name))
+    scene_props = pyluxcore.Properties(str(folder / base.Get("scene.file").GetString()))
+    scene = pyluxcore.Scene()
+    scene.Parse(scene_props)
+    width, height = base.Get("film.width").GetInt(), base.Get("film.height").GetInt()
+    per_pass = math.ceil(args.spp / max(1, args.passes))  # as mitsuba_worker
+    images, taken, render_s, timed_out = [], [], 0.0, False
+    for k in range(args.passes):
+        props = pyluxcore.Properties(base)
+        props.Set(pyluxcore.Property("renderengine.seed", args.seed + k + 1))  # LuxCore's seeds start at 1
+        props.Set(pyluxcore.Property("batch.haltspp", per_pass))
+        config = pyluxcore.RenderConfig(props, scene)
+        session = pyluxcore.RenderSession(config)
+        t = time.perf_counter()
+        session.Start()
+        while True:
+            time.sleep(POLL_S)
+            session.UpdateStats()
+            if session.HasDone():
+                break
+            if time.perf_counter() > deadline:
+                timed_out = True
+                break
+        session.Stop()
+        render_s += time.perf_counter() - t
+        if timed_out:
+            print(f"luxcore_worker: timed out after {args.timeout} s", file=sys.stderr)
+            sys.exit(TIMEOUT_EXIT)
+        taken.append(session.GetStats().Get("stats.renderengine.total.samplecount").GetFloat() / (width * height))
+        buf = np.zeros(width * height * 3, dtype=np.float32)
+        session.GetFilm().GetOutputFloat(pyluxcore.FilmOutputType.RGB, buf)
+        images.append(buf.reshape(height, width, 3)[::-1].astype(np.float64))  # LuxCore's rows run bottom to top
+        del session, config
+    np.save(args.out, np.stack(images))
+    result = {"variant": args.mode, "spp": int(round(sum(taken))), "spp_asked": per_pass * args.passes,
+              "samples_per_pixel_per_pass": [round(t, 3) for t in taken], "passes": args.passes, "seed": args.seed,
+              "time_s": render_s,
+              "wall_s": time.perf_counter() - t0, "resolution": [width, height],
+              "versions": {"pyluxcore": pyluxcore.Version(), "numpy": np.__version__,
+                           "python": sys.version.split()[0]}}
+    Path(args.result).write_text(json.dumps(result, indent=1))
+
+
+if __name__ == "__main__":
+    main()

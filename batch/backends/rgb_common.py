@@ -1,0 +1,104 @@
+"""What the RGB backends (Cycles, LuxCore) share: deciding the mode from what the scene needs
+(rgb_scene.problems), exporting the reduced scene, running a child process under a time limit,
+and writing independent passes as a mean and its standard error (as mitsuba_worker does).
+
+Modes: ``rgb`` (spectra reduced to RGB by exporters/rgb_reduction.py's rule: always, that is what
+these backends measure) and ``rgb-approx`` (``--approximate``: something the renderer cannot
+express was rendered as the stated approximation; the job's record lists it under
+``approximated``). Without ``--approximate`` such a scene is ``unsupported`` with every object
+and field named.
+"""
+import json
+import math
+import subprocess
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ...exporters import rgb_scene
+from .. import exr
+from .mitsuba_backend import BackendFailure
+
+MODE = "rgb"
+APPROX_MODE = "rgb-approx"
+
+
+class RgbBackend:
+    """Shared half of an RGB backend; a subclass sets name, label, distributions and implements
+    availability, write(rgb scene, out_dir) -> path and render."""
+    name = label = ""
+    distributions = frozenset()
+
+    def __init__(self, executable=None, approximate=False):
+        self.executable = executable
+        self.approximate = approximate
+
+    @property
+    def formats(self):
+        return (self.name,)
+
+    def mode_for(self, scene):
+        found = rgb_scene.problems(scene, self.distributions)
+        blocking = [p for p in found if not self.approximate or p[3] is None]
+        if blocking:
+            hint = any(p[3] for p in blocking)
+            return None, (f"{self.label} cannot express: " + "; ".join(f"{o}.{f}: {m}" for o, f, m, _ in blocking)
+                          + (" (--approximate renders an explicitly labelled approximation)" if hint else ""))
+        return (APPROX_MODE if found else MODE), None
+
+    def export(self, scene, out_dir):
+        """Reduce ``scene`` to RGB and write it in this renderer's format into ``out_dir``."""
+        rgb = rgb_scene.build(scene, self.distributions, approximate=self.approximate)
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        return self.write(rgb, out)
+
+
+def reduction_of(export_path):
+    """reduction.json of an exported folder (what was reduced and approximated)."""
+    path = Path(export_path).parent / "reduction.json"
+    return json.loads(path.read_text()) if path.is_file() else {}
+
+
+def run_child(cmd, timeout, log_path, what, env=None, cwd=None):
+    """Run a worker; BackendFailure on a time-out, a crash or a non-zero exit (with its tail)."""
+    t0 = time.perf_counter()
+    try:
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, env=env, cwd=cwd)
+    except subprocess.TimeoutExpired as exc:
+        if log_path:
+            Path(log_path).write_text(f"$ {' '.join(map(str, cmd))}\n(timed out after {timeout} s)\n"
+                                      f"{exc.stdout or ''}\n{exc.stderr or ''}")
+        raise BackendFailure(f"{what} timed out after {timeout} s") from exc
+    if log_path:
+        Path(log_path).write_text(f"$ {' '.join(map(str, cmd))}\n{proc.stdout}\n{proc.stderr}")
+    if proc.returncode != 0:
+        lines = (proc.stderr.strip() or proc.stdout.strip()).splitlines()
+        tail = [l for l in lines if "Error" in l or "error" in l][-3:] or lines[-3:]
+        raise BackendFailure(f"{what} exited with {proc.returncode}: {' | '.join(tail)[-600:]}")
+    return time.perf_counter() - t0
+
+
+def write_passes(out_exr, images, film_scale=1.0, stokes=False):
+    """Write the mean of independent pass images (each H x W x 3, linear sRGB) and, with two or
+    more, the standard error of that mean per pixel (stderr.<channel>, from the pass-to-pass
+    spread). ``film_scale`` multiplies every pass (an approximated polariser); ``stokes`` adds
+    S0 = RGB and S1 = S2 = S3 = 0 (an approximated Stokes output). Returns the channel names."""
+    stack = np.stack([np.asarray(i, dtype=np.float64)[..., :3] for i in images]) * film_scale
+    names = ["R", "G", "B"]
+    if stokes:
+        zeros = np.zeros_like(stack)
+        stack = np.concatenate([stack, stack, zeros, zeros, zeros], axis=-1)
+        names += [f"S{k}.{c}" for k in range(4) for c in "RGB"]
+    extra = {}
+    if len(images) > 1:
+        stderr = stack.std(axis=0, ddof=1) / math.sqrt(len(images))
+        extra = {f"stderr.{n}": stderr[..., i].astype(np.float32) for i, n in enumerate(names)}
+    exr.write_image(out_exr, names, stack.mean(axis=0), extra)
+    return names
+
+
+def split_spp(spp, passes):
+    """Samples per pass (the same in every pass, rounded up as mitsuba_worker does)."""
+    return math.ceil(spp / max(1, passes))
