@@ -18,22 +18,37 @@ def default_input():
 
 
 def load(paths):
-    """[(scene name, IR dict or SceneError)] from .blend and .json paths, in order."""
+    """[(scene name, IR dict or SceneError)] from .blend and .json paths, in order. A scene name
+    met twice is an error for the later one (outputs are written per scene name)."""
+    results = _load(paths)
+    seen, out = {}, []
+    for (name, result), origin in results:
+        if name in seen and not isinstance(result, Exception):
+            result = validate.SceneError(name, [("scene", "name", f"a scene of this name already comes from {seen[name]}; "
+                                                 f"rename one (outputs are written per scene name), input {origin}")])
+        seen.setdefault(name, origin)
+        out.append((name, result))
+    return out
+
+
+def _load(paths):
+    """[((scene name, IR dict or SceneError), input path)]."""
     results = []
     for p in paths:
         path = Path(p)
         if path.suffix == ".blend":
             if not path.is_file():
-                results.append((path.stem, validate.SceneError(path.stem, [("scene", "(file)", f"no such file: {path}")])))
+                results.append(((path.stem, validate.SceneError(path.stem, [("scene", "(file)", f"no such file: {path}")])),
+                                str(path)))
                 continue
             from .blend_input import load_blend
-            results += load_blend(path)
+            results += [(r, str(path)) for r in load_blend(path)]
         else:
             try:
                 scene = ir_json.load(path)
-                results.append((scene["name"], scene))
+                results.append(((scene["name"], scene), str(path)))
             except validate.SceneError as exc:
-                results.append((exc.scene if exc.scene != "?" else path.stem, exc))
+                results.append(((exc.scene if exc.scene != "?" else path.stem, exc), str(path)))
     return results
 
 

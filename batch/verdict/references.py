@@ -2,9 +2,14 @@
 B and, for Stokes scenes, S0.R ... S3.B; the standard error of that mean per pixel as
 stderr.<channel>) and references/<scene>.json (provenance).
 
-A reference records the fingerprint of the scene it was rendered from (the IR without the
-sample count); a changed scene makes it stale, and stale references are never used for a
-verdict. References change only through ``batch/make_references.py`` (an explicit request).
+A reference records the fingerprint of the scene it was rendered from: everything that
+determines the expected image, i.e. the IR without the sample count and names, with every named
+spectrum and named conductor replaced by its table and every mesh file by a hash of its contents
+(a changed data file or mesh changes the scene). A changed scene makes the reference stale, and
+stale references are never used for a verdict. The renderer and its version are provenance, not
+fingerprint: a reference exists to judge other versions (and renderers) against; every job shows
+the versions of both. References change only through ``batch/make_references.py`` (an explicit
+request), and are written atomically (temporary files renamed into place, the JSON last).
 """
 import copy
 import hashlib
@@ -13,16 +18,38 @@ from pathlib import Path
 
 import numpy as np
 
-from ...exporters import ir_json
+from ...exporters import ir_json, mesh_io, spectra
 from .. import exr
 
 REFERENCE_DIR = Path(__file__).resolve().parents[2] / "references"
 
 
+def _resolved(node, base_dir):
+    """The IR with named spectra and conductors replaced by their tables and mesh files by hashes
+    of their contents (in place)."""
+    if isinstance(node, dict):
+        if node.get("type") == "named" and "name" in node and node["name"] in spectra.named_spectra():
+            wl, values = spectra.tabulate(node)
+            node["table"] = [[round(float(w), 6), round(float(v), 9)] for w, v in zip(wl, values)]
+        if node.get("type") == "conductor" and "material" in node:
+            node["tables"] = [spectra.tabulate(s)[1].round(9).tolist() for s in spectra.named_conductor(node["material"])]
+        if node.get("type") == "mesh" and "file" in node:
+            verts, faces = mesh_io.load_mesh(node, base_dir)
+            node["file"] = hashlib.sha256(np.asarray(verts, dtype=np.float64).tobytes()
+                                          + np.asarray(faces, dtype=np.int64).tobytes()).hexdigest()
+        for v in node.values():
+            _resolved(v, base_dir)
+    elif isinstance(node, list):
+        for v in node:
+            _resolved(v, base_dir)
+    return node
+
+
 def fingerprint(scene):
     """sha256 of what determines the expected image: the IR without the sample count, the
-    description and the names of the scene's objects (objects sorted by content)."""
-    data = copy.deepcopy({k: v for k, v in scene.items() if not k.startswith("_")})
+    description and the names of the scene's objects (objects sorted by content), with the data
+    behind named spectra, conductors and mesh files resolved."""
+    data = _resolved(copy.deepcopy({k: v for k, v in scene.items() if not k.startswith("_")}), scene.get("_base_dir"))
     data["render"].pop("spp", None)
     for key in ("description", "name", "case"):
         data.pop(key, None)
@@ -103,7 +130,11 @@ def save(scene, names, mean, stderr, provenance, directory=None):
     directory = Path(directory or REFERENCE_DIR)
     directory.mkdir(parents=True, exist_ok=True)
     extra = {f"stderr.{n}": _noise_channel(stderr[..., i]) for i, n in enumerate(names)}
-    exr.write_image(directory / f"{scene['name']}.exr", names, mean, extra)
+    exr_path, meta_path = directory / f"{scene['name']}.exr", directory / f"{scene['name']}.json"
+    exr_tmp, meta_tmp = exr_path.with_suffix(".exr.tmp"), meta_path.with_suffix(".json.tmp")
+    exr.write_image(exr_tmp, names, mean, extra)
     meta = dict(provenance, scene=scene["name"], fingerprint=fingerprint(scene))
-    (directory / f"{scene['name']}.json").write_text(json.dumps(meta, indent=1, sort_keys=True) + "\n")
-    return directory / f"{scene['name']}.exr"
+    meta_tmp.write_text(json.dumps(meta, indent=1, sort_keys=True) + "\n")
+    exr_tmp.replace(exr_path)
+    meta_tmp.replace(meta_path)
+    return exr_path
