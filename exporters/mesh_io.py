@@ -1,27 +1,31 @@
-"""Triangle meshes to and from files: binary PLY (written for Mitsuba and ART), PLY/OBJ read."""
+"""Triangle meshes to and from files: PLY through plyfile (any layout: ASCII or binary, either
+byte order, polygons triangulated as fans), written as binary little-endian PLY for Mitsuba and
+ART; a minimal Wavefront OBJ reader (positions and faces)."""
 from pathlib import Path
 
 import numpy as np
+from plyfile import PlyData, PlyElement
 
 
 def write_ply(path, vertices, faces, normals=None):
     """Binary PLY; ``normals`` (per vertex, optional) are written as nx, ny, nz."""
     v = np.asarray(vertices, dtype="<f4").reshape(-1, 3)
     f = np.asarray(faces, dtype="<i4").reshape(-1, 3)
-    extra = "" if normals is None else "property float nx\nproperty float ny\nproperty float nz\n"
-    header = ("ply\nformat binary_little_endian 1.0\n"
-              f"element vertex {len(v)}\nproperty float x\nproperty float y\nproperty float z\n{extra}"
-              f"element face {len(f)}\nproperty list uchar int vertex_indices\nend_header\n")
+    fields = [("x", "<f4"), ("y", "<f4"), ("z", "<f4")]
     if normals is not None:
-        v = np.ascontiguousarray(np.concatenate([v, np.asarray(normals, dtype="<f4").reshape(-1, 3)], axis=1))
-    face_rec = np.zeros(len(f), dtype=[("n", "u1"), ("i", "<i4", 3)])
-    face_rec["n"], face_rec["i"] = 3, f
+        fields += [("nx", "<f4"), ("ny", "<f4"), ("nz", "<f4")]
+    vert = np.empty(len(v), dtype=fields)
+    vert["x"], vert["y"], vert["z"] = v.T
+    if normals is not None:
+        n = np.asarray(normals, dtype="<f4").reshape(-1, 3)
+        vert["nx"], vert["ny"], vert["nz"] = n.T
+    face = np.empty(len(f), dtype=[("vertex_indices", "<i4", (3,))])
+    face["vertex_indices"] = f
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "wb") as fh:
-        fh.write(header.encode("ascii"))
-        fh.write(v.tobytes())
-        fh.write(face_rec.tobytes())
+    PlyData([PlyElement.describe(vert, "vertex"),
+             PlyElement.describe(face, "face", len_types={"vertex_indices": "u1"})], text=False,
+            byte_order="<").write(str(path))
     return path
 
 
@@ -42,17 +46,14 @@ def read_obj(path):
 
 
 def read_ply(path):
-    """Vertices and faces of a PLY written by write_ply (binary little endian, x y z [nx ny nz], triangles)."""
-    data = Path(path).read_bytes()
-    end = data.index(b"end_header\n") + len(b"end_header\n")
-    header = data[:end].decode("ascii").splitlines()
-    nv = int(next(l for l in header if l.startswith("element vertex")).split()[-1])
-    nf = int(next(l for l in header if l.startswith("element face")).split()[-1])
-    face_at = next(i for i, l in enumerate(header) if l.startswith("element face"))
-    props = sum(1 for l in header[:face_at] if l.startswith("property float"))  # x y z (nx ny nz)
-    v = np.frombuffer(data, dtype="<f4", count=nv * props, offset=end).reshape(nv, props)[:, :3]
-    rec = np.frombuffer(data, dtype=[("n", "u1"), ("i", "<i4", 3)], count=nf, offset=end + nv * 4 * props)
-    return v.tolist(), rec["i"].tolist()
+    """Vertices and triangles of any PLY file (faces under vertex_indices or vertex_index)."""
+    ply = PlyData.read(str(path))
+    vert = ply["vertex"].data
+    v = np.stack([vert["x"], vert["y"], vert["z"]], axis=1).astype(np.float64)
+    face = ply["face"].data
+    key = "vertex_indices" if "vertex_indices" in face.dtype.names else "vertex_index"
+    faces = [[int(poly[0]), int(poly[k]), int(poly[k + 1])] for poly in face[key] for k in range(1, len(poly) - 1)]
+    return v.tolist(), faces
 
 
 def load_mesh(shape, base_dir=None):

@@ -122,7 +122,15 @@ def _shape_problems(shape, base_dir):
 def bsdf_problems(bsdf):
     kind = bsdf["type"]
     if kind == "diffuse":
-        yield from spectra.check(bsdf["reflectance"], "reflectance")
+        problems = list(spectra.check(bsdf["reflectance"], "reflectance"))
+        yield from problems
+        if not problems:
+            wl = spectra.cie_1931_cmfs()[0]
+            values = spectra.evaluate(bsdf["reflectance"], wl)
+            if values.max() > 1.0:
+                i = int(values.argmax())
+                yield "reflectance", (f"a diffuse reflectance above 1 creates energy: {values[i]:.4g} at "
+                                      f"{wl[i]:g} nm (360-830 nm)")
     if kind == "conductor":
         if "material" in bsdf and bsdf["material"] not in spectra.NAMED_CONDUCTORS:
             yield "material", (f"unknown conductor {bsdf['material']!r} "

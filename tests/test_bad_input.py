@@ -29,10 +29,13 @@ def broken(golden, how):
     if how == "mesh":
         _obj(sc, "floor")["shape"] = {"type": "mesh", "file": "missing_floor.ply"}
         return sc, "floor", "shape.file"
+    if how == "reflectance":
+        _obj(sc, "floor")["bsdf"]["reflectance"] = {"type": "sampled", "wavelengths": [400, 700], "values": [0.5, 1.2]}
+        return sc, "floor", "bsdf.reflectance"
     raise ValueError(how)
 
 
-@pytest.mark.parametrize("how", ["roughness", "ior", "nan", "named", "mesh"])
+@pytest.mark.parametrize("how", ["roughness", "ior", "nan", "named", "mesh", "reflectance"])
 def test_value_errors_name_scene_object_field(golden, tmp_path, how):
     sc, obj, field = broken(golden, how)
     path = ir_json.write(sc, tmp_path / "bad.json")
@@ -94,3 +97,17 @@ def test_existing_results_are_never_overwritten(golden, tmp_path):
     proc = run_batch("-i", write_scene(tmp_path, golden["ggx_glass"]), "--export-only", "-o", out)
     assert proc.returncode == 2 and "already holds results" in proc.stderr
     assert json.loads((out / "metrics.json").read_text()) == {"runs": ["earlier"]}
+
+
+def test_two_inputs_with_one_scene_name_keep_apart(golden, tmp_path):
+    """Outputs are written per scene name: the second scene of a name fails with the reason, the
+    first renders, nothing is mixed."""
+    a = write_scene(tmp_path / "a", golden["ggx_copper_50"], name="twin")
+    b = write_scene(tmp_path / "b", golden["ggx_copper_60"], name="twin")
+    out = tmp_path / "out"
+    proc = run_batch("-i", a, b, "-r", "mitsuba", "--scale", 0.0625, "--no-flip", "-o", out)
+    runs = metrics(out)["runs"]
+    assert [r["scene"] for r in runs] == ["twin", "twin"]
+    assert runs[0]["status"] in ("unjudged", "ok") and runs[1]["status"] == "failed"
+    assert "already comes from" in runs[1]["reason"] and str(a) in runs[1]["reason"]
+    assert proc.returncode == 1
