@@ -33,7 +33,7 @@ ROOT = Path(__file__).resolve().parents[1]
 # statistics; colour-science (+ imageio): CIELAB/CIEDE2000 of the probes). matplotlib (sweep charts)
 # is not bundled: the panel does not run sweeps.
 WHEELS = ["jsonschema", "jsonschema-specifications", "referencing", "rpds-py", "attrs", "typing-extensions",
-          "mitsuba", "drjit", "OpenEXR", "flip-evaluator", "Pillow", "scipy", "colour-science", "imageio"]
+          "mitsuba", "drjit", "OpenEXR", "flip-evaluator", "Pillow", "scipy", "colour-science", "imageio", "plyfile"]
 PLATFORMS = {"linux-x64": ["manylinux_2_17_x86_64", "manylinux_2_28_x86_64", "manylinux2014_x86_64"],
              "windows-x64": ["win_amd64"], "macos-arm64": ["macosx_11_0_arm64", "macosx_12_0_arm64",
                                                            "macosx_14_0_arm64"]}
