@@ -13,14 +13,16 @@ def test_prediction_and_slope_arithmetic():
     assert sweep.predicted_rmse(sigma2, var, 8) == pytest.approx(0.5)
     pts = [{"spp": s, "rmse": 1 / np.sqrt(s)} for s in (4, 16, 64)]
     assert sweep.fit_slope([p["spp"] for p in pts], [p["rmse"] for p in pts]) == pytest.approx(-0.5)
+    # the fit reports the error floor; the verdict is the top rung's noise test
     biased = [{"spp": s, "rmse": np.sqrt(2.0 / s + 0.05 ** 2)} for s in (4, 64, 1024)]
+    biased[-1]["test"] = {"pass": False, "z_max": 9.0, "p_min": 1e-12, "threshold": 1e-4}
     verdict = sweep.analyse(biased, sigma2, var)
-    assert not verdict["converges"] and verdict["error_floor_rmse"] == pytest.approx(0.05, rel=0.05)
+    assert verdict["converges"] is False and verdict["error_floor_rmse"] == pytest.approx(0.05, rel=0.05)
     unbiased = [{"spp": s, "rmse": np.sqrt(2.0 / s)} for s in (4, 64, 1024)]
-    assert sweep.analyse(unbiased, sigma2, var)["converges"]
-    # a noisier renderer (8x the reference's variance) without bias still converges
-    noisier = [{"spp": s, "rmse": np.sqrt(16.0 / s)} for s in (4, 64, 1024)]
-    assert sweep.analyse(noisier, sigma2, var)["converges"]
+    unbiased[-1]["test"] = {"pass": True}
+    assert sweep.analyse(unbiased, sigma2, var)["converges"] is True
+    unbiased[-1].pop("test")
+    assert sweep.analyse(unbiased, sigma2, var)["converges"] is None  # not judged is not converged
     assert sweep.fit_noise_model([4, 64, 1024], [np.sqrt(2.0 / s + 0.01) for s in (4, 64, 1024)]) == pytest.approx((2.0, 0.01), rel=1e-6)
 
 
@@ -38,8 +40,9 @@ def test_sweep_flags_the_biased_mode_and_passes_the_unbiased_one(sweep_run):
     assert set(lines) == {"llvm_ad_spectral", "llvm_ad_rgb"}
     spectral, rgb = lines["llvm_ad_spectral"], lines["llvm_ad_rgb"]
     assert [p["spp"] for p in spectral["points"]] == [16, 256, 4096]
-    assert spectral["converges"] and spectral["slope"] == pytest.approx(-0.5, abs=0.05)
-    assert not rgb["converges"] and "does not converge" in rgb["flag"]
+    assert spectral["converges"] is True and spectral["slope"] == pytest.approx(-0.5, abs=0.05)
+    assert all(p["test"]["noise"] == "own" for p in spectral["points"])
+    assert rgb["converges"] is False and "does not converge" in rgb["flag"]
     assert all(p["time_s"] > 0 for l in lines.values() for p in l["points"])
 
 

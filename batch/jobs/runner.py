@@ -219,12 +219,16 @@ class Run:
                 for spp in ladder:
                     image = folder / f"{backend.name}-{mode}" / f"spp{spp}.exr"
                     image.parent.mkdir(parents=True, exist_ok=True)
-                    info = backend.render(scene_dir, mode, spp, image, seed=self.opts["seed"],
+                    info = backend.render(scene_dir, mode, spp, image, passes=2, seed=self.opts["seed"],
                                           timeout=self.opts["timeout"])
-                    names, img = exr.read_image(image)
+                    names, img, stderr = exr.read_image_and_stderr(image)
                     at = compare.reference_at(ref.mean, ref.stderr, ref.spp, img.shape, ref.provenance.get("passes", 8))
                     point = {"spp": info["spp"], "time_s": info["time_s"], "wall_s": info["wall_s"]}
                     point.update(compare.metrics(img[..., :3], at.mean[..., :3]))
+                    if stderr is not None and names == ref.names:
+                        zt = compare.z_test(img, at, info["spp"], own_var_of_mean=stderr.astype(np.float64) ** 2,
+                                            own_passes=2, alpha=self.opts["alpha"], min_samples=self.opts["min_samples"])
+                        point["test"] = zt.as_dict()
                     line["points"].append(point)
                 line.update(sweep.analyse(line["points"], at.sigma2[..., :3], at.var_of_mean[..., :3]))
             except Exception as exc:  # noqa: BLE001 - a failing mode must not stop the sweep

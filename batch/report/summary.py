@@ -48,7 +48,7 @@ def sweeps_table(sweeps):
         times = ", ".join("{:.2f}".format(p["time_s"]) for p in pts)
         errs = ", ".join("{:.3g}".format(p["rmse"]) for p in pts)
         rows.append(f"| {l['scene']} | {l['backend']} | {l['mode']} | {spps} | {times} | {errs} "
-                    f"| {_num(l.get('slope'), '{:.2f}')} | {'yes' if l.get('converges') else 'NO: ' + l.get('flag', l.get('reason', ''))} "
+                    f"| {_num(l.get('slope'), '{:.2f}')} | {'yes' if l.get('converges') else ('NO: ' if l.get('converges') is False else '') + l.get('flag', l.get('reason', ''))} "
                     f"| {_num(eq.get('rmse_at_equal_time'))} | {_num(eq.get('time_at_equal_error'), '{:.3g}')} |")
     return "\n".join(rows) + "\n"
 
