@@ -16,7 +16,7 @@ import shutil
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-MODULES = {}  # {"sb_<name>": "<module file stem>"}: one entry per plugin
+MODULES = {"sb_dispersive_dielectric": "dispersive_dielectric"}  # {"sb_<name>": "<module file stem>"}: one entry per plugin
 
 LOADER = '''"""Registers this scene's Python plugins with Mitsuba 3 (written by spectral_bench).
 
