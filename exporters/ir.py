@@ -7,7 +7,8 @@ Conventions (every writer follows them):
 - ``rectangle`` is the square [-1, 1]^2 in its local z = 0 plane, normal and emission +Z.
 - ``sphere`` is analytic: ``center`` and ``radius``.
 - ``mesh`` has inline ``vertices``/``faces`` (triangles) or a ``file`` (PLY/OBJ, relative to
-  the JSON file), both with an optional ``to_world``.
+  the JSON file), both with an optional ``to_world``. Faces are flat (no normals are
+  interpolated) and wound counter-clockwise seen from outside (their normals point outwards).
 - Roughness ``alpha`` is the microfacet width (GGX/Beckmann alpha, Walter et al. 2007);
   alpha 0 is a smooth surface. Blender's "Roughness" r corresponds to alpha = r^2.
 - Spectra and their radiometric normalisation: see spectra.py.

@@ -97,6 +97,9 @@ class _Writer:
             self.files.append(mesh_io.write_ply(self.out / rel, verts, faces))
             node = ET.SubElement(root, "shape", type="ply", id=obj["name"])
             ET.SubElement(node, "string", name="filename", value=rel)
+            # the IR's meshes carry no normals: their faces are flat (Mitsuba would otherwise
+            # interpolate vertex normals it computes, which bends a prism's faces)
+            ET.SubElement(node, "boolean", name="face_normals", value="true")
             if "to_world" in s:
                 _transform(node, s["to_world"])
         else:
