@@ -251,7 +251,8 @@ def build_dispersion(square, sphere):
 
     scene = new_scene("dispersion_fringes", "dispersion", 256,
                       "A smooth N-SF11 sphere (Abbe number 25.7) before black and white stripes 0.15 wide under a "
-                      "uniform D65 environment: chromatic fringes where the sphere refracts the stripes' edges")
+                      "uniform D65 environment: chromatic fringes where the sphere refracts the stripes' edges",
+                      resolution=(256, 256))
     scene.world = uniform_world("uniform_d65_fringes", "NAMED", "cie_d65")
     sf11 = material("N-SF11", "DIELECTRIC", ior_model="NAMED", glass="N-SF11", ext_ior=1.000277, distribution="SMOOTH")
     add_object(scene, "sf11_sphere", sphere, sf11, "SPHERE")

@@ -4,17 +4,19 @@ a closed form, independently of any renderer (plain numpy; colour-science for CI
 - lambert.py: Lambertian patches under a uniform environment (rho * L, CIEDE2000);
 - fresnel.py: a smooth dielectric reflecting an area light through a polariser (Fresnel, Malus,
   Brewster) and the degree of polarisation;
-- stokes.py: the validity of Stokes output (S0 >= |(S1, S2, S3)|).
+- stokes.py: the validity of Stokes output (S0 >= |(S1, S2, S3)|);
+- prism.py: a collimated beam through a dispersive dielectric onto a screen (Snell's law per
+  wavelength: band positions and order; Fresnel: the flux on the screen).
 
 Each probe is a dict {name, expected, measured, error, unit, pass}; ``pass`` is None when the
 probe cannot be measured at the render's resolution (fewer than MIN_PIXELS whole pixels).
 """
-from . import fresnel, lambert, stokes
+from . import fresnel, lambert, prism, stokes
 from .common import MIN_PIXELS, Measurement  # noqa: F401 - part of the interface
 
 # Every probe: a function of one Measurement returning a list of probe records; a probe that does
 # not apply to the scene returns [].
-PROBES = [lambert.patches, fresnel.brewster, stokes.validity]
+PROBES = [lambert.patches, fresnel.brewster, stokes.validity, prism.probes]
 
 
 def evaluate(scene, names, image, reference=None, stderr=None):
