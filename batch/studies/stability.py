@@ -12,12 +12,18 @@ Sweeps (built from the canonical scenes' IR, so they follow scenes.blend):
   pixel for every n (the limit n -> 1 is an invisible sphere).
 - polarizer_malus: the Brewster plane seen through the polariser at 0..90 degrees: the Fresnel
   probe (Malus' law) at every angle.
+- dispersion_ior, dispersion_abbe (with dispersion_fringes in the input; DISPERSION_STRIPS): the
+  N-SF11 sphere before the stripes with its Sellmeier B scaled so that n_d runs 1.7847..1.0001
+  (n^2 - 1 scales at every wavelength), and a Cauchy glass of n_d 1.7847 whose Abbe number runs
+  20..1e6. Every render is checked for NaN, Inf and negative values; the last of each strip must
+  equal its limit within noise: n_d 1.0001 the scene without the sphere (the sphere vanishes), the
+  largest Abbe number the native, non-dispersive dielectric of the same n_d.
 """
 import copy
 
 import numpy as np
 
-from ...exporters import ir
+from ...exporters import colorimetry, dispersion, ir
 from ..verdict import compare, probes
 from .. import exr
 
@@ -34,6 +40,44 @@ def _furnace_sphere(bsdf):
             "environment": {"type": "uniform", "radiance": {"type": "constant", "value": 1.0}},
             "objects": [{"name": "sphere", "shape": {"type": "sphere", "center": [0, 0, 0], "radius": 1.0},
                          "bsdf": bsdf, "emitter": None}]}
+
+
+# data: strip name -> (parameter values, last value's limit); the scenes come from dispersion_fringes
+DISPERSION_STRIPS = {
+    "dispersion_ior": ((1.7847, 1.5, 1.3, 1.1, 1.01, 1.001, 1.0001), "the scene without the sphere"),
+    "dispersion_abbe": ((20.0, 40.0, 80.0, 160.0, 1e3, 1e4, 1e6), "the native dielectric of the same n_d"),
+}
+DISPERSION_SIZE, DISPERSION_SPP = 48, 64
+
+
+def _dispersive_sphere(scene):
+    return next(o for o in scene["objects"] if (o.get("bsdf") or {}).get("type") == "dielectric")
+
+
+def dispersion_scene(base, strip, value):
+    """The fringes scene with its sphere's IOR set by one value of a dispersion strip; value None:
+    the strip's limit (no sphere, or the native dielectric of n_d)."""
+    sc = copy.deepcopy(base)
+    sphere = _dispersive_sphere(sc)
+    glass = sphere["bsdf"]["int_ior"]
+    n_d = dispersion.abbe_number(glass)[0]
+    if strip == "dispersion_ior":
+        if value is None:
+            sc["objects"] = [o for o in sc["objects"] if o is not sphere]
+        else:  # scale n^2 - 1 at every wavelength: n_d becomes ``value``
+            b, c = dispersion.sellmeier(glass)
+            k = (value ** 2 - 1.0) / (n_d ** 2 - 1.0)
+            sphere["bsdf"]["int_ior"] = {"type": "sellmeier", "B": [k * x for x in b], "C": c}
+    else:
+        if value is None:
+            sphere["bsdf"]["int_ior"] = round(n_d, 6)
+        else:  # Cauchy n = A + B / l^2 with n_d fixed and (n_d - 1) / (n_F - n_C) = value
+            lf, ld, lc = (dispersion.FRAUNHOFER_NM[k] * 1e-3 for k in "FdC")
+            bb = (n_d - 1.0) / (value * (1 / lf ** 2 - 1 / lc ** 2))
+            sphere["bsdf"]["int_ior"] = {"type": "cauchy", "A": n_d - bb / ld ** 2, "B": bb, "C": 0.0}
+    sc["render"].update(width=DISPERSION_SIZE, height=DISPERSION_SIZE, spp=DISPERSION_SPP)
+    sc["needs"] = ir.derived_needs({k: v for k, v in sc.items() if k != "needs"})
+    return sc
 
 
 def definitions(golden):
@@ -62,6 +106,9 @@ def definitions(golden):
         for _, sc in strip:
             sc["render"]["width"] = sc["render"]["height"] = 32 if sc["name"] == "furnace" else 64
             sc["needs"] = ir.derived_needs({k: v for k, v in sc.items() if k != "needs"})
+    if "dispersion_fringes" in golden:
+        for name, (values, _limit) in DISPERSION_STRIPS.items():
+            out[name] = [(v, dispersion_scene(golden["dispersion_fringes"], name, v)) for v in values]
     return out
 
 
@@ -89,6 +136,12 @@ def check(sweep, value, scene, names, img, stderr=None):
                             f"(+{float(((m - 1) / np.maximum(se, 1e-12)).max()):.1f} standard errors)")
         if sweep == "ior_furnace" and abs(float(ratio.mean()) - 1.0) > 0.02:
             problems.append(f"a lossless sphere in a furnace must equal the environment; mean {float(ratio.mean()):.4f}x")
+    if sweep in DISPERSION_STRIPS:
+        # a path that keeps one wavelength has an out-of-gamut colour (a negative sRGB component
+        # is legitimate), but its luminance Y, an integral against y_bar >= 0, never is negative
+        y = colorimetry.srgb_to_xyz(rgb)[..., 1]
+        if (y < -1e-6 * max(float(np.abs(y).max()), 1.0)).any():
+            problems.append(f"{int((y < 0).sum())} pixels of negative luminance")
     if sweep == "polarizer_malus":
         p = next((p for p in probes.evaluate(scene, names, img) if p["name"].startswith("brewster")), None)
         if p is None or p["pass"] is False:
@@ -105,11 +158,36 @@ def strip_image(path, images):
     Image.fromarray((np.concatenate(tiles, axis=1) * 255 + 0.5).astype(np.uint8)).save(path)
 
 
-def run(backend, golden, out_dir, passes=4, seed=0, timeout=600):
-    """Render every sweep with ``backend``; returns the result rows and writes strip images."""
+def _limit_problem(backend, strip, golden, row, img, stderr, folder, passes, seed, timeout):
+    """Compare a dispersion strip's last render with its limit, each channel's image mean against
+    both renders' standard errors (independent pixels and passes)."""
+    limit = dispersion_scene(golden["dispersion_fringes"], strip, None)
+    mode, why = backend.mode_for(limit)
+    if mode is None:
+        return None
+    path = backend.export(limit, folder / "scene")
+    backend.render(path, mode, limit["render"]["spp"], folder / "render.exr", passes=passes, seed=seed + 1000,
+                   timeout=timeout)
+    _, ref, ref_se = exr.read_image_and_stderr(folder / "render.exr")
+    n = img.shape[0] * img.shape[1]
+    diff = img[..., :3].mean(axis=(0, 1)) - ref[..., :3].mean(axis=(0, 1))
+    se = np.sqrt((stderr[..., :3] ** 2).sum(axis=(0, 1)) + (ref_se[..., :3] ** 2).sum(axis=(0, 1))) / n
+    z = float(np.max(np.abs(diff) / np.maximum(se, 1e-12)))
+    row["limit_z"] = z
+    if z > Z:
+        return (f"differs from its limit ({DISPERSION_STRIPS[strip][1]}) by {z:.1f} standard errors "
+                f"(image means {img[..., :3].mean():.4f} vs {ref[..., :3].mean():.4f})")
+    return None
+
+
+def run(backend, golden, out_dir, passes=4, seed=0, timeout=600, sweeps=None):
+    """Render every sweep (or those named in ``sweeps``) with ``backend``; returns the result rows
+    and writes strip images."""
     out_dir.mkdir(parents=True, exist_ok=True)
     rows = []
     for name, strip in definitions(golden).items():
+        if sweeps is not None and name not in sweeps:
+            continue
         images = []
         for value, sc in strip:
             mode, why = backend.mode_for(sc)
@@ -147,6 +225,14 @@ def run(backend, golden, out_dir, passes=4, seed=0, timeout=600):
             if jump > 0.01:
                 first["problems"].append(f"alpha {images[0][0]} differs from the smooth limit by {jump:.4f}")
                 first["status"] = "failed"
+        if name in DISPERSION_STRIPS and images and images[-1][0] == strip[-1][0]:
+            last = next(r for r in rows if r["sweep"] == name and r["value"] == strip[-1][0])
+            _, img, stderr = exr.read_image_and_stderr(out_dir / name / f"{strip[-1][0]:g}" / "render.exr")
+            problem = _limit_problem(backend, name, golden, last, img, stderr, out_dir / name / "limit", passes,
+                                     seed, timeout)
+            if problem:
+                last["problems"].append(problem)
+                last["status"] = "failed"
         if images:
             strip_image(out_dir / f"{name}.png", images)
     return rows
