@@ -48,6 +48,12 @@ AIR_IOR = 1.000277
 LANES = 4  # wavelengths per path in Mitsuba's spectral variants (mi.Spectrum's size)
 
 
+def _pos(x):
+    """A positive denominator (scalar variants divide Python floats, which raise on zero; the
+    results there are masked out anyway)."""
+    return dr.maximum(x, 1e-30)
+
+
 def _get(props, key, default):
     return props.get(key, default) if props.has_property(key) else default
 
@@ -152,9 +158,9 @@ class DispersiveDielectric(mi.BSDF):
         radiance = ctx.mode == mi.TransportMode.Radiance
         lanes = []
         for k in range(LANES):
-            w_r = fr[k][0] / p_r
+            w_r = fr[k][0] / _pos(p_r)
             scale = dr.square(fr[k][3]) if radiance else 1.0  # solid angle compression (radiance)
-            w_t = dr.select(j == k, (1.0 - fr[k][0]) * scale * LANES / p_t, 0.0)
+            w_t = dr.select(j == k, (1.0 - fr[k][0]) * scale * LANES / _pos(p_t), 0.0)
             lanes.append(dr.select(sel_r, w_r, w_t))
         weight = mi.Spectrum(*lanes)
         return bs, dr.select(active & (bs.pdf > 0), weight, 0.0)
@@ -184,12 +190,13 @@ class DispersiveDielectric(mi.BSDF):
             d = distr.eval(m)
             f = mi.fresnel(wi_m, etas[k])[0]
             g = distr.G(si.wi, wo, m)
-            v_r = f * d * g / (4.0 * dr.abs(cos_i))
+            v_r = f * d * g / _pos(4.0 * dr.abs(cos_i))
             scale = dr.square(dr.rcp(eta)) if radiance else 1.0
-            v_t = dr.abs(scale * (1.0 - f) * d * g * dr.square(eta) * wi_m * wo_m
-                         / (cos_i * dr.square(wi_m + eta * wo_m)))
+            v_t = dr.abs(scale * (1.0 - f) * d * g * dr.square(eta) * wi_m * wo_m) \
+                / _pos(dr.abs(cos_i) * dr.square(wi_m + eta * wo_m))
             values.append(dr.select(ok, dr.select(reflect, v_r, v_t), 0.0))
-            dwh_dwo = dr.select(reflect, dr.rcp(4.0 * wo_m), dr.square(eta) * wo_m / dr.square(wi_m + eta * wo_m))
+            dwh_dwo = dr.select(reflect, 1.0 / _pos(4.0 * dr.abs(wo_m)),
+                                dr.square(eta) * dr.abs(wo_m) / _pos(dr.square(wi_m + eta * wo_m)))
             prob = distr.pdf(dr.mulsign(si.wi, cos_i), m)
             if has_r and has_t:
                 prob *= dr.select(reflect, f, 1.0 - f)
