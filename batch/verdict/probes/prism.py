@@ -36,7 +36,9 @@ without passes, the squared residual against the expected image, unbiased under 
   the beam's flux times the prism's Fresnel transmittance. The footprint sum's own error (the
   image-to-screen Jacobian varies inside a pixel) is computed on the expected image and added to
   the tolerance (``model_error``).
-Both use the Sidak-corrected p-value of stats.py over the three channels.
+Both use the Sidak-corrected p-value of stats.py over the three channels, from Student's t with
+the Welch-Satterthwaite degrees of freedom of the estimated variance (each pixel's variance
+counted with one degree of freedom, as from two passes: conservative with more).
 """
 import math
 
@@ -245,13 +247,14 @@ def _clip_boxes(x0, y0, quad):
 
 
 def _channel_weights(wl):
-    """w_c(l) per nm: linear sRGB of the CIE 1931 CMFs over the integral of y_bar (Y of a flat 1 is 1),
-    with the trapezoid rule's weights on the grid (as colorimetry.xyz)."""
+    """w_c(l) dl: linear sRGB of the CIE 1931 CMFs over the integral of y_bar (Y of a flat 1 is 1),
+    times the trapezoid rule's weights on the grid ``wl`` (as colorimetry.xyz)."""
     cwl, xb, yb, zb = spectra.cie_1931_cmfs()
     cmf = np.stack([np.interp(wl, cwl, c) for c in (xb, yb, zb)], axis=-1)
     rgb = colorimetry.xyz_to_srgb(cmf) / np.trapz(yb, cwl)
-    trap = np.full(len(wl), STEP_NM)
-    trap[0] = trap[-1] = STEP_NM / 2
+    trap = np.zeros(len(wl))
+    trap[1:] += np.diff(wl) / 2
+    trap[:-1] += np.diff(wl) / 2
     return rgb * trap[:, None]
 
 
@@ -339,29 +342,39 @@ def _variance(m, residual):
     return residual ** 2  # one pass: the squared residual, unbiased for the variance under H0
 
 
+def _linear_test(a, v):
+    """(standard deviation, degrees of freedom) of sum_px a_px x_px for independent pixels whose
+    variances v_px are estimated each with one degree of freedom (two passes, or one squared
+    residual: the worst case, conservative with more passes): Welch-Satterthwaite."""
+    terms = a ** 2 * v
+    return math.sqrt(float(np.sum(terms))), float(stats.satterthwaite_dof(terms, np.ones_like(terms)))
+
+
 def _positions(label, gt, s, meas, exp_img, var, threshold):
     """The band-position probe: colour order and each channel's centroid along the fan."""
     name = f"prism band positions, {label}"
     if gt["fan_spread_px"] < 0.5:
         return _probe(name, None, None, None, "sigma", None,
                       reason=f"the fan spans {gt['fan_spread_px']:.2g} px: no colour order to measure")
-    exp_pos, meas_pos, se_pos, z_pos = [], [], [], []
+    exp_pos, meas_pos, se_pos, z_pos, dofs = [], [], [], [], []
     for ch in range(3):
         e_c, m_c, v_c = exp_img[:, ch], meas[:, ch], var[:, ch]
         s_exp = float(np.sum(s * e_c) / np.sum(e_c))
         total = float(np.sum(m_c))
         stat = float(np.sum((s - s_exp) * m_c))  # zero in expectation at the expected centroid
-        sd = math.sqrt(float(np.sum((s - s_exp) ** 2 * v_c)))
+        sd, dof = _linear_test(s - s_exp, v_c)
         exp_pos.append(s_exp)
         if total <= 5 * math.sqrt(float(np.sum(v_c))):  # no light where the channel expects its band
             meas_pos.append(math.nan)
             se_pos.append(None)
             z_pos.append(math.inf)
+            dofs.append(None)
             continue
         meas_pos.append(s_exp + stat / total)
         se_pos.append(sd / total)
         z_pos.append(abs(stat) / max(sd, 1e-300))
-    p_pos = [float(stats.two_sided_p(z)) if math.isfinite(z) else 0.0 for z in z_pos]
+        dofs.append(dof)
+    p_pos = [float(stats.two_sided_p(z, d)) if math.isfinite(z) else 0.0 for z, d in zip(z_pos, dofs)]
     order_exp = "".join("RGB"[i] for i in np.argsort(exp_pos))
     order_meas = "".join("RGB"[i] for i in np.argsort(meas_pos)) if not np.isnan(meas_pos).any() else "?"
     c, wl, u = gt["centres"], gt["wavelengths"], gt["fan_direction"]
@@ -370,7 +383,7 @@ def _positions(label, gt, s, meas, exp_img, var, threshold):
     return _probe(name, exp_pos, meas_pos, float(max(z_pos)), "sigma",
                   bool(order_meas == order_exp and min(p_pos) >= threshold),
                   unit_positions="px along the fan (towards more deviation) from 550 nm's band centre",
-                  standard_error_px=se_pos, p_min=float(min(p_pos)), threshold=threshold,
+                  standard_error_px=se_pos, dof=dofs, p_min=float(min(p_pos)), threshold=threshold,
                   order_expected=order_exp, order_measured=order_meas, fraunhofer_px=lines,
                   beam_width_px=gt["beam_width_px"], fan_spread_px=gt["fan_spread_px"])
 
@@ -384,11 +397,12 @@ def _energy(label, gt, mask, meas, exp_img, var, threshold):
     flux_m = np.sum(scale[:, None] * meas, axis=0)
     flux_e = gt["flux"]
     model = np.abs(np.sum(scale[:, None] * exp_img, axis=0) - flux_e)  # the footprint sum's own error
-    se = np.sqrt(np.sum(scale[:, None] ** 2 * var, axis=0))
+    se_dof = [_linear_test(scale, var[:, c]) for c in range(3)]
+    se, dof = np.array([x[0] for x in se_dof]), np.array([x[1] for x in se_dof])
     z = np.abs(flux_m - flux_e) / np.sqrt(se ** 2 + model ** 2)
-    p = stats.two_sided_p(z)
+    p = np.array([stats.two_sided_p(zc, dc) for zc, dc in zip(z, dof)])
     return _probe(name, flux_e, flux_m, float(z.max()), "sigma", bool(np.min(p) >= threshold),
-                  standard_error=se.tolist(), model_error=model.tolist(),
+                  standard_error=se.tolist(), dof=dof.tolist(), model_error=model.tolist(),
                   relative_error=((flux_m - flux_e) / flux_e).tolist(),
                   flux_unpolarised=gt["flux_unpolarised"].tolist(), p_min=float(np.min(p)), threshold=threshold,
                   transmittance_550nm=float(gt["T"][np.argmin(np.abs(gt["wavelengths"] - 550))]))
