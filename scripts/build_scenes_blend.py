@@ -211,41 +211,45 @@ def build_dispersion(square, sphere):
     theta_i = math.asin(n0 * math.sin(math.radians(apex / 2)))
     turn = math.radians(apex / 2) - theta_i
     deviation = 2 * theta_i - math.radians(apex)
+    # Lengths are 10x a lab bench's (the beam 0.08 x 0.5, the screen 40 away): Mitsuba offsets every
+    # spawned ray by 8.9e-5 x (1 + |p|) along the normal, which moves a refracted beam sideways;
+    # at this size that is ~0.002 px (at 1x, measured: ~0.01 px, as large as the noise at 64 spp)
+    u = 10.0
     scene = new_scene("dispersion_prism", "dispersion", 64,
-                      f"A collimated D65 beam (8 x 50 mm) through a {apex:g} degree N-BK7 prism at minimum deviation "
-                      f"for {lam0:g} nm, fanned out on a white screen 4 m away; light tracing (ptracer)",
+                      f"A collimated D65 beam (0.08 x 0.5) through a {apex:g} degree N-BK7 prism (sides 5) at minimum "
+                      f"deviation for {lam0:g} nm, fanned out on a white screen 40 away; light tracing (ptracer)",
                       resolution=(256, 128))
     scene.spectral_bench.integrator = "PTRACER"
     bk7 = material("N-BK7", "DIELECTRIC", ior_model="NAMED", glass="N-BK7", ext_ior=1.000277, distribution="SMOOTH")
-    prism = add_object(scene, "prism", prism_mesh("prism", apex, 0.5, 0.3), bk7, "MESH", rotation=(0, 0, turn))
+    add_object(scene, "prism", prism_mesh("prism", apex, 0.5 * u, 0.3 * u), bk7, "MESH", rotation=(0, 0, turn))
     # the entry face's middle, turned with the prism: the beam's height
     half = math.radians(apex / 2)
-    h = 0.5 * math.cos(half)
-    mx, my = -0.25 * math.sin(half), 0.6 * h - 0.5 * h
+    h = 0.5 * u * math.cos(half)
+    mx, my = -0.25 * u * math.sin(half), 0.6 * h - 0.5 * h
     beam_y = mx * math.sin(turn) + my * math.cos(turn)
     exit_x, exit_y = -mx * math.cos(turn) - my * math.sin(turn), -mx * math.sin(turn) + my * math.cos(turn)
     light = bpy.data.lights.new("beam", "AREA")
-    light.shape, light.size, light.size_y = "RECTANGLE", 0.05, 0.008  # 50 mm tall, 8 mm wide
+    light.shape, light.size, light.size_y = "RECTANGLE", 0.05 * u, 0.008 * u  # tall, narrow across the fan
     light.spectral_bench.collimated = True
     r = light.spectral_bench.radiance
     r.kind, r.named, r.scale = "NAMED", "cie_d65", 40.0
     light.energy = 1.0
     beam = bpy.data.objects.new("beam", light)
-    beam.location = (-2.0, beam_y, 0.0)
+    beam.location = (-2.0 * u, beam_y, 0.0)
     beam.rotation_euler = (0.0, math.radians(-90.0), 0.0)  # the light's -Z (its emission) along +X
     scene.collection.objects.link(beam)
     dx, dy = math.cos(-deviation), math.sin(-deviation)
-    distance = 4.0
+    distance = 4.0 * u
     centre = (exit_x + distance * dx, exit_y + distance * dy, 0.0)
     gamma = math.atan2(-dx, dy)  # turns the square's normal (-Y after the X turn) to face the prism
     screen = add_object(scene, "screen", square, material("screen_0.8", "DIFFUSE", reflectance=0.8), "RECTANGLE",
                         location=centre, rotation=(math.radians(90), 0, gamma))
-    screen.scale = (0.6, 0.3, 1.0)
-    # the camera faces the screen from 1 m, aimed 55 mm to the less deviated side, so that a fan
+    screen.scale = (0.6 * u, 0.3 * u, 1.0)
+    # the camera faces the screen from 10, aimed 0.55 to the less deviated side, so that a fan
     # 2 degrees less deviated (fused silica in place of N-BK7) is in view as well
     along = (math.cos(gamma), math.sin(gamma))  # the screen's local x: towards more deviation
-    target = (centre[0] - 0.055 * along[0], centre[1] - 0.055 * along[1], 0.0)
-    origin = (target[0] - 1.0 * dx, target[1] - 1.0 * dy, 0.25)
+    target = (centre[0] - 0.055 * u * along[0], centre[1] - 0.055 * u * along[1], 0.0)
+    origin = (target[0] - 1.0 * u * dx, target[1] - 1.0 * u * dy, 0.25 * u)
     cam = add_camera(scene, "prism_camera", origin=origin, target=target)
     cam.data.lens = cam.data.sensor_width / (2 * math.tan(math.radians(18.0) / 2))  # 18 degrees wide
 
