@@ -143,7 +143,7 @@ class DispersiveDielectric(mi.BSDF):
             sel_r = active & (sample1 <= f_mean)
             p_r, p_t = f_mean, 1.0 - f_mean
         else:
-            sel_r = active & dr.full(mi.Bool, bool(has_r), dr.width(cos_i))
+            sel_r = active & bool(has_r)
             p_r, p_t = mi.Float(1.0), mi.Float(1.0)
         j = mi.UInt32(dr.clip(sample2.x * LANES, 0.0, LANES - 1.0))
         cos_t = self._pick([f[1] for f in fr], j)
@@ -176,7 +176,8 @@ class DispersiveDielectric(mi.BSDF):
         cos_i, cos_o = mi.Frame3f.cos_theta(si.wi), mi.Frame3f.cos_theta(wo)
         active = active & (cos_i != 0.0)
         reflect = cos_i * cos_o > 0.0
-        active &= (has_r & reflect) | (has_t & ~reflect)
+        transmit = cos_i * cos_o <= 0.0  # not ~reflect: scalar variants' masks are Python bools
+        active &= (has_r & reflect) | (has_t & transmit)
         etas = etas if etas is not None else self._eta(si.wavelengths)
         distr = self._distr()
         radiance = ctx.mode == mi.TransportMode.Radiance
@@ -224,7 +225,7 @@ class DispersiveDielectric(mi.BSDF):
         if has_r and has_t:
             sel_r = active & (u <= f)
         else:
-            sel_r = active & dr.full(mi.Bool, bool(has_r), dr.width(cos_i))
+            sel_r = active & bool(has_r)
         bs.wo = dr.select(sel_r, mi.reflect(si.wi, m), mi.refract(si.wi, m, cos_t, eta_ti))
         bs.eta = dr.select(sel_r, 1.0, eta_it)
         bs.sampled_component = dr.select(sel_r, mi.UInt32(0), mi.UInt32(1))
