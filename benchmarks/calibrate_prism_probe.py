@@ -7,8 +7,8 @@ alarms on unbiased renders at the scene's default settings (its spp, 2 passes, d
 (3) power: fused silica where N-BK7 is declared, N-BK7 with n^2 - 1 scaled so that n_d is 1e-4
 higher, a 1 % brighter beam, and (4) what the renderer does at 16x the samples (evidence for the
 known deviations: its film's CIE normalisation and the ray-spawn offset at refractions, measured
-again with the whole scene moved 30 units away from the origin). --write records the tables in
-benchmarks/CALIBRATION.md.
+again with the whole scene moved 30 units away from the origin), (5) Mitsuba's film against
+colorimetry.py on a uniform D65 environment. --write records the tables in benchmarks/CALIBRATION.md.
 """
 import argparse
 import copy
@@ -123,6 +123,23 @@ def main():
                          f"{', '.join(f'{x:.4f}' for x in pos['standard_error_px'])} | "
                          f"{', '.join(f'{x:+.5f}' for x in en['relative_error'])} | "
                          f"{', '.join(f'{x:.5f}' for x in rel_se)} |")
+    # (5) Mitsuba's film against colorimetry.py: a camera path tracer seeing only a uniform D65 sky
+    from spectral_bench.exporters import colorimetry
+    d65 = {"type": "named", "name": "cie_d65", "scale": 1.0}
+    sky = {"format": ir.FORMAT, "version": ir.VERSION, "name": "d65_sky", "case": "custom", "needs": ["spectral"],
+           "render": {"spp": 4096, "width": 16, "height": 16, "max_depth": 2, "filter": "box", "integrator": "path"},
+           "camera": copy.deepcopy(base["camera"]), "environment": {"type": "uniform", "radiance": d65}, "objects": []}
+    with tempfile.TemporaryDirectory() as tmp:
+        xml = backend.export(sky, Path(tmp) / "m")
+        backend.render(xml, backend.mode_for(sky)[0], 4096, Path(tmp) / "r.exr", passes=8, seed=900)
+        _, img, se = exr.read_image_and_stderr(Path(tmp) / "r.exr")
+    expected = colorimetry.xyz_to_srgb(colorimetry.spectrum_xyz(d65))
+    n = img.shape[0] * img.shape[1]
+    ratio = img[..., :3].mean(axis=(0, 1)) / expected
+    rel_se = np.sqrt((se[..., :3] ** 2).sum(axis=(0, 1))) / n / expected
+    lines += ["", "Mitsuba's spectral film against colorimetry.py (camera path tracer, uniform D65 environment only, "
+              "16x16, 4096 spp x 8): rendered / expected R, G, B = "
+              + ", ".join(f"{x:.5f}" for x in ratio) + " (standard errors " + ", ".join(f"{x:.1e}" for x in rel_se) + ")."]
     text = "\n".join(lines + [""])
     print(text)
     if args.write:

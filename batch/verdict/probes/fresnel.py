@@ -9,7 +9,7 @@ crossed polariser extinguishes the reflection. Without a polariser and with Stok
 degree of polarisation is (Rs - Rp)/(Rs + Rp)."""
 import numpy as np
 
-from ....exporters import colorimetry
+from ....exporters import colorimetry, dispersion
 from .. import raycast
 from .common import MIN_PIXELS, probe as _probe
 
@@ -75,6 +75,11 @@ def brewster(m):
     lights = [i for i, o in enumerate(objs) if o.get("emitter") and o["shape"]["type"] == "rectangle"]
     if not (pol or stokes):
         return out
+    for di in [i for i in dielectrics if dispersion.is_model(objs[i]["bsdf"]["int_ior"])]:
+        # the closed form takes one IOR; a dispersive one is said so, not approximated
+        out.append(_probe(f"reflection {objs[di]['name']}", None, None, None, "sigma", None,
+                          reason="dispersive int_ior: the Fresnel probe needs a constant IOR"))
+    dielectrics = [i for i in dielectrics if not dispersion.is_model(objs[i]["bsdf"]["int_ior"])]
     for di in dielectrics:
         for li in lights:
             corners, _, _, _ = _reflection_geometry(scene, di, li, w, h, "corners")
