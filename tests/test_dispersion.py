@@ -104,9 +104,14 @@ import sys; sys.path.insert(0, {plugins!r})
 import dispersive_dielectric as dd
 dd.register()
 wavelengths = mi.Spectrum(430.0, 510.0, 590.0, 680.0)  # distinct lanes: four different IORs
+pdf_right = dd.DispersiveDielectric.pdf
 results = []
-for dist, alpha, wi in (("ggx", 0.3, [0.5, 0.2, 0.8426]), ("beckmann", 0.2, [0.3, -0.4, -0.8660]),
-                        ("ggx", 0.6, [0.9, 0.1, 0.4243])):
+lane0 = lambda self, ctx, si, wo, active=True: dd.DispersiveDielectric._eval_pdf_rough(
+    self, ctx, si, wo, active, [self._eta(si.wavelengths)[0]] * 4)[1]
+for dist, alpha, wi, wrong in (("ggx", 0.1, [0.5, 0.2, 0.8426], False), ("beckmann", 0.2, [0.3, -0.4, -0.8660], False),
+                               ("ggx", 0.6, [0.9, 0.1, 0.4243], False), ("ggx", 0.1, [0.5, 0.2, 0.8426], True)):
+    # wrong: pdf() returns the density had lane 0 been drawn instead of the mixture: must fail
+    dd.DispersiveDielectric.pdf = lane0 if wrong else pdf_right
     props = {{"type": dd.PLUGIN_NAME, "model": "sellmeier", "B1": 1.73759695, "B2": 0.313747346, "B3": 1.89878101,
              "C1": 0.013188707, "C2": 0.0623068142, "C3": 155.23629, "ext_ior": 1.0, "distribution": dist, "alpha": alpha}}
     bsdf = mi.load_dict(props)
@@ -136,25 +141,27 @@ for dist, alpha, wi in (("ggx", 0.3, [0.5, 0.2, 0.8426]), ("beckmann", 0.2, [0.3
     kept = np.any(wt != 0, axis=0) if wt.shape[0] == 4 else np.any(wt != 0, axis=-1)  # a wasted sample weighs 0
     r, wt = (r[:, kept], wt[:, kept]) if wt.shape[0] == 4 else (r[kept], wt[kept])
     err = float(np.max(np.abs(r - wt) / np.maximum(1.0, np.abs(wt))))
-    results.append((dist, alpha, ok, err))
+    results.append((dist, alpha, wrong, ok, err))
 print(results)
 """
 
 
-def test_rough_plugin_samples_its_own_density_chi_square():
+def test_rough_plugin_samples_its_own_density_chi_square(tmp_path):
     """mi.chi2 on an llvm variant: the rough plugin's directions follow its lane-mixture pdf,
-    for GGX and Beckmann, from outside and from inside, with four distinct wavelengths."""
+    for GGX and Beckmann, from outside and from inside, with four distinct wavelengths; a pdf that
+    is one lane's density instead of the mixture is rejected."""
     if llvm.find()[0] is None:
         pytest.skip(f"needs an llvm variant: {llvm.find()[1]}")
     code = CHI2.format(plugins=str(ROOT / "exporters" / "mitsuba_plugins"))
     proc = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], capture_output=True, text=True,
-                          timeout=600, env=llvm.env())
+                          timeout=600, env=llvm.env(), cwd=tmp_path)  # a rejected test writes chi2_data.py there
     assert proc.returncode == 0, proc.stderr[-3000:]
     results = eval(proc.stdout.strip().splitlines()[-1])  # noqa: S307 - our own child's repr
-    assert len(results) == 3
-    for dist, alpha, ok, err in results:
-        assert ok, (dist, alpha, proc.stdout[-3000:])
-        assert err < 1e-3, (dist, alpha, err)
+    assert len(results) == 4
+    for dist, alpha, wrong, ok, err in results:
+        assert ok is not wrong, (dist, alpha, wrong, proc.stdout[-3000:])
+        if not wrong:
+            assert err < 1e-3, (dist, alpha, err)
 
 
 @pytest.fixture(scope="module")

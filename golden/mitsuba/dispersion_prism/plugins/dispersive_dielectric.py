@@ -149,7 +149,8 @@ class DispersiveDielectric(mi.BSDF):
         cos_t = self._pick([f[1] for f in fr], j)
         eta_it = self._pick([f[2] for f in fr], j)
         eta_ti = self._pick([f[3] for f in fr], j)
-        bs.wo = dr.select(sel_r, mi.reflect(si.wi), mi.refract(si.wi, cos_t, eta_ti))
+        bs.wo = dr.select(active, dr.select(sel_r, mi.reflect(si.wi), mi.refract(si.wi, cos_t, eta_ti)),
+                          mi.Vector3f(0.0))
         bs.pdf = dr.detach(dr.select(sel_r, p_r, p_t))
         bs.eta = dr.select(sel_r, 1.0, eta_it)
         bs.sampled_component = dr.select(sel_r, mi.UInt32(0), mi.UInt32(1))
@@ -226,7 +227,9 @@ class DispersiveDielectric(mi.BSDF):
             sel_r = active & (u <= f)
         else:
             sel_r = active & bool(has_r)
-        bs.wo = dr.select(sel_r, mi.reflect(si.wi, m), mi.refract(si.wi, m, cos_t, eta_ti))
+        # where nothing was sampled (no microfacet normal) the direction is 0, as Mitsuba's own
+        bs.wo = dr.select(active, dr.select(sel_r, mi.reflect(si.wi, m), mi.refract(si.wi, m, cos_t, eta_ti)),
+                          mi.Vector3f(0.0))
         bs.eta = dr.select(sel_r, 1.0, eta_it)
         bs.sampled_component = dr.select(sel_r, mi.UInt32(0), mi.UInt32(1))
         bs.sampled_type = dr.select(sel_r, mi.UInt32(+mi.BSDFFlags.GlossyReflection),
