@@ -34,8 +34,10 @@ mixture and ``eval`` every lane's own f_k(wi, wo) |cos theta_o|. Every lane's we
 f_k(wo) |cos theta_o| / p(wo): an unbiased one-sample estimator for each lane because
 p(wo) >= p_k(wo) / 4 > 0 wherever f_k(wo) > 0 (the one-sample model of multiple importance
 sampling: E. Veach, PhD thesis, Stanford 1997, section 9.2.4).
-No lane is dropped, so it has lower variance than keeping one lane (whose weight
-f_j / (p_j / 4) is the special case that puts all weight on the lane that was drawn). MIS with
+No lane is dropped, so it has lower variance than keeping one lane (weight f_j / (p_j / 4) on the
+lane drawn, 0 on the others; also unbiased): measured on the same samples, N-SF11, GGX alpha
+0.05-0.5, from both sides, each lane's variance is 8-25x lower with the mixture
+(benchmarks/plugin_lane_estimators.py). MIS with
 emitter sampling uses the same mixture density, so each lane's MIS weights still sum to one.
 tests/test_dispersion.py checks with mi.chi2 that the sampler follows ``pdf``.
 """
