@@ -68,7 +68,17 @@ class SPECTRAL_BENCH_PT_material(_Base, bpy.types.Panel):
                 for key in ("film_ior", "film_thickness", "film_ext_ior"):
                     self.layout.prop(a, key)
         elif a.kind == "DIELECTRIC":
-            self.layout.prop(a, "int_ior")
+            self.layout.prop(a, "ior_model")
+            if a.ior_model == "CONSTANT":
+                self.layout.prop(a, "int_ior")
+            elif a.ior_model == "NAMED":
+                self.layout.prop(a, "glass")
+            elif a.ior_model == "SELLMEIER":
+                self.layout.prop(a, "sellmeier_b")
+                self.layout.prop(a, "sellmeier_c")
+            else:
+                for key in ("cauchy_a", "cauchy_b", "cauchy_c"):
+                    self.layout.prop(a, key)
             self.layout.prop(a, "ext_ior")
         if a.kind in ("CONDUCTOR", "DIELECTRIC"):
             self.layout.prop(a, "distribution")
@@ -92,7 +102,9 @@ class SPECTRAL_BENCH_PT_light(_ObjectDataBase, bpy.types.Panel):
     data_type = bpy.types.Light
 
     def draw(self, context):
-        _draw_spectrum(self.layout, context.object.data.spectral_bench.radiance, "Radiance", "light.radiance")
+        a = context.object.data.spectral_bench
+        self.layout.prop(a, "collimated")
+        _draw_spectrum(self.layout, a.radiance, "Irradiance" if a.collimated else "Radiance", "light.radiance")
         _draw_problems(self.layout, validation.light_problems(context.object.data))
 
 
@@ -118,7 +130,8 @@ class SPECTRAL_BENCH_PT_scene(_Base, bpy.types.Panel):
 
     def draw(self, context):
         a = context.scene.spectral_bench
-        for key in ("case", "description", "spp", "max_depth", "output", "needs_polarization", "needs_fluorescence"):
+        for key in ("case", "description", "spp", "max_depth", "output", "integrator", "needs_polarization",
+                    "needs_fluorescence"):
             self.layout.prop(a, key)
 
 

@@ -5,9 +5,9 @@ IR validation with scene, object and field, rather than silently clamped.
 """
 import bpy
 from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProperty,
-                       IntProperty, PointerProperty, StringProperty)
+                       FloatVectorProperty, IntProperty, PointerProperty, StringProperty)
 
-from ..exporters import ir, spectra
+from ..exporters import dispersion, ir, spectra
 
 SPECTRUM_TYPES = [
     ("CONSTANT", "Constant", "The same value at every wavelength"),
@@ -42,6 +42,12 @@ MATERIAL_KINDS = [
     ("CONDUCTOR", "Conductor", "Metal with complex IOR (named table or eta/k spectra)"),
     ("DIELECTRIC", "Dielectric", "Transparent dielectric with a real IOR"),
 ]
+IOR_MODELS = [
+    ("CONSTANT", "Constant", "One IOR at every wavelength (every renderer's native dielectric)"),
+    ("NAMED", "Named Glass", "A glass with the manufacturer's Sellmeier coefficients (exporters/dispersion.py)"),
+    ("SELLMEIER", "Sellmeier", "n^2 = 1 + sum B_i l^2 / (l^2 - C_i), l in micrometres, C_i in um^2"),
+    ("CAUCHY", "Cauchy", "n = A + B / l^2 + C / l^4, l in micrometres"),
+]
 DISTRIBUTIONS = [("SMOOTH", "Smooth", "Perfectly specular")] + [
     (d.upper(), d.upper() if d == "ggx" else d.title(), f"{d} microfacet distribution") for d in ir.DISTRIBUTIONS]
 
@@ -56,6 +62,15 @@ class MaterialProps(bpy.types.PropertyGroup):
     k: PointerProperty(type=SpectrumProps)
     int_ior: FloatProperty(name="Interior IOR", default=1.5046, soft_min=1.0, soft_max=3.0, precision=4)
     ext_ior: FloatProperty(name="Exterior IOR", default=ir.AIR_IOR, soft_min=1.0, soft_max=3.0, precision=6)
+    ior_model: EnumProperty(name="IOR Model", items=IOR_MODELS, default="CONSTANT",
+                            description="Interior IOR as a function of wavelength (dispersion)")
+    glass: StringProperty(name="Glass", default="N-BK7", search=lambda self, context, edit_text: list(dispersion.NAMED_GLASSES))
+    sellmeier_b: FloatVectorProperty(name="B", size=3, default=(1.03961212, 0.231792344, 1.01046945), precision=8)
+    sellmeier_c: FloatVectorProperty(name="C (um^2)", size=3, default=(0.00600069867, 0.0200179144, 103.560653),
+                                     precision=8)
+    cauchy_a: FloatProperty(name="A", default=1.5046, precision=6)
+    cauchy_b: FloatProperty(name="B (um^2)", default=0.0042, precision=8)
+    cauchy_c: FloatProperty(name="C (um^4)", default=0.0, precision=8)
     distribution: EnumProperty(name="Microfacets", items=DISTRIBUTIONS, default="SMOOTH")
     alpha: FloatProperty(name="Alpha", default=0.1, soft_min=0.0, soft_max=1.0, precision=4,
                          description="Microfacet width alpha (Blender roughness r is alpha = r^2)")
@@ -70,6 +85,10 @@ class MaterialProps(bpy.types.PropertyGroup):
 
 class LightProps(bpy.types.PropertyGroup):
     radiance: PointerProperty(type=SpectrumProps)
+    collimated: BoolProperty(name="Collimated Beam", default=False,
+                             description="Emit only along the light's direction (a parallel beam of the light's shape); "
+                                         "the spectrum is then the irradiance across the beam. Only a light tracer "
+                                         "(scene Integrator: Light Tracer) renders it")
 
 
 class WorldProps(bpy.types.PropertyGroup):
@@ -108,6 +127,10 @@ class SceneProps(bpy.types.PropertyGroup):
     output: EnumProperty(name="Output", items=OUTPUTS, default="RGB")
     needs_polarization: BoolProperty(name="Needs Polarisation", default=False)
     needs_fluorescence: BoolProperty(name="Needs Fluorescence", default=False)
+    integrator: EnumProperty(name="Integrator", default="PATH", items=[
+        ("PATH", "Path Tracer", "Paths from the camera (every backend)"),
+        ("PTRACER", "Light Tracer", "Paths from the lights (Mitsuba's ptracer): caustics such as a collimated "
+                                    "beam through a prism; ART has none")])
 
 
 CLASSES = (SpectrumSample, SpectrumProps, MaterialProps, LightProps, WorldProps, CameraProps, ObjectProps, SceneProps)

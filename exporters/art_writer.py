@@ -16,15 +16,17 @@ spectrum came out 10 % darker under ``-s46e`` (identical under the default 8 sam
 illuminants with an ART table use it.
 
 What ART cannot express is returned per object and field, never silently replaced:
-upstream ART has no GGX or Beckmann microfacets (Blinn only), no thin-film interference, and its
-outside medium is vacuum. Named conductors are written with the IR's own eta/k tables (Mitsuba's
-data, exporters/data), not ART's material presets, so both renderers render the same metal.
+upstream ART has no GGX or Beckmann microfacets (Blinn only), no thin-film interference, no light
+tracer and no collimated emitter; of the IOR models only Sellmeier (and named glasses, which are
+Sellmeier) and constants; and its outside medium is vacuum. Named conductors are written with the
+IR's own eta/k tables (Mitsuba's data, exporters/data), not ART's material presets, so both
+renderers render the same metal.
 """
 from pathlib import Path
 
 import numpy as np
 
-from . import ir, mesh_io, spectra
+from . import dispersion, ir, mesh_io, spectra
 
 # ART's own CIE illuminant tables are raw CIE data (D65 = 100 at 560 nm): the IR's scale s
 # (1.0 at 560 nm) becomes s / 100 on them
@@ -62,6 +64,23 @@ class _Writer:
         rows = ",\n            ".join(", ".join(pts[i:i + 6]) for i in range(0, len(pts), 6))
         return f"CONST_COLOUR_PSSPECTRUM(1.0,\n            {rows},\n            PSS_END)"
 
+    def ior(self, obj):
+        """ART's expression of a dielectric's int_ior: a grey colour, or a Sellmeier dispersion
+        CONST_SELLMEIER_DISPERSION_6(B1, C1, B2, C2, B3, C3) (ArnSellmeierDispersion.m: n^2 = 1 +
+        sum B_i l^2 / (l^2 - C_i), l in micrometres, C_i in um^2, the IR's convention); None
+        (and an unsupported entry) for a model ART cannot take exactly."""
+        value = obj["bsdf"]["int_ior"]
+        if not dispersion.is_model(value):
+            return f"CONST_COLOUR_GREY({_num(value)})"
+        coeffs = dispersion.sellmeier(value)
+        if coeffs is None:
+            self.unsupported.append((obj["name"], "bsdf.int_ior",
+                                     f"ART has no {value.get('type')} dispersion and it is not an exact Sellmeier "
+                                     "(ART takes CONST_SELLMEIER_DISPERSION_6 only)"))
+            return None
+        b, c = coeffs
+        return "CONST_SELLMEIER_DISPERSION_6(" + ", ".join(_num(x) for pair in zip(b, c) for x in pair) + ")"
+
     def surface(self, obj):
         """ART material expression of an object's BSDF (None when unsupported)."""
         b, name = obj["bsdf"], obj["name"]
@@ -89,7 +108,10 @@ class _Writer:
             if abs(ext - 1.0) > 1e-3:
                 self.unsupported.append((name, "bsdf.ext_ior", f"ART's outside medium is vacuum; got {ext}"))
                 return None
-            material = f"STANDARD_MATERIAL(CONST_COLOUR_GREY({_num(b['int_ior'])}), CONST_COLOUR_GREY(0.0))"
+            ior = self.ior(obj)
+            if ior is None:
+                return None
+            material = f"STANDARD_MATERIAL({ior}, CONST_COLOUR_GREY(0.0))"
             if obj["shape"]["type"] != "rectangle":
                 # a dielectric solid takes its surface and its interior medium as two attributes;
                 # SUPPLY_MATERIAL rendered ART's glass spheres dark (measured), while a lone
@@ -124,6 +146,16 @@ class _Writer:
             mesh_io.write_ply(self.out / rel, v, faces)
             self.lines.append(f'    ArObj {var} = [ PLY_MESH("{rel}") apply : {material} ];')
         return var
+
+    def scene_problems(self):
+        """What ART cannot render in the scene as a whole: light tracing, collimated beams."""
+        sc = self.scene
+        integrator = sc["render"].get("integrator", "path")
+        if integrator != "path":
+            self.unsupported.append(("render", "integrator", f"{integrator!r}: ART's PATHTRACER traces from the camera only"))
+        for obj in sc["objects"]:
+            if (obj.get("emitter") or {}).get("type") == "collimated":
+                self.unsupported.append((obj["name"], "emitter.type", "ART has no collimated (directional area) emitter"))
 
     def camera(self):
         cam, r = self.scene["camera"], self.scene["render"]
@@ -173,7 +205,10 @@ class _Writer:
                       f"#ifndef SAMPLES\n#define SAMPLES {sc['render']['spp']}\n#endif", "",
                       "ARM_MAIN_FUNCTION(scene)", "{"]
         names = []
+        self.scene_problems()
         for k, obj in enumerate(sc["objects"]):
+            if (obj.get("emitter") or {}).get("type") == "collimated":
+                continue  # reported by scene_problems
             if obj.get("emitter"):
                 colour, brightness = self.emission(obj["emitter"]["radiance"])
                 material = f"LAMBERT_EMITTER({colour}, {_num(brightness)})"
@@ -205,7 +240,10 @@ class _Writer:
 def unsupported(scene, ggx=False):
     """[(object, field, message)] of what ART cannot express in ``scene``, without writing."""
     w = _Writer(scene, Path("."), ggx=ggx)
+    w.scene_problems()
     for obj in scene["objects"]:
+        if (obj.get("emitter") or {}).get("type") == "collimated":
+            continue
         if obj.get("emitter"):
             if obj.get("bsdf"):
                 w.unsupported.append((obj["name"], "bsdf", "an emitter with a BSDF (ART emitters reflect nothing)"))

@@ -45,6 +45,23 @@ def spectrum(props):
     return {"type": "blackbody", "temperature": float(props.temperature), "scale": float(props.scale)}
 
 
+def _digits(x):
+    """Blender stores float32: eight significant digits keep Sellmeier coefficients (which span
+    1e-3 to 1e2) as entered."""
+    return float(f"{float(x):.8g}")
+
+
+def _ior(a):
+    """The interior IOR: a number, or an IOR model (exporters/dispersion.py)."""
+    if a.ior_model == "NAMED":
+        return {"type": "named", "name": a.glass}
+    if a.ior_model == "SELLMEIER":
+        return {"type": "sellmeier", "B": [_digits(x) for x in a.sellmeier_b], "C": [_digits(x) for x in a.sellmeier_c]}
+    if a.ior_model == "CAUCHY":
+        return {"type": "cauchy", "A": _digits(a.cauchy_a), "B": _digits(a.cauchy_b), "C": _digits(a.cauchy_c)}
+    return _clean(a.int_ior)
+
+
 def material_bsdf(mat):
     a = mat.spectral_bench
     if a.kind == "DIFFUSE":
@@ -60,7 +77,7 @@ def material_bsdf(mat):
             out["thin_film"] = {"ior": _clean(a.film_ior), "thickness": _clean(a.film_thickness),
                                 "ext_ior": _clean(a.film_ext_ior)}
     elif a.kind == "DIELECTRIC":
-        out = {"type": "dielectric", "int_ior": _clean(a.int_ior), "ext_ior": _clean(a.ext_ior)}
+        out = {"type": "dielectric", "int_ior": _ior(a), "ext_ior": _clean(a.ext_ior)}
     if a.distribution != "SMOOTH":
         out["roughness"] = {"distribution": a.distribution.lower(), "alpha": _clean(a.alpha)}
     return out
@@ -113,8 +130,11 @@ def _light_object(obj, problems):
     # Blender area lights emit along local -Z; the IR rectangle emits along +Z: turn it over
     # (180 degrees about X), then size it.
     local = Matrix.Diagonal((sx, sy, 1.0, 1.0)) @ Matrix.Rotation(math.pi, 4, "X")
+    emitter = {"type": "area", "radiance": spectrum(light.spectral_bench.radiance)}
+    if light.spectral_bench.collimated:
+        emitter = {"type": "collimated", "irradiance": spectrum(light.spectral_bench.radiance)}
     return {"name": obj.name, "shape": {"type": "rectangle", "to_world": _matrix(_world(obj) @ local)},
-            "bsdf": None, "emitter": {"type": "area", "radiance": spectrum(light.spectral_bench.radiance)}}
+            "bsdf": None, "emitter": emitter}
 
 
 def _camera(scene, problems):
@@ -154,7 +174,7 @@ def extract_scene(scene):
         "needs": [n for n, on in (("polarization", a.needs_polarization),
                                   ("fluorescence", a.needs_fluorescence)) if on],
         "render": {"spp": a.spp, "max_depth": a.max_depth, "width": int(r.resolution_x * pct),
-                   "height": int(r.resolution_y * pct), "filter": "box", "integrator": "path"},
+                   "height": int(r.resolution_y * pct), "filter": "box", "integrator": a.integrator.lower()},
         "camera": _camera(scene, problems),
         "environment": None,
         "objects": [],

@@ -7,10 +7,16 @@ Conventions (every writer follows them):
 - ``rectangle`` is the square [-1, 1]^2 in its local z = 0 plane, normal and emission +Z.
 - ``sphere`` is analytic: ``center`` and ``radius``.
 - ``mesh`` has inline ``vertices``/``faces`` (triangles) or a ``file`` (PLY/OBJ, relative to
-  the JSON file), both with an optional ``to_world``.
+  the JSON file), both with an optional ``to_world``. Faces are flat (no normals are
+  interpolated) and wound counter-clockwise seen from outside (their normals point outwards).
 - Roughness ``alpha`` is the microfacet width (GGX/Beckmann alpha, Walter et al. 2007);
   alpha 0 is a smooth surface. Blender's "Roughness" r corresponds to alpha = r^2.
 - Spectra and their radiometric normalisation: see spectra.py.
+- A dielectric's ``int_ior`` is a number or an IOR model n(lambda) (Sellmeier, Cauchy, a named
+  glass): see dispersion.py. A model needs "dispersion" (and "spectral").
+- An emitter is ``area`` (Lambertian, ``radiance``) or ``collimated`` (a rectangle emitting only
+  along its +Z normal, ``irradiance`` across the beam: Mitsuba's directionalarea); a collimated
+  beam is reached only by light tracing (``render.integrator`` "ptracer").
 - Polarisation: ``camera.polarizer.angle`` is the transmission axis of an ideal linear
   polariser in front of the lens, in degrees counter-clockwise from image right as seen from the
   camera (0 = horizontal, 90 = vertical; ART's 0 degrees is horizontal too). ``render.output``
@@ -65,8 +71,10 @@ def derived_needs(scene):
             if spectral(bsdf.get(key)):
                 needs.add("spectral")
         em = obj.get("emitter") or {}
-        if spectral(em.get("radiance")):
+        if spectral(em.get("radiance")) or spectral(em.get("irradiance")):
             needs.add("spectral")
+        if bsdf.get("type") == "dielectric" and isinstance(bsdf.get("int_ior"), dict):
+            needs.update(("dispersion", "spectral"))  # an IOR model: n varies with wavelength
     return sorted(needs)
 
 

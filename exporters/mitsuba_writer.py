@@ -8,12 +8,13 @@ from pathlib import Path
 
 import numpy as np
 
-from . import ir, mesh_io, mitsuba_plugins, spectra
+from . import dispersion, ir, mesh_io, mitsuba_plugins, spectra
 
 # Blender/OpenGL cameras look down -Z with +Y up; Mitsuba's look down +Z with +X to the
 # image's left. Mitsuba to_world = IR to_world @ diag(-1, 1, -1).
 _CAMERA_FLIP = np.diag([-1.0, 1.0, -1.0, 1.0])
 THIN_FILM_PLUGIN = "sb_thin_film_conductor"  # a conductor with bsdf.thin_film
+DISPERSIVE_PLUGIN = "sb_dispersive_dielectric"  # exporters/mitsuba_plugins/dispersive_dielectric.py
 POLARIZER_DISTANCE = 0.05  # scene units in front of the lens (the sensor's near clip is 0.01)
 
 
@@ -75,6 +76,16 @@ class _Writer:
             else:
                 self.spectrum(node, "eta", b["eta"], f"{stem}_eta")
                 self.spectrum(node, "k", b["k"], f"{stem}_k")
+        elif b["type"] == "dielectric" and dispersion.is_dispersive(b["int_ior"]):
+            # n(lambda): this project's plugin (Mitsuba 3's dielectrics take one IOR)
+            self.plugins.add(DISPERSIVE_PLUGIN)
+            node = ET.SubElement(parent, "bsdf", type=DISPERSIVE_PLUGIN)
+            for key, value in dispersion.plugin_coefficients(b["int_ior"]).items():
+                if isinstance(value, str):
+                    ET.SubElement(node, "string", name=key, value=value)
+                else:
+                    ET.SubElement(node, "float", name=key, value=repr(float(value)))
+            ET.SubElement(node, "float", name="ext_ior", value=repr(float(b.get("ext_ior", ir.AIR_IOR))))
         elif b["type"] == "dielectric":
             node = ET.SubElement(parent, "bsdf", type="roughdielectric" if is_rough else "dielectric")
             ET.SubElement(node, "float", name="int_ior", value=repr(float(b["int_ior"])))
@@ -101,6 +112,9 @@ class _Writer:
             self.files.append(mesh_io.write_ply(self.out / rel, verts, faces))
             node = ET.SubElement(root, "shape", type="ply", id=obj["name"])
             ET.SubElement(node, "string", name="filename", value=rel)
+            # the IR's meshes carry no normals: their faces are flat (Mitsuba would otherwise
+            # interpolate vertex normals it computes, which bends a prism's faces)
+            ET.SubElement(node, "boolean", name="face_normals", value="true")
             if "to_world" in s:
                 _transform(node, s["to_world"])
         else:
@@ -111,7 +125,12 @@ class _Writer:
             # an emitter without a BSDF is black on reflection, as in the IR
             node_b = ET.SubElement(node, "bsdf", type="diffuse")
             ET.SubElement(node_b, "spectrum", name="reflectance", value="0")
-        if obj.get("emitter"):
+        if obj.get("emitter") and obj["emitter"]["type"] == "collimated":
+            # Mitsuba's directionalarea emits along the shape's normal; its "radiance" is the
+            # irradiance across the beam (power per area: the ray weight is area x radiance)
+            em = ET.SubElement(node, "emitter", type="directionalarea")
+            self.spectrum(em, "radiance", obj["emitter"]["irradiance"], f"{obj['name']}_irradiance")
+        elif obj.get("emitter"):
             em = ET.SubElement(node, "emitter", type="area")
             self.spectrum(em, "radiance", obj["emitter"]["radiance"], f"{obj['name']}_radiance")
 
@@ -140,7 +159,7 @@ class _Writer:
         parent = root
         if r.get("output") == "stokes":
             parent = ET.SubElement(root, "integrator", type="stokes")
-        integ = ET.SubElement(parent, "integrator", type="path")
+        integ = ET.SubElement(parent, "integrator", type=r.get("integrator", "path"))  # path | ptracer
         ET.SubElement(integ, "integer", name="max_depth", value="$max_depth")
         cam = sc["camera"]
         sensor = ET.SubElement(root, "sensor", type="perspective")

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import jsonschema
 
-from . import ir, spectra
+from . import dispersion, ir, spectra
 
 SCHEMA_PATH = Path(__file__).resolve().parent / "schema" / "scene.schema.json"
 
@@ -86,7 +86,10 @@ def _value_problems(scene):
             yield from ((name, "bsdf." + f, m) for f, m in bsdf_problems(bsdf))
         em = obj.get("emitter")
         if em:
-            yield from ((name, "emitter." + f, m) for f, m in spectra.check(em["radiance"], "radiance"))
+            key = "irradiance" if em.get("type") == "collimated" else "radiance"
+            yield from ((name, "emitter." + f, m) for f, m in spectra.check(em[key], key))
+            if em.get("type") == "collimated" and obj["shape"]["type"] != "rectangle":
+                yield name, "emitter.type", "a collimated emitter must be a rectangle (it emits along its normal)"
         if not bsdf and not em:
             yield name, "bsdf", "object has neither a BSDF nor an emitter annotation"
 
@@ -148,10 +151,10 @@ def bsdf_problems(bsdf):
                 if not _finite(v) or v <= 0:
                     yield f"thin_film.{key}", f"must be a finite IOR > 0, got {v!r}"
     if kind == "dielectric":
-        for key in ("int_ior", "ext_ior"):
-            v = bsdf.get(key, ir.AIR_IOR)
-            if not _finite(v) or v <= 0:
-                yield key, f"must be a finite IOR > 0, got {v!r}"
+        yield from dispersion.problems(bsdf.get("int_ior"), "int_ior")  # a number or an IOR model
+        v = bsdf.get("ext_ior", ir.AIR_IOR)
+        if not _finite(v) or v <= 0:
+            yield "ext_ior", f"must be a finite IOR > 0, got {v!r}"
     rough = bsdf.get("roughness")
     if rough is not None:
         a = rough["alpha"]

@@ -231,6 +231,90 @@ def build_iridescence(square, sphere):
     add_object(scene, "smooth_film_sphere", sphere, base("smooth_film_1.33_550nm", (1.33, 550.0), distribution="SMOOTH"),
                "SPHERE")
     add_camera(scene, "smooth_film_camera", origin=(0, -4, 0))
+def prism_mesh(name, apex_deg, side, height):
+    """A triangular prism: apex angle ``apex_deg`` at +Y, sides of length ``side``, extruded
+    along Z over ``height`` (centred); faces wound so their normals point outwards."""
+    half = math.radians(apex_deg) / 2
+    b, h = side * math.sin(half), side * math.cos(half)
+    apex_y = 0.6 * h  # the beam crosses the faces near their middle (the scene places it there)
+    tri = [(0.0, apex_y), (-b, apex_y - h), (b, apex_y - h)]
+    verts = [(x, y, -height / 2) for x, y in tri] + [(x, y, height / 2) for x, y in tri]
+    faces = [(0, 2, 1), (3, 4, 5), (0, 1, 4, 3), (1, 2, 5, 4), (2, 0, 3, 5)]
+    mesh = bpy.data.meshes.new(name)
+    mesh.from_pydata(verts, [], faces)
+    return mesh
+
+
+def build_dispersion(square, sphere):
+    """Dispersion (the thesis' empty section 3.3.6): a collimated D65 beam through an N-BK7
+    prism fanned out on a white screen (rendered by light tracing: no camera path reaches a
+    collimated beam), and an N-SF11 sphere before fine black-and-white stripes (chromatic fringes)."""
+    from spectral_bench.exporters import dispersion
+    apex, lam0 = 30.0, 550.0
+    n0 = float(dispersion.ior({"type": "named", "name": "N-BK7"}, [lam0])[0])
+    # minimum deviation at 550 nm: inside, the ray runs parallel to the base; the beam goes along
+    # +X, so the prism turns until the entry face meets it at theta_i = asin(n sin(apex / 2))
+    theta_i = math.asin(n0 * math.sin(math.radians(apex / 2)))
+    turn = math.radians(apex / 2) - theta_i
+    deviation = 2 * theta_i - math.radians(apex)
+    # Lengths are 10x a lab bench's (the beam 0.08 x 0.5, the screen 40 away): Mitsuba offsets every
+    # spawned ray by 8.9e-5 x (1 + |p|) along the normal, which moves a refracted beam sideways;
+    # at this size that is ~0.002 px (at 1x, measured: ~0.01 px, as large as the noise at 64 spp)
+    u = 10.0
+    scene = new_scene("dispersion_prism", "dispersion", 64,
+                      f"A collimated D65 beam (0.08 x 0.5) through a {apex:g} degree N-BK7 prism (sides 5) at minimum "
+                      f"deviation for {lam0:g} nm, fanned out on a white screen 40 away; light tracing (ptracer)",
+                      resolution=(256, 128))
+    scene.spectral_bench.integrator = "PTRACER"
+    bk7 = material("N-BK7", "DIELECTRIC", ior_model="NAMED", glass="N-BK7", ext_ior=1.000277, distribution="SMOOTH")
+    add_object(scene, "prism", prism_mesh("prism", apex, 0.5 * u, 0.3 * u), bk7, "MESH", rotation=(0, 0, turn))
+    # the entry face's middle, turned with the prism: the beam's height
+    half = math.radians(apex / 2)
+    h = 0.5 * u * math.cos(half)
+    mx, my = -0.25 * u * math.sin(half), 0.6 * h - 0.5 * h
+    beam_y = mx * math.sin(turn) + my * math.cos(turn)
+    exit_x, exit_y = -mx * math.cos(turn) - my * math.sin(turn), -mx * math.sin(turn) + my * math.cos(turn)
+    light = bpy.data.lights.new("beam", "AREA")
+    light.shape, light.size, light.size_y = "RECTANGLE", 0.05 * u, 0.008 * u  # tall, narrow across the fan
+    light.spectral_bench.collimated = True
+    r = light.spectral_bench.radiance
+    r.kind, r.named, r.scale = "NAMED", "cie_d65", 40.0
+    light.energy = 1.0
+    beam = bpy.data.objects.new("beam", light)
+    beam.location = (-2.0 * u, beam_y, 0.0)
+    beam.rotation_euler = (0.0, math.radians(-90.0), 0.0)  # the light's -Z (its emission) along +X
+    scene.collection.objects.link(beam)
+    dx, dy = math.cos(-deviation), math.sin(-deviation)
+    distance = 4.0 * u
+    centre = (exit_x + distance * dx, exit_y + distance * dy, 0.0)
+    gamma = math.atan2(-dx, dy)  # turns the square's normal (-Y after the X turn) to face the prism
+    screen = add_object(scene, "screen", square, material("screen_0.8", "DIFFUSE", reflectance=0.8), "RECTANGLE",
+                        location=centre, rotation=(math.radians(90), 0, gamma))
+    screen.scale = (0.6 * u, 0.3 * u, 1.0)
+    # the camera faces the screen from 10, aimed 0.55 to the less deviated side, so that a fan
+    # 2 degrees less deviated (fused silica in place of N-BK7) is in view as well
+    along = (math.cos(gamma), math.sin(gamma))  # the screen's local x: towards more deviation
+    target = (centre[0] - 0.055 * u * along[0], centre[1] - 0.055 * u * along[1], 0.0)
+    origin = (target[0] - 1.0 * u * dx, target[1] - 1.0 * u * dy, 0.25 * u)
+    cam = add_camera(scene, "prism_camera", origin=origin, target=target)
+    cam.data.lens = cam.data.sensor_width / (2 * math.tan(math.radians(18.0) / 2))  # 18 degrees wide
+
+    scene = new_scene("dispersion_fringes", "dispersion", 256,
+                      "A smooth N-SF11 sphere (Abbe number 25.7) before black and white stripes 0.15 wide under a "
+                      "uniform D65 environment: chromatic fringes where the sphere refracts the stripes' edges",
+                      resolution=(256, 256))
+    scene.world = uniform_world("uniform_d65_fringes", "NAMED", "cie_d65")
+    sf11 = material("N-SF11", "DIELECTRIC", ior_model="NAMED", glass="N-SF11", ext_ior=1.000277, distribution="SMOOTH")
+    add_object(scene, "sf11_sphere", sphere, sf11, "SPHERE")
+    board = add_object(scene, "white_board", square, material("white_0.8", "DIFFUSE", reflectance=0.8), "RECTANGLE",
+                       location=(0, 3, 0), rotation=(math.radians(90), 0, 0))
+    board.scale = (4.0, 4.0, 1.0)
+    black = material("black_0", "DIFFUSE", reflectance=0.0)
+    for k in range(-9, 10):
+        stripe = add_object(scene, f"stripe_{k + 9:02d}", square, black, "RECTANGLE",
+                            location=(0.3 * k, 2.999, 0), rotation=(math.radians(90), 0, 0))
+        stripe.scale = (0.075, 4.0, 1.0)
+    add_camera(scene, "fringes_camera", origin=(0, -6, 0), target=(0, 0, 0))
 
 
 def build():
@@ -297,6 +381,7 @@ def build():
     build_spectral_accuracy(square)
     build_polarization(square, sphere)
     build_iridescence(square, sphere)
+    build_dispersion(square, sphere)
     for s in list(bpy.data.scenes):
         if not s.spectral_bench.case or s.name == "Scene":
             bpy.data.scenes.remove(s)

@@ -18,7 +18,8 @@ SPECTRAL_ACCURACY = ["macbeth_chart_D50", "macbeth_chart_D65"]
 POLARIZATION = ["polarizing_plane_0", "polarizing_plane_90", "polarizing_spheres"]
 IRIDESCENCE = ["iridescent_sphere_smooth", "iridescent_spheres_film", "iridescent_spheres_height",
                "iridescent_spheres_materials"]
-ALL_SCENES = sorted(REFLECTANCE + SPECTRAL_ACCURACY + POLARIZATION + IRIDESCENCE)
+DISPERSION = ["dispersion_fringes", "dispersion_prism"]
+ALL_SCENES = sorted(REFLECTANCE + SPECTRAL_ACCURACY + POLARIZATION + IRIDESCENCE + DISPERSION)
 
 
 @pytest.fixture(scope="session")

@@ -26,7 +26,7 @@ def test_writer_matches_golden_folder(golden, tmp_path, name):
     written = sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*") if p.is_file())
     assert written == sorted(p.relative_to(expected) for p in expected.rglob("*") if p.is_file())
     for rel in written:
-        assert (tmp_path / rel).read_text() == (expected / rel).read_text(), rel
+        assert (tmp_path / rel).read_bytes() == (expected / rel).read_bytes(), rel  # meshes are binary PLY
 
 
 def _structure_ok(text, folder):

@@ -13,13 +13,19 @@ def _obj(scene, name):
 
 
 def broken(golden, how):
-    sc = copy.deepcopy(golden["ggx_copper_50"] if how != "ior" else golden["ggx_glass"])
+    sc = copy.deepcopy(golden["ggx_copper_50"] if how not in ("ior", "sellmeier", "glass") else golden["ggx_glass"])
     if how == "roughness":
         _obj(sc, "copper_plate_50")["bsdf"]["roughness"]["alpha"] = -0.2
         return sc, "copper_plate_50", "bsdf.roughness.alpha"
     if how == "ior":
         _obj(sc, "glass_sphere")["bsdf"]["int_ior"] = 0.0
         return sc, "glass_sphere", "bsdf.int_ior"
+    if how == "sellmeier":  # a resonance at 500 nm, inside the renderers' range: n is infinite there
+        _obj(sc, "glass_sphere")["bsdf"]["int_ior"] = {"type": "sellmeier", "B": [1.0, 0.2], "C": [0.25, 0.02]}
+        return sc, "glass_sphere", "bsdf.int_ior"
+    if how == "glass":
+        _obj(sc, "glass_sphere")["bsdf"]["int_ior"] = {"type": "named", "name": "BK7"}
+        return sc, "glass_sphere", "bsdf.int_ior.name"
     if how == "nan":
         _obj(sc, "floor")["bsdf"]["reflectance"]["value"] = float("nan")
         return sc, "floor", "bsdf.reflectance.value"
@@ -35,7 +41,7 @@ def broken(golden, how):
     raise ValueError(how)
 
 
-@pytest.mark.parametrize("how", ["roughness", "ior", "nan", "named", "mesh", "reflectance"])
+@pytest.mark.parametrize("how", ["roughness", "ior", "sellmeier", "glass", "nan", "named", "mesh", "reflectance"])
 def test_value_errors_name_scene_object_field(golden, tmp_path, how):
     sc, obj, field = broken(golden, how)
     path = ir_json.write(sc, tmp_path / "bad.json")

@@ -24,7 +24,7 @@ from ...exporters import art_writer, colorimetry, spectra
 from .. import exr
 from .mitsuba_backend import BackendFailure
 
-NATIVE = {"spectral", "polarization"}
+NATIVE = {"spectral", "polarization", "dispersion"}  # dispersion: CONST_SELLMEIER_DISPERSION_6
 
 
 def find_artist(executable=None):

@@ -21,7 +21,8 @@ WORKER = Path(__file__).resolve().parent / "mitsuba_worker.py"
 NATIVE = {"spectral", "polarization"}
 # phenomena this project's Python plugins add (exporters/mitsuba_plugins): they load through the
 # Python API only, not through the mitsuba executable
-PLUGIN_NEEDS = {"thin_film"}
+PLUGIN_NEEDS = {"thin_film", "dispersion"}  # sb_thin_film_conductor; sb_dispersive_dielectric (unpolarised)
+INTEGRATORS = ("path", "ptracer")  # the IR's render.integrator values Mitsuba renders
 
 
 class BackendFailure(RuntimeError):
@@ -64,6 +65,11 @@ class MitsubaBackend:
         if self.executable and needs & PLUGIN_NEEDS:
             return None, (f"{', '.join(sorted(needs & PLUGIN_NEEDS))} needs this project's Python plugins, "
                           "which the mitsuba executable cannot load (use the Python route: no -e mitsuba=...)")
+        if "dispersion" in needs and "polarization" in needs:
+            return None, ("the dispersive dielectric plugin has no polarised (Mueller) form: "
+                          "dispersion with polarisation is not supported")
+        if scene.get("render", {}).get("integrator", "path") not in INTEGRATORS:
+            return None, f"render.integrator {scene['render']['integrator']!r}: Mitsuba renders {', '.join(INTEGRATORS)}"
         if self.force_variant:
             return self.force_variant, None
         llvm_ok = llvm.find()[0] is not None
@@ -72,7 +78,7 @@ class MitsubaBackend:
             if "spectral" in needs or not llvm_ok:  # Mitsuba ships no scalar_mono_polarized
                 return prefix + "spectral_polarized", None
             return "llvm_ad_mono_polarized", None  # every spectrum is constant: one wavelength is exact
-        if "spectral" in needs:
+        if "spectral" in needs or "dispersion" in needs:
             return prefix + "spectral", None
         return prefix + "rgb", None
 

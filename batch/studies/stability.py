@@ -20,6 +20,13 @@ checks that apply:
   thickness 0..2000 nm and film index 1.0001..2.8: a passive film can only lose energy; thickness
   -> 0 and film index -> the exterior's (1) must meet the bare conductor (the same sphere without a
   film, Mitsuba's own roughconductor) within noise, without a jump.
+- dispersion_ior, dispersion_abbe (with dispersion_fringes in the input): the N-SF11 sphere before
+  the stripes with its Sellmeier B scaled so that n_d runs 1.7847..1.0001 (n^2 - 1 scales at every
+  wavelength), and a Cauchy glass of n_d 1.7847 whose Abbe number runs 20..1e6. Luminance may not
+  be negative beyond noise (a path that keeps one wavelength has an out-of-gamut colour, so a
+  negative sRGB component is legitimate, but Y, an integral against y_bar >= 0, never is); the
+  last value must meet its limit within noise: n_d 1.0001 the scene without the sphere (it
+  vanishes), the largest Abbe number the native, non-dispersive dielectric of the same n_d.
 """
 import copy
 from dataclasses import dataclass
@@ -27,7 +34,7 @@ from typing import Callable
 
 import numpy as np
 
-from ...exporters import ir
+from ...exporters import colorimetry, dispersion, ir
 from .. import exr
 from ..verdict import probes, raycast, stats
 
@@ -68,6 +75,43 @@ def _set_film(field):
     return apply
 
 
+def _dispersive_sphere(scene):
+    return next(o for o in scene["objects"] if (o.get("bsdf") or {}).get("type") == "dielectric")
+
+
+def _set_n_d(sc, value):
+    """Scale the glass's Sellmeier B (n^2 - 1 at every wavelength) so that n_d becomes ``value``."""
+    sphere = _dispersive_sphere(sc)
+    glass = sphere["bsdf"]["int_ior"]
+    n_d = dispersion.abbe_number(glass)[0]
+    b, c = dispersion.sellmeier(glass)
+    k = (value ** 2 - 1.0) / (n_d ** 2 - 1.0)
+    sphere["bsdf"]["int_ior"] = {"type": "sellmeier", "B": [k * x for x in b], "C": c}
+
+
+def _set_abbe(sc, value):
+    """A Cauchy glass n = A + B / l^2 of the scene glass's n_d with Abbe number (n_d - 1)/(n_F - n_C) = value."""
+    sphere = _dispersive_sphere(sc)
+    n_d = dispersion.abbe_number(sphere["bsdf"]["int_ior"])[0]
+    lf, ld, lc = (dispersion.FRAUNHOFER_NM[k] * 1e-3 for k in "FdC")
+    bb = (n_d - 1.0) / (value * (1 / lf ** 2 - 1 / lc ** 2))
+    sphere["bsdf"]["int_ior"] = {"type": "cauchy", "A": n_d - bb / ld ** 2, "B": bb, "C": 0.0}
+
+
+def _no_sphere(sc):
+    out = copy.deepcopy(sc)
+    name = _dispersive_sphere(out)["name"]
+    out["objects"] = [o for o in out["objects"] if o["name"] != name]
+    return out
+
+
+def _native_glass(sc):
+    out = copy.deepcopy(sc)
+    sphere = _dispersive_sphere(out)
+    sphere["bsdf"]["int_ior"] = round(dispersion.abbe_number(sphere["bsdf"]["int_ior"])[0], 6)
+    return out
+
+
 def _without(key):
     """The limit scene: the strip's first scene without its bsdf's ``key`` (roughness, thin film)."""
     def limit(sc):
@@ -83,9 +127,12 @@ class Strip:
     base: object            # a canonical scene's name, or an IR scene
     values: tuple
     apply: Callable         # (scene copy, value) -> None
-    checks: tuple           # of "finite", "negative", "gain", "lossless", "probes"
+    checks: tuple           # of "finite", "negative", "luminance", "gain", "lossless", "probes"
     size: int = 32
-    limit: Callable = None  # (the first value's scene) -> the scene it must meet within noise
+    limit: Callable = None  # (the limit value's scene) -> the scene it must meet within noise
+    limit_at: int = 0       # which value is the limit: 0 the first, -1 the last
+    region: str = "sphere"  # what the limit compares: the furnace "sphere" or the whole "image"
+    spp: int = None         # samples per pixel (default: the base scene's)
 
 
 ROUGH_GLASS = _furnace_sphere({"type": "dielectric", "int_ior": 1.5, "ext_ior": 1.0,
@@ -107,6 +154,10 @@ STRIPS = [
           _set_film("thickness"), ("finite", "negative", "gain"), limit=_without("thin_film")),
     Strip("film_ior_furnace", FILMED, (1.0001, 1.001, 1.01, 1.1, 1.33, 1.5, 2.0, 2.8), _set_film("ior"),
           ("finite", "negative", "gain"), limit=_without("thin_film")),
+    Strip("dispersion_ior", "dispersion_fringes", (1.7847, 1.5, 1.3, 1.1, 1.01, 1.001, 1.0001), _set_n_d,
+          ("finite", "luminance"), 48, limit=_no_sphere, limit_at=-1, region="image", spp=64),
+    Strip("dispersion_abbe", "dispersion_fringes", (20.0, 40.0, 80.0, 160.0, 1e3, 1e4, 1e6), _set_abbe,
+          ("finite", "luminance"), 48, limit=_native_glass, limit_at=-1, region="image", spp=64),
 ]
 
 
@@ -122,6 +173,8 @@ def definitions(golden, strips=None):
             sc = copy.deepcopy(base)
             strip.apply(sc, value)
             sc["render"]["width"] = sc["render"]["height"] = strip.size
+            if strip.spp:
+                sc["render"]["spp"] = strip.spp
             sc["needs"] = ir.derived_needs({k: v for k, v in sc.items() if k != "needs"})
             scenes.append((value, sc))
         out[strip.name] = (strip, scenes)
@@ -169,6 +222,13 @@ def check(strip, value, scene, names, img, stderr=None, tests=1):
         judged = True
         if bad:
             problems.append(f"{bad} negative values beyond their noise")
+    if "luminance" in checks and stderr is not None:
+        y = colorimetry.srgb_to_xyz(rgb)[..., 1]
+        y_se = np.sqrt(np.sum((colorimetry.srgb_to_xyz(np.eye(3))[:, 1] * stderr[..., :3]) ** 2, axis=-1))
+        bad = int(np.sum(stats.one_sided_p(-y / np.maximum(y_se, 1e-300), 1) < stats.sidak_threshold(stats.ALPHA, y.size)))
+        judged = True
+        if bad:
+            problems.append(f"{bad} pixels of negative luminance beyond their noise")
     if {"gain", "lossless"} & set(checks):
         sphere, env = sphere_region(scene, img.shape[1], img.shape[0])
         if sphere.sum() >= 4 and env.sum() >= 4:
@@ -242,18 +302,20 @@ def run(backend, golden, out_dir, passes=4, seed=0, timeout=600, only=None):
             except Exception as exc:  # noqa: BLE001 - report per value, go on
                 row.update(status="failed", problems=[f"render failed: {exc}"])
             strip_rows.append(row)
-        if strip.limit and images:
-            _limit(backend, strip, images[0], strip_rows, out_dir / name / "limit", passes, seed, timeout, tests)
+        if strip.limit and images and images[strip.limit_at][0] == strip.values[strip.limit_at]:
+            _limit(backend, strip, images[strip.limit_at], strip_rows, out_dir / name / "limit", passes, seed, timeout,
+                   tests)
         if images:
             strip_image(out_dir / f"{name}.png", [(v, i) for v, i, _, _ in images])
         rows += strip_rows
     return rows
 
 
-def _limit(backend, strip, first, strip_rows, folder, passes, seed, timeout, tests):
-    """The strip's first value must meet its limit (alpha -> 0: the smooth surface; film -> 0: the
-    bare conductor): the difference of the sphere's means against both renders' noise."""
-    value, img, stderr, sc = first
+def _limit(backend, strip, at_limit, strip_rows, folder, passes, seed, timeout, tests):
+    """The strip's limit value must meet its limit scene (alpha -> 0: the smooth surface; film -> 0:
+    the bare conductor; n -> 1: no sphere; Abbe number -> infinity: the native dielectric): the
+    difference of the region's means against both renders' noise."""
+    value, img, stderr, sc = at_limit
     limit_scene = strip.limit(sc)
     limit_scene["needs"] = ir.derived_needs({k: v for k, v in limit_scene.items() if k != "needs"})
     mode, why, result = _render(backend, limit_scene, folder, passes, seed + 1000, timeout)
@@ -261,15 +323,26 @@ def _limit(backend, strip, first, strip_rows, folder, passes, seed, timeout, tes
     if result is None:
         row.setdefault("notes", []).append(f"limit not rendered: {why}")
         return
-    _, limit, _ = result
-    sphere, env = sphere_region(sc, img.shape[1], img.shape[0])
-    a, b = img[sphere][:, :3].astype(np.float64), limit[sphere][:, :3].astype(np.float64)
+    _, limit, limit_se = result
+    if strip.region == "sphere":
+        region, _ = sphere_region(sc, img.shape[1], img.shape[0])
+    else:
+        region = np.ones(img.shape[:2], dtype=bool)
+    a, b = img[region][:, :3].astype(np.float64), limit[region][:, :3].astype(np.float64)
     diff = a.mean(axis=0) - b.mean(axis=0)
-    se = np.sqrt(a.var(axis=0, ddof=1) / len(a) + b.var(axis=0, ddof=1) / len(b))
+    n = len(a)
+    if stderr is not None and limit_se is not None:
+        # each render's own noise (pixels independent): the region's signal varies, its noise is known
+        se = np.sqrt(np.sum(stderr[region][:, :3].astype(np.float64) ** 2, axis=0)
+                     + np.sum(limit_se[region][:, :3].astype(np.float64) ** 2, axis=0)) / n
+        dof = n * (passes - 1)
+    else:
+        se = np.sqrt(a.var(axis=0, ddof=1) / n + b.var(axis=0, ddof=1) / n)
+        dof = n - 1
     z = diff / np.maximum(se, 1e-300)
     row["limit_jump"] = float(np.abs(diff).max())
     row["limit_z"] = float(np.abs(z).max())
-    if np.min(stats.two_sided_p(z, len(a) - 1)) < stats.sidak_threshold(stats.ALPHA, tests):
+    if np.min(stats.two_sided_p(z, dof)) < stats.sidak_threshold(stats.ALPHA, tests):
         row["problems"].append(f"{value:g} differs from its limit by {row['limit_jump']:.4f} "
                                f"({float(np.abs(z).max()):.1f} standard errors)")
         row["status"] = "failed"

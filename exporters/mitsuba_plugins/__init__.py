@@ -16,7 +16,8 @@ import shutil
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-MODULES = {"sb_thin_film_conductor": "thin_film_conductor"}  # {"sb_<name>": "<module file stem>"}: one entry per plugin
+MODULES = {"sb_thin_film_conductor": "thin_film_conductor",
+           "sb_dispersive_dielectric": "dispersive_dielectric"}  # {"sb_<name>": "<module file stem>"}: one entry per plugin
 
 LOADER = '''"""Registers this scene's Python plugins with Mitsuba 3 (written by spectral_bench).
 

@@ -1,0 +1,150 @@
+"""Index of refraction as a function of wavelength: the one place that evaluates a dielectric's
+``int_ior`` (writers, validation, probes and studies all call it).
+
+``int_ior`` in the IR is either a number (a constant IOR, as before) or a model object:
+  {"type": "sellmeier", "B": [B1, B2, B3], "C": [C1, C2, C3]}
+        n^2(l) = 1 + sum_i B_i l^2 / (l^2 - C_i), l in micrometres, C_i in um^2 (1 to 3 terms)
+  {"type": "cauchy", "A": A, "B": B, "C": C}
+        n(l) = A + B / l^2 + C / l^4, l in micrometres (B in um^2, C in um^4; C optional)
+  {"type": "named", "name": "N-BK7"}          a glass of NAMED_GLASSES (Sellmeier coefficients)
+
+A model object is always treated as dispersive (it needs the "dispersion" phenomenon and the
+project's Mitsuba plugin), even when its coefficients make n constant: that is how the tests run
+the plugin against Mitsuba's native dielectric. A number keeps every renderer's native dielectric.
+"""
+import math
+
+import numpy as np
+
+LAMBDA_MIN, LAMBDA_MAX = 360.0, 830.0  # nm: the renderers' range (spectra.py)
+
+# Fraunhofer lines (nm): F (hydrogen), d (helium), C (hydrogen); the Abbe number is
+# v_d = (n_d - 1) / (n_F - n_C) (SCHOTT, "TIE-29: Refractive Index and Dispersion", 2016)
+FRAUNHOFER_NM = {"F": 486.1327, "d": 587.5618, "C": 656.2725}
+
+# Sellmeier coefficients (B_i, C_i in um^2) of named glasses, from the manufacturers' data:
+# - N-BK7, N-SF11: SCHOTT optical glass data sheets (SCHOTT AG, "Optical Glass - Data Sheets",
+#   2017-01-20): N-BK7 n_d 1.51680, n_F 1.52238, n_C 1.51432, v_d 64.17; N-SF11 n_d 1.78472,
+#   v_d 25.68 (tests/test_dispersion.py checks N-BK7 against these published values).
+# - fused silica: I. H. Malitson, "Interspecimen Comparison of the Refractive Index of Fused
+#   Silica", J. Opt. Soc. Am. 55(10), 1205-1209 (1965), eq. (1) at 20 C; Malitson gives the
+#   resonance wavelengths (0.0684043, 0.1162414, 9.896161 um), whose squares are the C_i.
+NAMED_GLASSES = {
+    "N-BK7": {"B": [1.03961212, 0.231792344, 1.01046945], "C": [0.00600069867, 0.0200179144, 103.560653]},
+    "N-SF11": {"B": [1.73759695, 0.313747346, 1.89878101], "C": [0.013188707, 0.0623068142, 155.23629]},
+    "fused_silica": {"B": [0.6961663, 0.4079426, 0.8974794],
+                     "C": [0.0684043 ** 2, 0.1162414 ** 2, 9.896161 ** 2]},
+}
+MODEL_TYPES = ("sellmeier", "cauchy", "named")
+
+
+def is_model(value):
+    """True for an IOR model object, False for a plain number."""
+    return isinstance(value, dict)
+
+
+def is_dispersive(value):
+    """Whether ``value`` (an ``int_ior``) needs the dispersion phenomenon: every model object does."""
+    return is_model(value)
+
+
+def sellmeier(value):
+    """(B, C) lists (three terms, zero-padded) of a Sellmeier or named model; None for Cauchy.
+    A number n is the exact one-term Sellmeier B1 = n^2 - 1, C1 = 0."""
+    if not is_model(value):
+        return [float(value) ** 2 - 1.0, 0.0, 0.0], [0.0, 0.0, 0.0]
+    kind = value.get("type")
+    if kind == "named":
+        value = NAMED_GLASSES[value["name"]]
+        kind = "sellmeier"
+    if kind == "sellmeier":
+        b, c = [float(x) for x in value["B"]], [float(x) for x in value["C"]]
+        return b + [0.0] * (3 - len(b)), c + [0.0] * (3 - len(c))
+    if kind == "cauchy" and not value.get("B", 0.0) and not value.get("C", 0.0):
+        return [float(value["A"]) ** 2 - 1.0, 0.0, 0.0], [0.0, 0.0, 0.0]  # a constant: exact
+    return None
+
+
+def ior(value, wavelengths_nm):
+    """n at ``wavelengths_nm`` (float64 array) for a number or a model object."""
+    wl = np.asarray(wavelengths_nm, dtype=np.float64)
+    if not is_model(value):
+        return np.full(wl.shape, float(value))
+    l2 = (wl * 1e-3) ** 2
+    if value.get("type") == "cauchy":
+        return float(value["A"]) + float(value.get("B", 0.0)) / l2 + float(value.get("C", 0.0)) / l2 ** 2
+    b, c = sellmeier(value)
+    n2 = 1.0 + sum(bi * l2 / (l2 - ci) for bi, ci in zip(b, c))
+    with np.errstate(invalid="ignore"):
+        return np.sqrt(n2)
+
+
+def abbe_number(value):
+    """(n_d, v_d) with the Fraunhofer F, d, C lines."""
+    n_f, n_d, n_c = ior(value, [FRAUNHOFER_NM[k] for k in "FdC"])
+    return float(n_d), float((n_d - 1.0) / (n_f - n_c)) if n_f != n_c else math.inf
+
+
+def plugin_coefficients(value):
+    """The parameters of the Mitsuba plugin (exporters/mitsuba_plugins/dispersive_dielectric.py):
+    {"model": "sellmeier", "B1".."B3", "C1".."C3"} or {"model": "cauchy", "A", "B", "C"}."""
+    if is_model(value) and value.get("type") == "cauchy":
+        return {"model": "cauchy", "A": float(value["A"]), "B": float(value.get("B", 0.0)),
+                "C": float(value.get("C", 0.0))}
+    b, c = sellmeier(value)
+    out = {"model": "sellmeier"}
+    out.update({f"B{i + 1}": b[i] for i in range(3)})
+    out.update({f"C{i + 1}": c[i] for i in range(3)})
+    return out
+
+
+def _finite(x):
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+
+def problems(value, field):
+    """Yield (field, message) for an ``int_ior`` that is not a usable IOR over 360-830 nm."""
+    if not is_model(value):
+        if not _finite(value) or value <= 0:
+            yield field, f"must be a finite IOR > 0, got {value!r}"
+        return
+    kind = value.get("type")
+    if kind not in MODEL_TYPES:
+        yield f"{field}.type", f"unknown IOR model {kind!r} (known: {', '.join(MODEL_TYPES)})"
+        return
+    if kind == "named":
+        if value.get("name") not in NAMED_GLASSES:
+            yield f"{field}.name", f"unknown glass {value.get('name')!r} (known: {', '.join(NAMED_GLASSES)})"
+            return
+    elif kind == "sellmeier":
+        b, c = value.get("B", []), value.get("C", [])
+        if not 1 <= len(b) <= 3 or len(b) != len(c):
+            yield field, f"B and C must hold 1 to 3 coefficients each, equally many (got {len(b)} and {len(c)})"
+            return
+        bad = False
+        for key, coeffs in (("B", b), ("C", c)):
+            for i, x in enumerate(coeffs):
+                if not _finite(x):
+                    bad = True
+                    yield f"{field}.{key}[{i}]", f"must be a finite number, got {x!r}"
+                elif key == "C" and x < 0:
+                    bad = True
+                    yield f"{field}.C[{i}]", f"must be >= 0 (a squared resonance wavelength in um^2), got {x!r}"
+        if bad:
+            return
+    else:
+        for key in ("A", "B", "C"):
+            if key in value and not _finite(value[key]):
+                yield f"{field}.{key}", f"must be a finite number, got {value[key]!r}"
+                return
+    grid = np.arange(LAMBDA_MIN, LAMBDA_MAX + 0.5, 1.0)
+    with np.errstate(all="ignore"):
+        n = ior(value, grid)
+    bad = ~np.isfinite(n) | (n <= 0)
+    if kind == "sellmeier":
+        # a resonance inside the range makes n infinite or imaginary next to it
+        l2 = (grid * 1e-3) ** 2
+        bad |= np.any(np.abs(l2[:, None] - np.asarray(value["C"], float)[None, :]) < 1e-9, axis=1)
+    if bad.any():
+        yield field, (f"n(lambda) must be finite and > 0 over {LAMBDA_MIN:g}-{LAMBDA_MAX:g} nm; "
+                      f"it is not at {grid[bad][0]:g} nm")
