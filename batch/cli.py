@@ -19,7 +19,7 @@ DEFAULTS = {
     "out": None, "export_only": False, "format": None, "log": None, "visualize": False, "settings": None,
     "variant": None, "alpha": 0.01, "block": None, "min_samples": 65536, "timeout": 1800, "passes": 2, "seed": 0, "flip": True,
     "references": None, "known": None, "list": False, "art_ggx": False, "sweep": False, "ladder": None, "sweep_modes": None, "stability": False,
-    "approximate": False,
+    "approximate": False, "cluster": None, "resume": None,
 }
 
 
@@ -70,6 +70,11 @@ def parser():
                          "reference wins; default: references/)")
     ap.add_argument("--known", metavar="FILE", help="known deviations (default: known_deviations.toml)")
     ap.add_argument("--list", action="store_true", help="list the jobs and exit")
+    ap.add_argument("--cluster", metavar="ADDRESS",
+                    help="run the jobs on a Dask scheduler at ADDRESS (tcp://host:8786), or 'local:N' for a "
+                         "LocalCluster of N workers (default: this machine, no extra service)")
+    ap.add_argument("--resume", metavar="OUT",
+                    help="finish the interrupted run in OUT with its own options: finished jobs are kept, the rest run")
     ap.add_argument("--sweep", action="store_true",
                     help="also render each scene over a ladder of sample counts and chart error against time")
     ap.add_argument("--ladder", type=lambda t: [int(x) for x in t.split(",")], metavar="N,N,...",

@@ -1,69 +1,139 @@
 """Render reference images (an explicit request: this is the only thing that changes references/).
 
     .venv/bin/python batch/make_references.py [-s SCENE ...] [--spp 4096 | --factor F] [--passes 8]
+                                              [--cluster ADDRESS | local:N]
 
-Each reference is rendered with the Mitsuba backend at the scene's resolution with ``spp``
-samples per pixel (or ``factor`` x the scene's own), in ``passes`` independent passes (distinct
-seeds); the
-pass-to-pass spread gives the per-pixel standard error stored beside the mean.
+Each reference is rendered with the Mitsuba backend at the scene's resolution with ``spp`` samples
+per pixel in all (or ``factor`` x the scene's own), in ``passes`` independent passes (distinct
+seeds). Every pass is a job (batch/jobs/job.py) on the chosen engine (this machine, or a Dask
+cluster: passes of one scene run on several workers at once); each finished pass is kept in
+references/.work/, so a run that is stopped resumes where it was. When every pass of a scene is
+there, their mean and the standard error of that mean (the pass-to-pass spread) are written as
+the reference with its provenance, and the passes are removed.
 """
 import argparse
 import datetime as dt
+import json
+import math
 import os
 import platform
+import shutil
 import sys
-import tempfile
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import pkg_bootstrap  # noqa: E402
 
+SEED_STRIDE = 1000  # pass k renders with seeds seed + k * SEED_STRIDE + chunk (chunks < 1000)
+
+
+def pass_jobs(name, scene, mode, spp, passes, seed, work):
+    """One job per pass; passes already in ``work`` (same scene, mode and samples) are skipped."""
+    from spectral_bench.batch.jobs import job as jobs
+    per_pass = math.ceil(spp / passes)
+    todo = []
+    for k in range(passes):
+        j = jobs.make("reference", name, scene, "mitsuba", mode, per_pass, work, f"pass{k}", passes=1,
+                      seed=seed + k * SEED_STRIDE, timeout=6 * 3600, label=f"{name} pass {k + 1}/{passes}",
+                      extra={"pass": k})
+        done = work / f"pass{k}" / "done.json"
+        if not (done.is_file() and json.loads(done.read_text()).get("job") == jobs.job_id(j)):
+            todo.append(j)
+    return todo, per_pass
+
+
+def merge(work, passes):
+    """(names, mean, standard error of the mean, summed render seconds, versions) of the passes."""
+    import numpy as np
+    from spectral_bench.batch import exr
+    images, seconds, versions = [], 0.0, None
+    for k in range(passes):
+        names, img = exr.read_image(work / f"pass{k}" / "render.exr")
+        record = json.loads((work / f"pass{k}" / "done.json").read_text())
+        seconds += record["time_s"]
+        versions = record.get("versions")
+        images.append(img.astype(np.float64))
+    stack = np.stack(images)
+    return names, stack.mean(axis=0), stack.std(axis=0, ddof=1) / math.sqrt(passes), seconds, versions
+
 
 def main(argv=None):
     pkg_bootstrap.package()
-    from spectral_bench.batch import backends, exr, scene_sources
+    from spectral_bench.batch import backends, scene_sources
+    from spectral_bench.batch.jobs import engines, job as jobs
     from spectral_bench.batch.verdict import references
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("-i", "--input", nargs="+", default=[str(scene_sources.DEFAULT_BLEND)])
     ap.add_argument("-s", "--scene", action="append")
-    ap.add_argument("--spp", type=int, default=4096, help="reference samples per pixel (default 4096)")
+    ap.add_argument("--spp", type=int, default=4096, help="reference samples per pixel in all (default 4096)")
     ap.add_argument("--factor", type=int, help="reference spp = factor x the scene's spp (instead of --spp)")
     ap.add_argument("--passes", type=int, default=8)
     ap.add_argument("--seed", type=int, default=1000, help="first seed (distinct from the runner's default 0)")
     ap.add_argument("--out", default=str(references.REFERENCE_DIR))
+    ap.add_argument("--cluster", metavar="ADDRESS", help="a Dask scheduler, or local:N (default: this machine)")
     args = ap.parse_args(argv)
     backend = backends.get("mitsuba")
-    print(backend.llvm_message())
-    failed = 0
+    print(backend.llvm_message(), flush=True)
+    out = Path(args.out)
+    plans, failed = [], 0
     for name, scene in scene_sources.load(args.input):
         if args.scene and name not in args.scene:
             continue
         if isinstance(scene, Exception):
-            print(f"{name}: {scene}")
+            print(f"{name}: {scene}", flush=True)
             failed += 1
             continue
         mode, why = backend.mode_for(scene)
         if mode is None:
-            print(f"{name}: unsupported: {why}")
+            print(f"{name}: unsupported: {why}", flush=True)
             continue
         spp = scene["render"]["spp"] * args.factor if args.factor else args.spp
-        with tempfile.TemporaryDirectory() as tmp:
-            xml = backend.export(scene, Path(tmp) / "mitsuba")
-            image = Path(tmp) / "ref.exr"
-            info = backend.render(xml, mode, spp, image, passes=args.passes, seed=args.seed, timeout=6 * 3600,
-                                  log_path=Path(tmp) / "render.log")
-            names, mean, stderr = exr.read_image_and_stderr(image)
-            prov = {"backend": "mitsuba", "mode": mode, "spp": info["spp"], "passes": info["passes"],
-                    "seed": args.seed, "resolution": info["resolution"], "time_s": round(info["time_s"], 2),
-                    "wall_s": round(info["wall_s"], 2), "date": dt.datetime.now().isoformat(timespec="seconds"),
-                    "versions": info["versions"],
-                    "machine": f"{platform.machine()} {platform.system()}, {os.cpu_count()} cores",
-                    "command": "batch/make_references.py " + " ".join(argv if argv is not None else sys.argv[1:])}
-            path = references.save(scene, names, mean, stderr, prov, args.out)
-        print(f"{name}: {info['spp']} spp in {info['time_s']:.1f} s -> {path} "
-              f"(mean stderr / mean = {float(stderr.mean() / max(mean.mean(), 1e-12)):.2e})")
-    return 1 if failed else 0
+        work = out / ".work" / name
+        todo, per_pass = pass_jobs(name, scene, mode, spp, args.passes, args.seed, work)
+        plans.append((name, scene, mode, per_pass, work, todo))
+        if len(todo) < args.passes:
+            print(f"{name}: resuming, {args.passes - len(todo)} of {args.passes} passes already rendered", flush=True)
+    remaining = {name: len(todo) for name, *_, todo in plans}
+
+    def finished(job, record):
+        work = Path(job["out"])
+        if record.get("status") != "rendered":
+            print(f"{job['scene_name']}: pass {job['extra']['pass']} failed: {record.get('reason')}", flush=True)
+            return
+        (work / job["folder"] / "done.json").write_text(json.dumps(dict(record, job=jobs.job_id(job)), default=str))
+        remaining[job["scene_name"]] -= 1
+        print(f"{job['label']}: {record['time_s']:.1f} s", flush=True)
+        if remaining[job["scene_name"]] == 0:
+            write_reference(next(p for p in plans if p[0] == job["scene_name"]))
+
+    def write_reference(plan):
+        name, scene, mode, per_pass, work, _todo = plan
+        names, mean, stderr, seconds, versions = merge(work, args.passes)
+        prov = {"backend": "mitsuba", "mode": mode, "spp": per_pass * args.passes, "passes": args.passes,
+                "seed": args.seed, "resolution": [int(mean.shape[1]), int(mean.shape[0])],
+                "time_s": round(seconds, 2), "date": dt.datetime.now().isoformat(timespec="seconds"),
+                "versions": versions, "engine": args.cluster or "local",
+                "machine": f"{platform.machine()} {platform.system()}, {os.cpu_count()} cores",
+                "command": "batch/make_references.py " + " ".join(argv if argv is not None else sys.argv[1:])}
+        path = references.save(scene, names, mean, stderr, prov, out)
+        shutil.rmtree(work, ignore_errors=True)
+        print(f"{name}: {prov['spp']} spp in {seconds:.1f} s -> {path} "
+              f"(mean stderr / mean = {float(stderr.mean() / max(mean.mean(), 1e-12)):.2e})", flush=True)
+
+    for plan in plans:
+        if not plan[5]:
+            write_reference(plan)  # every pass was already there
+    engine = engines.make(args.cluster)
+    try:
+        engine.map([j for p in plans for j in p[5]], finished)
+    except engines.Interrupted:
+        print("interrupted: the finished passes are kept in references/.work; run the same command to resume",
+              flush=True)
+        return 130
+    finally:
+        engine.close()
+    return 1 if failed or any(remaining.values()) else 0
 
 
 if __name__ == "__main__":

@@ -17,8 +17,12 @@ def setup_logging(log_file=None):
     logger = logging.getLogger("spectral_bench")
     logger.setLevel(logging.INFO)
     logger.handlers.clear()
-    console = logging.StreamHandler(sys.stderr)
-    console.setFormatter(logging.Formatter("%(message)s"))
+    if sys.stderr.isatty():  # a progress bar is drawn: log lines go above it
+        from spectral_bench.batch.jobs.progress import TqdmLogHandler
+        console = TqdmLogHandler(logging.Formatter("%(message)s"))
+    else:
+        console = logging.StreamHandler(sys.stderr)
+        console.setFormatter(logging.Formatter("%(message)s"))
     logger.addHandler(console)
     if log_file:
         fh = logging.FileHandler(log_file)

@@ -285,10 +285,13 @@ def test_film_strip_limit_check_catches_a_jump(tmp_path):
     sc["needs"] = ir.derived_needs({k: v for k, v in sc.items() if k != "needs"})
     folder = tmp_path / "film"
     backend.render(backend.export(sc, folder / "scene"), backend.mode_for(sc)[0], 64, folder / "render.exr", passes=4)
-    names, img, se = exr.read_image_and_stderr(folder / "render.exr")
-    rows = [{"sweep": strip.name, "value": 100.0, "problems": [], "status": "ok"}]
-    stability._limit(backend, strip, (100.0, img, se, sc), rows, tmp_path / "limit", 4, 0, 600, tests=3)
-    assert rows[0]["status"] == "failed" and rows[0]["limit_z"] > 10, rows
+    bare = strip.limit(sc)
+    bare["needs"] = ir.derived_needs({k: v for k, v in bare.items() if k != "needs"})
+    limit = tmp_path / "limit"
+    backend.render(backend.export(bare, limit / "scene"), backend.mode_for(bare)[0], 64, limit / "render.exr", passes=4,
+                   seed=1000)
+    found = stability.compare_to_limit(strip, sc, folder / "render.exr", limit / "render.exr", 4, tests=3)
+    assert found["problem"] and found["limit_z"] > 10, found
 
 
 # -- IR, writers, export ------------------------------------------------------------------------

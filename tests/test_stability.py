@@ -11,7 +11,8 @@ from spectral_bench.batch.studies import stability
 @pytest.fixture(scope="module")
 def stability_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("stab") / "out"
-    proc = run_batch("-r", "mitsuba", "-s", "ggx_copper_80", "-s", "polarizing_plane_0", "--scale", 0.125,
+    proc = run_batch("-r", "mitsuba", "-s", "ggx_copper_80", "-s", "polarizing_plane_0", "-s", "dispersion_fringes",
+                     "--scale", 0.125,
                      "--stability", "--no-flip", "-o", out, timeout=1200)
     return proc, out, metrics(out)
 
@@ -20,8 +21,11 @@ def test_every_sweep_value_is_rendered_and_stable(stability_run):
     proc, out, data = stability_run
     rows = data["stability"]
     sweeps = {r["sweep"] for r in rows}
-    assert sweeps == {"ggx_grazing", "roughness_furnace", "ior_furnace", "polarizer_malus", "film_thickness_furnace",
-                      "film_ior_furnace"}
+    assert sweeps == {s.name for s in stability.STRIPS} == {
+        "ggx_grazing", "roughness_furnace", "ior_furnace", "polarizer_malus", "film_thickness_furnace",
+        "film_ior_furnace", "dispersion_ior", "dispersion_abbe"}
+    assert all(r["status"] != "skipped" for r in rows)
+    assert all("limit_z" in r for r in rows if r["sweep"].startswith("dispersion_") and r["value"] in (1.0001, 1e6))
     assert len([r for r in rows if r["sweep"].startswith("film_")]) == 18
     assert all("limit_z" in r for r in rows if r["sweep"].startswith("film_") and r["value"] in (0.0, 1.0001))
     assert len([r for r in rows if r["sweep"] == "ggx_grazing"]) == 10

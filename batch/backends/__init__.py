@@ -3,6 +3,8 @@ models what the scene needs (or says plainly that it cannot), and renders to EXR
 
 The interface every backend implements (plain objects; no base class needed):
     name, formats                      "mitsuba", ("mitsuba",): the export formats it renders
+    options                            the constructor's keyword arguments (plain data: a job
+                                       rebuilds the backend from its name and these on any worker)
     availability() -> (bool, reason)   whether it can run here, and why not
     mode_for(scene) -> (mode, None) | (None, reason)
                                        the cheapest mode that models the scene, or why it cannot

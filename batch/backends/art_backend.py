@@ -22,6 +22,7 @@ import numpy as np
 
 from ...exporters import art_writer, colorimetry, spectra
 from .. import exr
+from . import child
 from .mitsuba_backend import BackendFailure
 
 NATIVE = {"spectral", "polarization", "dispersion"}  # dispersion: CONST_SELLMEIER_DISPERSION_6
@@ -75,6 +76,7 @@ class ArtBackend:
 
     def __init__(self, executable=None, ggx=False):
         self.executable, self.ggx = executable, ggx
+        self.options = {"executable": executable, "ggx": ggx}  # what rebuilds this backend (jobs are data)
         self.artist = find_artist(executable)
 
     def availability(self):
@@ -106,7 +108,7 @@ class ArtBackend:
             cmd.append("-p")
         t0 = time.perf_counter()
         try:
-            proc = subprocess.run(cmd, cwd=run_dir, capture_output=True, text=True, timeout=timeout,
+            proc = subprocess.run(cmd, cwd=run_dir, capture_output=True, text=True, timeout=timeout, **child.popen_kwargs(),
                                   env=artist_env(self.artist))
         except subprocess.TimeoutExpired as exc:
             raise BackendFailure(f"artist timed out after {timeout} s") from exc

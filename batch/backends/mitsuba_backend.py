@@ -15,7 +15,7 @@ import numpy as np
 
 from ...exporters import mitsuba_writer
 from .. import exr
-from . import llvm
+from . import child, llvm
 
 WORKER = Path(__file__).resolve().parent / "mitsuba_worker.py"
 NATIVE = {"spectral", "polarization"}
@@ -43,6 +43,7 @@ class MitsubaBackend:
     def __init__(self, executable=None, force_variant=None):
         self.executable = executable
         self.force_variant = force_variant
+        self.options = {"executable": executable, "force_variant": force_variant}  # what rebuilds this backend
 
     def availability(self):
         """(available, reason)."""
@@ -98,7 +99,8 @@ class MitsubaBackend:
     def _run(self, cmd, timeout, log_path):
         t0 = time.perf_counter()
         try:
-            proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, env=llvm.env())
+            proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, env=llvm.env(),
+                                  **child.popen_kwargs())
         except subprocess.TimeoutExpired as exc:
             raise BackendFailure(f"render timed out after {timeout} s") from exc
         if log_path:

@@ -18,6 +18,7 @@ import numpy as np
 
 from ...exporters import rgb_scene
 from .. import exr
+from . import child
 from .mitsuba_backend import BackendFailure
 
 MODE = "rgb"
@@ -33,6 +34,7 @@ class RgbBackend:
     def __init__(self, executable=None, approximate=False):
         self.executable = executable
         self.approximate = approximate
+        self.options = {"executable": executable, "approximate": approximate}  # what rebuilds this backend
 
     @property
     def formats(self):
@@ -65,7 +67,8 @@ def run_child(cmd, timeout, log_path, what, env=None, cwd=None):
     """Run a worker; BackendFailure on a time-out, a crash or a non-zero exit (with its tail)."""
     t0 = time.perf_counter()
     try:
-        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, env=env, cwd=cwd)
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, env=env, cwd=cwd,
+                              **child.popen_kwargs())
     except subprocess.TimeoutExpired as exc:
         if log_path:
             Path(log_path).write_text(f"$ {' '.join(map(str, cmd))}\n(timed out after {timeout} s)\n"

@@ -30,6 +30,7 @@ checks that apply:
 """
 import copy
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Callable
 
 import numpy as np
@@ -262,70 +263,101 @@ def strip_image(path, images):
     Image.fromarray((np.concatenate(tiles, axis=1) * 255 + 0.5).astype(np.uint8)).save(path)
 
 
-def _render(backend, sc, folder, passes, seed, timeout):
-    mode, why = backend.mode_for(sc)
-    if mode is None:
-        return mode, why, None
-    path = backend.export(sc, folder / "scene")
-    backend.render(path, mode, sc["render"]["spp"], folder / "render.exr", passes=passes, seed=seed, timeout=timeout)
-    return mode, None, exr.read_image_and_stderr(folder / "render.exr")
-
-
-def run(backend, golden, out_dir, passes=4, seed=0, timeout=600, only=None):
-    """Render every strip (or those named in ``only``) with ``backend`` into out_dir/<backend>/;
-    returns the result rows and writes the strip images out_dir/<backend>/<strip>.png."""
-    out_dir = out_dir / backend.name
-    out_dir.mkdir(parents=True, exist_ok=True)
-    rows = []
-    for name, (strip, scenes) in definitions(golden).items():
-        if only is not None and name not in only:
-            continue
-        images, strip_rows = [], []
+def jobs(backend, golden, out, folder, passes=4, seed=0, timeout=600, strips=None):
+    """The stability case as jobs for one backend (batch/jobs/job.py): one per strip value, plus
+    one for each strip's limit scene; and the rows decided without rendering (unsupported)."""
+    from ..jobs import job as jobs_mod
+    job_list, rows = [], []
+    for name, (strip, scenes) in definitions(golden, strips).items():
         tests = len(scenes) * 3 + (3 if strip.limit else 0)
-        for value, sc in scenes:
-            row = {"sweep": name, "value": value, "backend": backend.name, "mode": None, "problems": []}
-            try:
-                mode, why, result = _render(backend, sc, out_dir / name / f"{value:g}", passes, seed, timeout)
-                row["mode"] = mode
-                if mode is None:
-                    row.update(status="unsupported", reason=why)
-                    strip_rows.append(row)
-                    continue
-                names, img, stderr = result
-                row["problems"], judged = check(strip, value, sc, names, img, stderr, tests)
-                row["status"] = "failed" if row["problems"] else ("ok" if judged else "unjudged")
-                row["mean"] = float(img[..., :3].mean())
-                if {"gain", "lossless"} & set(strip.checks):
-                    sphere, env = sphere_region(sc, img.shape[1], img.shape[0])
-                    row["mean"] = float(_ratio(img, stderr, sphere, env)[0].mean())  # sphere / environment
-                images.append((value, img, stderr, sc))
-            except Exception as exc:  # noqa: BLE001 - report per value, go on
-                row.update(status="failed", problems=[f"render failed: {exc}"])
-            strip_rows.append(row)
-        if strip.limit and images and images[strip.limit_at][0] == strip.values[strip.limit_at]:
-            _limit(backend, strip, images[strip.limit_at], strip_rows, out_dir / name / "limit", passes, seed, timeout,
-                   tests)
+        for k, (value, sc) in enumerate(scenes):
+            mode, why = backend.mode_for(sc)
+            if mode is None:
+                rows.append({"sweep": name, "value": value, "backend": backend.name, "mode": None, "problems": [],
+                             "status": "unsupported", "reason": why})
+                continue
+            where = Path(folder) / backend.name / name / f"{value:g}"
+            job_list.append(jobs_mod.make("stability", sc["name"], sc, backend.name, mode, sc["render"]["spp"], out,
+                                          where, backend_options=backend.options, passes=passes,
+                                          seed=seed, timeout=timeout, label=f"{name} {value:g} ({backend.name})",
+                                          extra={"strip": name, "value": value, "tests": tests, "role": "value"}))
+            if strip.limit and k == (strip.limit_at % len(scenes)):
+                limit = strip.limit(sc)
+                limit["needs"] = ir.derived_needs({key: v for key, v in limit.items() if key != "needs"})
+                mode_l, _ = backend.mode_for(limit)
+                if mode_l is not None:
+                    job_list.append(jobs_mod.make(
+                        "stability", limit["name"], limit, backend.name, mode_l, limit["render"]["spp"], out,
+                        Path(folder) / backend.name / name / "limit", backend_options=backend.options,
+                        passes=passes, seed=seed + 1000, timeout=timeout, label=f"{name} limit ({backend.name})",
+                        extra={"strip": name, "value": value, "tests": tests, "role": "limit"}))
+    return job_list, rows
+
+
+def judge_value(job, record):
+    """The row of one strip value (the limit scene's render is compared in finish())."""
+    e = job["extra"]
+    row = {"sweep": e["strip"], "value": e["value"], "backend": job["backend"], "mode": job["mode"], "problems": [],
+           "role": e["role"], "image": record["image_path"]}
+    if e["role"] == "limit":
+        return row
+    strip = next(s for s in STRIPS if s.name == e["strip"])
+    names, img, stderr = exr.read_image_and_stderr(record["image_path"])
+    row["problems"], judged = check(strip, e["value"], job["scene"], names, img, stderr, e["tests"])
+    row["status"] = "failed" if row["problems"] else ("ok" if judged else "unjudged")
+    row["mean"] = float(img[..., :3].mean())
+    if {"gain", "lossless"} & set(strip.checks):
+        sphere, env = sphere_region(job["scene"], img.shape[1], img.shape[0])
+        row["mean"] = float(_ratio(img, stderr, sphere, env)[0].mean())  # sphere / environment
+    return row
+
+
+def finish(results, out_dir):
+    """The rows of every strip from the jobs' results [(job, result)]: limits compared, strip
+    images written to out_dir/<backend>/<strip>.png."""
+    rows, by_strip = [], {}
+    for job, result in results:
+        by_strip.setdefault((job["backend"], job["extra"]["strip"]), []).append((job, result))
+    for (backend, name), items in sorted(by_strip.items()):
+        strip = next(s for s in STRIPS if s.name == name)
+        values = [(j, r) for j, r in items if j["extra"]["role"] == "value"]
+        limit = next(((j, r) for j, r in items if j["extra"]["role"] == "limit"), None)
+        strip_rows = []
+        for j, r in sorted(values, key=lambda jr: jr[0]["extra"]["value"]):
+            row = r.get("row") or {"sweep": name, "value": j["extra"]["value"], "backend": backend, "mode": j["mode"],
+                                   "status": "failed", "problems": [r.get("reason", "failed")]}
+            strip_rows.append((j, row))
+        if limit is not None:
+            lj, lr = limit
+            at = next(((j, row) for j, row in strip_rows if j["extra"]["value"] == lj["extra"]["value"]), None)
+            if at is not None and lr.get("row") and at[1].get("image"):
+                _limit(strip, at[0], at[1], lj, lr["row"])
+        images = [(row["value"], exr.read_image(row["image"])[1]) for _, row in strip_rows if row.get("image")]
         if images:
-            strip_image(out_dir / f"{name}.png", [(v, i) for v, i, _, _ in images])
-        rows += strip_rows
+            (Path(out_dir) / backend).mkdir(parents=True, exist_ok=True)
+            strip_image(Path(out_dir) / backend / f"{name}.png", images)
+        rows += [{k: v for k, v in row.items() if k not in ("image", "role")} for _, row in strip_rows]
     return rows
 
 
-def _limit(backend, strip, at_limit, strip_rows, folder, passes, seed, timeout, tests):
-    """The strip's limit value must meet its limit scene (alpha -> 0: the smooth surface; film -> 0:
-    the bare conductor; n -> 1: no sphere; Abbe number -> infinity: the native dielectric): the
-    difference of the region's means against both renders' noise."""
-    value, img, stderr, sc = at_limit
-    limit_scene = strip.limit(sc)
-    limit_scene["needs"] = ir.derived_needs({k: v for k, v in limit_scene.items() if k != "needs"})
-    mode, why, result = _render(backend, limit_scene, folder, passes, seed + 1000, timeout)
-    row = next(r for r in strip_rows if r["value"] == value)
-    if result is None:
-        row.setdefault("notes", []).append(f"limit not rendered: {why}")
-        return
-    _, limit, limit_se = result
+def _limit(strip, job, row, limit_job, limit_row):
+    """The strip's limit value must meet its limit scene (see compare_to_limit); updates its row."""
+    found = compare_to_limit(strip, job["scene"], row["image"], limit_row["image"], job["passes"],
+                             job["extra"]["tests"])
+    row.update(limit_jump=found["limit_jump"], limit_z=found["limit_z"])
+    if found["problem"]:
+        row["problems"].append(f"{row['value']:g} {found['problem']}")
+        row["status"] = "failed"
+
+
+def compare_to_limit(strip, scene, image, limit_image, passes, tests):
+    """alpha -> 0 must meet the smooth surface, film -> 0 the bare conductor, n -> 1 the scene
+    without the sphere, Abbe number -> infinity the native dielectric: the difference of the
+    region's means (the furnace sphere, or the whole image) against both renders' own noise."""
+    _, img, stderr = exr.read_image_and_stderr(image)
+    _, limit, limit_se = exr.read_image_and_stderr(limit_image)
     if strip.region == "sphere":
-        region, _ = sphere_region(sc, img.shape[1], img.shape[0])
+        region, _ = sphere_region(scene, img.shape[1], img.shape[0])
     else:
         region = np.ones(img.shape[:2], dtype=bool)
     a, b = img[region][:, :3].astype(np.float64), limit[region][:, :3].astype(np.float64)
@@ -340,9 +372,7 @@ def _limit(backend, strip, at_limit, strip_rows, folder, passes, seed, timeout, 
         se = np.sqrt(a.var(axis=0, ddof=1) / n + b.var(axis=0, ddof=1) / n)
         dof = n - 1
     z = diff / np.maximum(se, 1e-300)
-    row["limit_jump"] = float(np.abs(diff).max())
-    row["limit_z"] = float(np.abs(z).max())
+    out = {"limit_jump": float(np.abs(diff).max()), "limit_z": float(np.abs(z).max()), "problem": None}
     if np.min(stats.two_sided_p(z, dof)) < stats.sidak_threshold(stats.ALPHA, tests):
-        row["problems"].append(f"{value:g} differs from its limit by {row['limit_jump']:.4f} "
-                               f"({float(np.abs(z).max()):.1f} standard errors)")
-        row["status"] = "failed"
+        out["problem"] = f"differs from its limit by {out['limit_jump']:.4f} ({out['limit_z']:.1f} standard errors)"
+    return out

@@ -41,12 +41,15 @@ def fit_noise_model(spps, rmses):
     return float(max(v, 0.0)), float(c)
 
 
-def analyse(points, sigma2, var_of_mean):
-    """Add predictions, the slope, the fitted noise model and the convergence verdict (the top
-    rung's noise test, points[-1]["test"]) to one line's points."""
-    floor2 = float(np.mean(var_of_mean))
-    for p in points:
-        p["predicted_rmse"] = predicted_rmse(sigma2, var_of_mean, p["spp"])
+def analyse(points, sigma2=None, var_of_mean=None):
+    """The slope, the fitted noise model and the convergence verdict (the top rung's noise test,
+    points[-1]["test"]) of one line's points; each point's noise-only prediction comes with it
+    (batch/verdict/judge.py: sweep_point) or is computed here from the reference's variances."""
+    if sigma2 is not None:
+        for p in points:
+            p["predicted_rmse"] = predicted_rmse(sigma2, var_of_mean, p["spp"])
+            p["noise_floor_rmse"] = float(np.sqrt(np.mean(var_of_mean)))
+    floor2 = float(points[-1].get("noise_floor_rmse", 0.0)) ** 2
     spps = [p["spp"] for p in points]
     top = points[-1]
     v, c = fit_noise_model(spps, [p["rmse"] for p in points]) if len(points) > 1 else (0.0, 0.0)

@@ -1,0 +1,146 @@
+"""A job is plain data: a JSON-compatible dict naming everything one render needs (the scene IR as
+rendered, the backend and its options, mode, samples, passes, seed, where its files go) and how
+its result is judged. Executing it is a function of that data alone: it renders, writes its files
+under its own folder and returns a small record. The same job gives the same image on any engine
+(the seed is part of it), and its id (a hash of what determines the image and the verdict) lets a
+resumed run keep what already finished.
+
+Kinds:
+  render     a scene on a backend, judged by batch/verdict/judge.py (the main run's jobs)
+  sweep      one rung of a speed/accuracy ladder, judged against the reference (batch/studies/sweep.py)
+  stability  one value of a stability strip, checked by batch/studies/stability.py
+  reference  one independent pass of a reference (batch/make_references.py merges them)
+"""
+import copy
+import hashlib
+import json
+import time
+from pathlib import Path
+
+KINDS = ("render", "sweep", "stability", "reference")
+
+
+class RenderCrashed(RuntimeError):
+    """A render that died (not a timeout, not a scene the backend refuses): worth one retry,
+    preferably on another worker."""
+
+
+def make(kind, scene_name, scene, backend, mode, spp, out, folder, *, backend_options=None, passes=1, seed=0,
+         timeout=1800, source_scene=None, export=None, verdict=None, extra=None, label=None):
+    """A job dict. ``out``: the run's output folder; ``folder``: this job's folder inside it;
+    ``export``: where the backend's scene files go (default: the job's folder)."""
+    return {"kind": kind, "scene_name": scene_name, "scene": scene, "source_scene": source_scene or scene,
+            "backend": backend, "backend_options": dict(backend_options or {}), "mode": mode, "spp": int(spp),
+            "passes": int(passes), "seed": int(seed), "timeout": timeout, "out": str(out), "folder": str(folder),
+            "export": str(export or Path(folder) / "export"), "verdict": dict(verdict or {}),
+            "extra": dict(extra or {}), "label": label or f"{scene_name} ({backend})"}
+
+
+def job_id(job):
+    """What determines the job's image and its verdict, hashed."""
+    from ..verdict import references
+    key = {k: job[k] for k in ("kind", "backend", "backend_options", "mode", "spp", "passes", "seed", "extra")}
+    key["scene"] = references.fingerprint(job["scene"])
+    key["resolution"] = [job["scene"]["render"]["width"], job["scene"]["render"]["height"]]
+    key["verdict"] = {k: v for k, v in job["verdict"].items() if k not in ("known",)}
+    return hashlib.sha256(json.dumps(key, sort_keys=True, default=str).encode()).hexdigest()[:20]
+
+
+def backend_of(job):
+    from .. import backends
+    return backends.get(job["backend"], **job["backend_options"])
+
+
+def execute(job):
+    """Export and render; returns the render record. Raises RenderCrashed for a render that died;
+    a timeout or a refusal is a failed record (retrying would not help)."""
+    from .. import backends
+    from ...exporters import ir_json
+    out = Path(job["out"])
+    folder, export = out / job["folder"], out / job["export"]
+    folder.mkdir(parents=True, exist_ok=True)
+    record = {"job": job_id(job), "kind": job["kind"], "scene": job["scene_name"], "backend": job["backend"],
+              "mode": job["mode"], "status": "rendered", "reason": "", "spp": job["spp"], "passes": job["passes"]}
+    t0 = time.perf_counter()
+    backend = backend_of(job)
+    if job["kind"] == "render":
+        ir_json.write(job["scene"], out / job["scene_name"] / "json" / f"{job['scene_name']}.json")
+    path = backend.export(job["scene"], export)
+    image = folder / "render.exr"
+    try:
+        info = backend.render(path, job["mode"], job["spp"], image, passes=job["passes"], seed=job["seed"],
+                              timeout=job["timeout"], log_path=folder / "render.log")
+    except backends.BackendFailure as exc:
+        if "timed out" in str(exc):
+            record.update(status="failed", reason=f"render failed: {exc}")
+            return record
+        raise RenderCrashed(f"render failed: {exc}") from exc
+    record.update(time_s=info["time_s"], wall_s=info["wall_s"], spp=info["spp"], passes=info.get("passes", 1),
+                  versions=info.get("versions"), image_path=str(image), image=str(image.relative_to(out)),
+                  job_wall_s=time.perf_counter() - t0)
+    return record
+
+
+def judge(job, record, deviations=None):
+    """The kind's verdict on a render record: the job's result (a metrics.json entry, a sweep
+    point, a stability row or a reference pass)."""
+    from ..verdict import judge as verdicts, known
+    if job["kind"] == "render":
+        entry = new_entry(job)
+        if record["status"] != "rendered":
+            entry.update(status="failed", reason=record["reason"])
+            return entry
+        entry.update({k: record[k] for k in ("time_s", "wall_s", "spp", "passes", "image", "versions")})
+        if deviations is None:
+            deviations = known.load(job["verdict"].get("known"))
+        out = Path(job["out"])
+        return verdicts.render_verdict(entry, job["source_scene"], job["scene"], out / record["image"],
+                                       out / job["folder"], job["verdict"], deviations)
+    if record["status"] != "rendered":
+        return dict(record)
+    if job["kind"] == "sweep":
+        return dict(record, point=verdicts.sweep_point(job, record))
+    if job["kind"] == "stability":
+        from ..studies import stability
+        return dict(record, row=stability.judge_value(job, record))
+    return dict(record)
+
+
+def run(job, deviations=None):
+    """Execute and judge one job (what an engine's worker calls). Failures inside the verdict
+    become failed records; a crashed render raises RenderCrashed for the engine to retry."""
+    record = execute(job)
+    try:
+        return judge(job, record, deviations)
+    except Exception as exc:  # noqa: BLE001 - a verdict that breaks is a failed job, not a crashed batch
+        return failure(job, f"verdict failed: {exc!r}", record)
+
+
+def new_entry(job, **kw):
+    """A metrics.json run record for a render job (the interface every reader of metrics.json uses)."""
+    r = job["scene"]["render"]
+    e = {"scene": job["scene_name"], "case": job["scene"].get("case"), "backend": job["backend"],
+         "mode": job["mode"], "status": "ok", "reason": "", "spp": job["spp"],
+         "resolution": [r["width"], r["height"]], "time_s": None, "image": None,
+         "metrics": {"rmse": None, "relmse": None, "mape": None, "flip": None}, "probes": [], "job": job_id(job)}
+    e.update(kw)
+    return e
+
+
+def failure(job, reason, record=None):
+    """The result of a job that could not finish (crash after its retry, killed worker, interrupt)."""
+    if job["kind"] == "render":
+        return new_entry(job, status="failed", reason=reason)
+    out = {"job": job_id(job), "kind": job["kind"], "scene": job["scene_name"], "backend": job["backend"],
+           "mode": job["mode"], "status": "failed", "reason": reason}
+    if record:
+        out.update({k: v for k, v in record.items() if k not in out})
+    return out
+
+
+def strip_scene(job):
+    """A copy of the job without its scenes (small enough to log or store)."""
+    out = copy.copy(job)
+    out.pop("scene", None)
+    out.pop("source_scene", None)
+    return out

@@ -1,0 +1,119 @@
+"""The verdict of one render: from its EXR (mean and, with passes, per-pixel standard error) to a
+job record with metrics, the noise test against the scene's reference, the analytic probes, the
+images a reader looks at (previews, differences, z-score, FLIP) and a status
+(batch/verdict/status.py). A function of files and settings: it never renders.
+"""
+import numpy as np
+
+from .. import exr
+from ..report import previews
+from . import compare, flip_isolated, known, probes, references, status
+
+
+def load_reference(name, scene, directories):
+    """(reference or None, why it cannot judge or None); a broken reference file is a reason."""
+    try:
+        ref = references.load(name, directories, scene=scene)
+    except Exception as exc:  # noqa: BLE001 - a bad reference must not stop the batch
+        return None, f"reference unreadable: {exc}"
+    return ref, references.check_usable(ref, scene)
+
+
+def render_verdict(entry, scene, rendered, image, res_dir, settings, deviations):
+    """Judge the render ``image`` of ``rendered`` (the scene as rendered: spp and scale applied;
+    ``scene`` as authored, for its reference) in place in ``entry``; writes the verdict's images
+    into ``res_dir``. ``settings``: alpha, min_samples, block, flip, references."""
+    names, test_all, stderr = exr.read_image_and_stderr(image)
+    entry["channels"] = names
+    entry["sanity"] = compare.image_sanity(test_all)
+    if entry["sanity"]["negative"]:
+        # negative linear sRGB can be a legitimate out-of-gamut colour; negative S0 never is
+        entry["flags"] = [f"{entry['sanity']['negative']} negative values"]
+    previews.save_linear(res_dir / "render.png", test_all[..., :3])
+    ref, unusable = load_reference(entry["scene"], scene, settings.get("references"))
+    ztest = None
+    if unusable:
+        entry["reference_problem"] = unusable
+    else:
+        ztest = noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings)
+    observers = sorted({d.observer for d in known.applicable(deviations, entry) if d.observer})
+    entry["probes"] = probes.evaluate(rendered, names, test_all, reference=None if unusable else ref, stderr=stderr,
+                                      passes=entry["passes"], observers=observers)
+    if unusable and not any(p["pass"] is not None for p in entry["probes"]):
+        entry["unjudged_because"] = unusable + ("" if entry["probes"] else "; no analytic probe applies")
+    status.decide(entry, deviations, ztest)
+    return entry
+
+
+def noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings):
+    """The noise test against the reference, on the render's own noise (entry["test"]); the
+    diff, z-score and FLIP images. Returns the in-memory test (for re-judging) or None."""
+    test = test_all[..., :3]
+    entry["reference"] = {"path": str(ref.path), "spp": ref.spp, "backend": ref.provenance.get("backend"),
+                          "mode": ref.provenance.get("mode"), "versions": ref.provenance.get("versions"),
+                          "date": ref.provenance.get("date")}
+    if names != ref.names:
+        entry["test"] = {"pass": False, "reason": f"render channels {names} differ from the reference's {ref.names}"}
+        return None
+    try:
+        at = compare.reference_at(ref.mean, ref.stderr, ref.spp, test_all.shape, ref.provenance.get("passes", 8))
+    except ValueError as exc:
+        entry["test"] = {"pass": None, "reason": f"cannot compare with the reference: {exc}"}
+        return None
+    mean = at.mean[..., :3]
+    entry["metrics"].update(compare.metrics(test, mean))
+    same = (entry["backend"], entry["mode"]) == (ref.provenance.get("backend"), ref.provenance.get("mode"))
+    zt = None
+    if stderr is None and not same:
+        entry["test"] = {"pass": None, "reason": (
+            "one pass: the render has no per-pixel noise of its own and another renderer's is not "
+            "borrowed (render with --passes >= 2)")}
+    else:
+        # every channel is judged: R, G, B and, for Stokes output, S0..S3
+        own = None if stderr is None else stderr.astype(np.float64) ** 2
+        zt = compare.z_test(test_all, at, entry["spp"], own_var_of_mean=own, own_passes=entry["passes"],
+                            alpha=settings["alpha"], block=settings.get("block"), min_samples=settings["min_samples"])
+        entry["test"] = zt.as_dict()
+        if not zt.passed:
+            entry["test"]["reason"] = (
+                f"differs from the reference beyond noise: min p = {zt.p_min:.3g} < {zt.threshold:.3g} "
+                f"(alpha {zt.alpha} Sidak-corrected over {zt.blocks} tests), max |z| = {zt.z_max:.1f}")
+        exr.write(res_dir / "zscore.exr", zt.zmap[..., :3])
+        worst = np.take_along_axis(zt.zmap, np.abs(zt.zmap).argmax(axis=-1)[..., None], axis=-1)[..., 0]
+        previews.save_signed(res_dir / "zscore.png", worst, scale=6)
+    exr.write(res_dir / "reference.exr", mean)
+    exr.write(res_dir / "diff_abs.exr", np.abs(test - mean))
+    exr.write(res_dir / "diff_rel.exr", np.abs(test - mean) / (np.abs(mean) + compare.REL_EPS))
+    previews.save_linear(res_dir / "reference.png", mean)
+    previews.save_signed(res_dir / "diff.png", (test - mean).mean(axis=-1),
+                         scale=max(float(np.percentile(np.abs(mean), 99)), 1e-6) * 0.25)
+    if settings.get("flip", True):
+        flip, err = flip_isolated.hdr_flip(res_dir / "reference.exr", image, res_dir / "flip.exr")
+        entry["metrics"]["flip"] = flip
+        if err:
+            entry["flip_error"] = err
+        elif (res_dir / "flip.exr").exists():
+            previews.save_gray(res_dir / "flip.png", exr.read_rgb(res_dir / "flip.exr")[..., 0])
+    return zt
+
+
+def sweep_point(job, record):
+    """One rung of a sweep: time, error against the reference and the noise test on the rung's
+    own noise (two passes)."""
+    scene = job["source_scene"]
+    ref, unusable = load_reference(job["scene_name"], scene, job["verdict"].get("references"))
+    point = {"spp": record["spp"], "time_s": record["time_s"], "wall_s": record["wall_s"]}
+    if unusable:
+        point["reason"] = unusable
+        return point
+    names, img, stderr = exr.read_image_and_stderr(record["image_path"])
+    at = compare.reference_at(ref.mean, ref.stderr, ref.spp, img.shape, ref.provenance.get("passes", 8))
+    point.update(compare.metrics(img[..., :3], at.mean[..., :3]))
+    point["predicted_rmse"] = float(np.sqrt(np.mean(at.sigma2[..., :3]) / record["spp"] + np.mean(at.var_of_mean[..., :3])))
+    point["noise_floor_rmse"] = float(np.sqrt(np.mean(at.var_of_mean[..., :3])))
+    if stderr is not None and names == ref.names:
+        zt = compare.z_test(img, at, record["spp"], own_var_of_mean=stderr.astype(np.float64) ** 2,
+                            own_passes=record["passes"], alpha=job["verdict"]["alpha"],
+                            min_samples=job["verdict"]["min_samples"])
+        point["test"] = zt.as_dict()
+    return point

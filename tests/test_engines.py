@@ -1,0 +1,101 @@
+"""Jobs as data on engines: a Dask LocalCluster gives the same images and verdicts as the default
+engine; an interrupted run resumes rendering only what is missing; a killed worker loses nothing."""
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+from conftest import ROOT, metrics, run_batch
+from spectral_bench.batch import exr
+
+SMALL = ["-s", "ggx_copper_50_isolated", "-s", "macbeth_chart_D65", "-r", "mitsuba", "--scale", 0.125, "--spp", 16,
+         "--no-flip"]
+
+
+def _runs(out):
+    return {(r["scene"], r["backend"]): r for r in metrics(out)["runs"]}
+
+
+def test_local_cluster_gives_the_default_engines_images_and_verdicts(tmp_path):
+    local, dask = tmp_path / "local", tmp_path / "dask"
+    p1 = run_batch(*SMALL, "-o", local)
+    p2 = run_batch(*SMALL, "--cluster", "local:2", "-o", dask)
+    assert p1.returncode == p2.returncode, (p1.stderr[-2000:], p2.stderr[-2000:])
+    a, b = _runs(local), _runs(dask)
+    assert sorted(a) == sorted(b) and len(a) == 2
+    for key in a:
+        assert a[key]["job"] == b[key]["job"]  # the same job
+        img_a = exr.read_image_and_stderr(local / a[key]["image"])
+        img_b = exr.read_image_and_stderr(dask / b[key]["image"])
+        assert all(np.array_equal(x, y) for x, y in zip(img_a[1:], img_b[1:])), key  # bit for bit
+        assert a[key]["status"] == b[key]["status"]
+        assert [(p["name"], p["pass"], p.get("z")) for p in a[key]["probes"]] == \
+               [(p["name"], p["pass"], p.get("z")) for p in b[key]["probes"]]
+
+
+def test_an_interrupted_run_resumes_with_only_the_missing_jobs(tmp_path):
+    """Stop the runner (SIGINT, as Ctrl-C) after its first finished job: metrics.json stays
+    consistent and says which jobs were interrupted; --resume keeps what finished (its files are
+    not touched) and renders only the rest."""
+    out = tmp_path / "out"
+    scenes = ["ggx_copper_50_isolated", "ggx_copper_60_isolated", "ggx_copper_70_isolated", "ggx_copper_80_isolated"]
+    args = [a for s in scenes for a in ("-s", s)] + ["-r", "mitsuba", "--scale", 0.25, "--spp", 64, "--no-flip"]
+    proc = subprocess.Popen([sys.executable, str(ROOT / "batch" / "run.py"), *map(str, args), "-o", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    deadline = time.time() + 300
+    while time.time() < deadline:
+        path = out / "metrics.json"
+        if path.is_file() and len(json.loads(path.read_text())["runs"]) >= 1:
+            break
+        time.sleep(0.2)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 130, err[-2000:]
+    first = metrics(out)["runs"]
+    finished = [r for r in first if not r.get("interrupted")]
+    assert 1 <= len(finished) < len(scenes), [r["status"] for r in first]
+    assert all(r["interrupted"] and r["status"] == "failed" for r in first if r not in finished)
+    stamps = {r["scene"]: (out / r["image"]).stat().st_mtime_ns for r in finished}
+    resumed = run_batch("--resume", out)
+    assert resumed.returncode == 0, resumed.stderr[-2000:]
+    assert f"{len(finished)} jobs kept, {len(scenes) - len(finished)} to run" in resumed.stderr
+    runs = metrics(out)["runs"]
+    assert sorted(r["scene"] for r in runs) == sorted(scenes) and all(r["status"] == "ok" for r in runs)
+    for r in runs:
+        if r["scene"] in stamps:
+            assert (out / r["image"]).stat().st_mtime_ns == stamps[r["scene"]]  # not rendered again
+
+
+def test_a_killed_worker_loses_no_job(golden, tmp_path):
+    """SIGKILL a worker in the middle of its render: Dask gives the job to another worker (one
+    retry) and every job still finishes."""
+    import copy
+    from spectral_bench.batch.jobs import engines, job as jobs, plan
+    engine = engines.make("local:2")
+    try:
+        pids = engine.client.run(os.getpid)
+        job_list = []
+        for k, name in enumerate(["ggx_glass", "beckmann_glass", "ggx_copper_80_isolated"]):
+            sc = copy.deepcopy(golden[name])
+            sc["render"].update(width=128, height=128)
+            job_list.append(jobs.make("render", name, sc, "mitsuba", "llvm_ad_spectral", 256, tmp_path,
+                                      f"{name}/results/mitsuba", passes=2, source_scene=golden[name],
+                                      verdict=plan.verdict_settings({"alpha": 0.01, "min_samples": 65536, "flip": False,
+                                                                     "block": None, "references": None, "known": None})))
+        results = []
+        victim = sorted(pids.values())[0]
+
+        def kill_soon():
+            time.sleep(3.0)
+            os.kill(victim, signal.SIGKILL)
+        import threading
+        threading.Thread(target=kill_soon, daemon=True).start()
+        engine.map(job_list, lambda j, r: results.append((j, r)))
+    finally:
+        engine.close()
+    assert len(results) == 3
+    assert all(r["status"] in ("ok", "known", "unjudged") for _, r in results), [(r["scene"], r["reason"]) for _, r in results]
