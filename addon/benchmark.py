@@ -42,8 +42,10 @@ class RunSettings(bpy.types.PropertyGroup):
     scene_source: EnumProperty(name="Scenes", items=SCENE_SOURCES, default="CANONICAL")
     canonical_scene: EnumProperty(name="Canonical Scene", items=canonical.scene_items,
                                   description="Which canonical scene to run, open or append")
-    backends_off: StringProperty(name="Backends Off", default="", options={"HIDDEN"},
-                                 description="Comma-separated backends the user switched off (all others run)")
+    # off by default: the RGB backends (batch/backends: DEFAULT is the spectral group)
+    backends_off: StringProperty(name="Backends Off", options={"HIDDEN"},
+                                 default=",".join(n for n in backends.BACKENDS if n not in backends.DEFAULT),
+                                 description="Comma-separated backends switched off (all others run)")
     spp: IntProperty(name="Samples", default=0, min=0, description="Samples per pixel (0: each scene's own)")
     scale: FloatProperty(name="Resolution Scale", default=0.25, min=0.01, max=4.0,
                          description="Resolution scale; an integer fraction of the reference's (1/2, 1/4, 1/8) "

@@ -10,7 +10,7 @@ import json
 import tomllib
 from pathlib import Path
 
-from .backends import BACKENDS
+from .backends import BACKENDS, DEFAULT, GROUPS
 
 FORMATS = ("mitsuba", "art", "json", "cycles", "luxcore")
 
@@ -42,7 +42,8 @@ def parser():
     ap.add_argument("-c", "--case", action="append", metavar="NAME", help="only scenes of this case (repeatable)")
     ap.add_argument("-s", "--scene", action="append", metavar="NAME", help="only this scene (repeatable)")
     ap.add_argument("-r", "--renderer", action="append", metavar="NAME",
-                    help=f"backend (repeatable; default: every available one): {', '.join(BACKENDS)}")
+                    help=f"backend or group (repeatable): {', '.join(BACKENDS)}; groups "
+                         f"{', '.join(f'{g} ({chr(43).join(m)})' for g, m in GROUPS.items())}; default: {', '.join(DEFAULT)}")
     ap.add_argument("-e", "--exec", action="append", metavar="[BACKEND=]PATH",
                     help="renderer executable, e.g. mitsuba=/opt/mitsuba/mitsuba")
     ap.add_argument("--spp", type=int, metavar="N", help="samples per pixel (default: each scene's own)")

@@ -26,6 +26,21 @@ from .mitsuba_backend import BackendFailure, MitsubaBackend  # noqa: F401 - Back
 
 # spectral backends first; the RGB ones (Cycles, LuxCore) measure what reducing spectra to RGB costs
 BACKENDS = {"mitsuba": MitsubaBackend, "art": ArtBackend, "cycles": CyclesBackend, "luxcore": LuxCoreBackend}
+# Groups for -r: the spectral renderers are the default (the regression run against spectral ground
+# truth); the RGB ones measure what RGB rendering gets wrong, so their verdicts against spectral
+# references fail by design on spectral scenes (benchmarks/RGB.md) and they run when asked for.
+GROUPS = {"spectral": ["mitsuba", "art"], "rgb": ["cycles", "luxcore"], "all": list(BACKENDS)}
+DEFAULT = GROUPS["spectral"]
+
+
+def expand(names):
+    """Backend names from -r values (names or groups), in order, without repeats."""
+    out = []
+    for n in names or DEFAULT:
+        for b in GROUPS.get(n, [n]):
+            if b not in out:
+                out.append(b)
+    return out
 
 
 def get(name, **options):

@@ -58,7 +58,7 @@ def select(results, opts):
 
 
 def backend_names(opts):
-    return list(opts["renderer"] or backends.BACKENDS)
+    return backends.expand(opts["renderer"])
 
 
 def make_backend(name, opts):

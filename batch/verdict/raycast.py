@@ -101,11 +101,18 @@ def rectangle_frame(shape):
     return m[:3, 3], n / np.linalg.norm(n), np.linalg.norm(m[:3, 0]), np.linalg.norm(m[:3, 1])
 
 
-def pixels_inside(camera, width, height, objects, index, margin=0.7):
-    """Mask (H, W) of pixels whose four corners see object ``index`` first, inside its inner
-    ``margin`` (for rectangles), so that the whole pixel shows that object."""
+def corner_hits(camera, width, height, objects):
+    """(origin, corner ray directions, index of the object each corner ray meets first or -1):
+    cast once, shared by every region of an image (pixels_inside)."""
     origin, dirs = camera_rays(camera, width, height, "corners")
-    who, _ = nearest(objects, origin, dirs)
+    return origin, dirs, nearest(objects, origin, dirs)[0]
+
+
+def pixels_inside(camera, width, height, objects, index, margin=0.7, hits=None):
+    """Mask (H, W) of pixels whose four corners see object ``index`` first, inside its inner
+    ``margin`` (for rectangles), so that the whole pixel shows that object. ``hits``: the
+    image's corner_hits, when several regions of one image are wanted."""
+    origin, dirs, who = hits or corner_hits(camera, width, height, objects)
     ok = who == index
     shape = objects[index]["shape"]
     if shape["type"] == "rectangle":

@@ -76,7 +76,8 @@ def patches(m):
     white = colorimetry.spectrum_xyz(radiance)
     y_row = colorimetry.srgb_to_xyz(np.eye(3))[:, 1]  # Y of each sRGB primary
     observers = [o for o in m.observers if o != colorimetry.GROUND_TRUTH]
-    found = [(objs[i], raycast.pixels_inside(cam, w, h, objs, i, margin=0.7)) for i in _patches(scene)]
+    hits = raycast.corner_hits(cam, w, h, objs)  # one cast for every patch
+    found = [(objs[i], raycast.pixels_inside(cam, w, h, objs, i, margin=0.7, hits=hits)) for i in _patches(scene)]
     if not found:
         return []
     measurable = sum(1 for _, mk in found if mk.sum() >= MIN_PIXELS)
