@@ -3,9 +3,11 @@ from pathlib import Path
 
 
 def prepend(path, head, text):
+    """Put ``text`` right under the file's ``head`` (written if the file does not start with it);
+    everything that was there before stays below it."""
     path = Path(path)
     old = path.read_text() if path.exists() else ""
-    old = old[len(head):] if old.startswith(head) else ""
+    old = old[len(head):] if old.startswith(head) else old
     path.write_text(head + text + "\n" + old)
 
 
