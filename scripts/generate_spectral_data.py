@@ -17,7 +17,7 @@ from pathlib import Path
 
 import colour
 
-ILLUMINANTS = ["A", "D50", "D55", "D65", "D75", "E", "FL2", "FL7", "FL11"]
+ILLUMINANTS = ["A", "D50", "D55", "D65", "D75", "E", "FL2", "FL7", "FL8", "FL11"]
 DATA = Path(__file__).resolve().parents[1] / "exporters" / "data"
 
 

@@ -15,7 +15,9 @@ GOLDEN = ROOT / "golden" / "ir"
 REFLECTANCE = ["ggx_copper_50", "ggx_copper_60", "ggx_copper_70", "ggx_copper_80", "ggx_glass"]
 SPECTRAL_ACCURACY = ["macbeth_chart_D50", "macbeth_chart_D65"]
 POLARIZATION = ["polarizing_plane_0", "polarizing_plane_90", "polarizing_spheres"]
-ALL_SCENES = sorted(REFLECTANCE + SPECTRAL_ACCURACY + POLARIZATION)
+FLUORESCENCE = ["fluorescent_sphere_D50_red", "fluorescent_sphere_lone", "fluorescent_sphere_mono_invisible",
+                "fluorescent_sphere_mono_red", "yellow_sphere_F8"]
+ALL_SCENES = sorted(REFLECTANCE + SPECTRAL_ACCURACY + POLARIZATION + FLUORESCENCE)
 
 
 @pytest.fixture(scope="session")

@@ -24,7 +24,7 @@ from ...exporters import art_writer, colorimetry, spectra
 from .. import exr
 from .mitsuba_backend import BackendFailure
 
-NATIVE = {"spectral", "polarization"}
+NATIVE = {"spectral", "polarization", "fluorescence"}  # fluorescence: CONST_FLUORESCENT_COLOUR (art_writer)
 
 
 def find_artist(executable=None):

@@ -21,7 +21,7 @@ WORKER = Path(__file__).resolve().parent / "mitsuba_worker.py"
 NATIVE = {"spectral", "polarization"}
 # phenomena this project's Python plugins add (exporters/mitsuba_plugins): they load through the
 # Python API only, not through the mitsuba executable
-PLUGIN_NEEDS = set()
+PLUGIN_NEEDS = {"fluorescence"}  # sb_fluorescent_diffuse + sb_fluorescent_path (unpolarised spectral variants)
 
 
 class BackendFailure(RuntimeError):
@@ -64,7 +64,12 @@ class MitsubaBackend:
         if self.executable and needs & PLUGIN_NEEDS:
             return None, (f"{', '.join(sorted(needs & PLUGIN_NEEDS))} needs this project's Python plugins, "
                           "which the mitsuba executable cannot load (use the Python route: no -e mitsuba=...)")
+        if "fluorescence" in needs and "polarization" in needs:
+            return None, ("fluorescence with polarisation: sb_fluorescent_path traces unpolarised spectral "
+                          "radiance only")
         if self.force_variant:
+            if "fluorescence" in needs and not self.force_variant.endswith("_spectral"):
+                return None, f"fluorescence needs an unpolarised spectral variant, not {self.force_variant}"
             return self.force_variant, None
         llvm_ok = llvm.find()[0] is not None
         prefix = "llvm_ad_" if llvm_ok else "scalar_"

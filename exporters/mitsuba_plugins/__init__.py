@@ -16,7 +16,10 @@ import shutil
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-MODULES = {}  # {"sb_<name>": "<module file stem>"}: one entry per plugin
+MODULES = {  # {"sb_<name>": "<module file stem>"}: one entry per plugin
+    "sb_fluorescent_diffuse": "fluorescent_diffuse",  # Lambertian + re-radiation table (fluorescence)
+    "sb_fluorescent_path": "fluorescent_path",  # path tracer that re-radiates at those surfaces
+}
 
 LOADER = '''"""Registers this scene's Python plugins with Mitsuba 3 (written by spectral_bench).
 
