@@ -1,9 +1,9 @@
 """Mitsuba (sb_fluorescent_path) against ART 2.1.2 (CONST_FLUORESCENT_COLOUR) on the fluorescence
 case, each judged on its own noise.
 
-    .venv/bin/python benchmarks/crosscheck_fluorescence.py [--scale 0.25] [--spp 256] [--passes 4] [--write]
+    .venv/bin/python benchmarks/crosscheck_fluorescence.py [--size 128] [--spp 256] [--passes 4] [--write]
 
-Both backends render every scene of the case at the same resolution and sample count in
+Both backends render every scene of the case at --size x --size pixels and one sample count in
 ``--passes`` independent passes, so each image carries its own per-pixel standard error. Regions
 of whole pixels (batch/verdict/raycast.py): the sphere, the floor's inner 70 % and the
 environment seen directly. Per region and channel the two means are compared with a two-sample
@@ -12,6 +12,13 @@ errors over n^2 (pixels are independent); a Sidak correction over the scene's te
 "agree" means no evidence of a difference at that level, not proof of equality: the standard
 errors are printed beside each difference. The lone sphere is also judged by its analytic probe,
 per backend. Prints Markdown; --write replaces the measured section of benchmarks/FLUORESCENCE.md.
+
+``--art-output spectral`` (default) has ART write its spectral EXR (46 bands, 320-780 nm), which is
+turned into linear sRGB here with the CIE 1931 CMFs, as the ART backend does for Stokes scenes:
+ART's own conversion to an sRGB EXR (``--art-output srgb``, what the backend renders otherwise)
+maps colours outside the sRGB gamut far from their values (measured: the 450 nm light seen
+directly, blue 1.00 instead of 5.27), which would hide how ART transports light behind how it
+writes it.
 """
 import argparse
 import datetime as dt
@@ -30,7 +37,13 @@ sys.path.insert(0, str(ROOT))
 import pkg_bootstrap  # noqa: E402
 
 ALPHA = 0.01
-BEGIN, END = "<!-- crosscheck: begin (benchmarks/crosscheck_fluorescence.py --write) -->", "<!-- crosscheck: end -->"
+SPECTRAL_ROUTE = ("[ IMAGECONVERSION_ARTRAW_TO_ARTCSP removeSource: NO ],",
+                  "[ IMAGECONVERSION_ARTRAW_TO_SPECTRAL_EXR removeSource: NO ],")
+
+
+def markers(route):
+    return (f"<!-- crosscheck {route}: begin (benchmarks/crosscheck_fluorescence.py --art-output {route} --write) -->",
+            f"<!-- crosscheck {route}: end -->")
 
 
 def regions(scene, w, h):
@@ -54,11 +67,16 @@ def region_stats(img, se, mask):
     return mean, sem, n
 
 
-def render(backend, scene, folder, spp, passes, seed):
+def render(backend, scene, folder, spp, passes, seed, art_output="spectral"):
     mode, why = backend.mode_for(scene)
     if mode is None:
         return None, why
     path = backend.export(scene, folder / backend.name)
+    if backend.name == "art" and art_output == "spectral":
+        text = path.read_text()
+        assert SPECTRAL_ROUTE[0] in text, "the ART writer's actions changed"
+        lines = [l for l in text.replace(*SPECTRAL_ROUTE).splitlines() if "IMAGECONVERSION_ARTCSP_TO_EXR" not in l]
+        path.write_text("\n".join(lines) + "\n")
     info = backend.render(path, mode, spp, folder / f"{backend.name}.exr", passes=passes, seed=seed,
                           timeout=6 * 3600, log_path=folder / f"{backend.name}.log")
     from spectral_bench.batch import exr
@@ -73,12 +91,13 @@ def main():
     from spectral_bench.batch.verdict import probes, stats
 
     ap = argparse.ArgumentParser()
-    ap.add_argument("--scale", type=float, default=0.25)
+    ap.add_argument("--size", type=int, default=128)
     ap.add_argument("--spp", type=int, default=256)
     ap.add_argument("--passes", type=int, default=4)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("-s", "--scene", action="append")
     ap.add_argument("--write", action="store_true")
+    ap.add_argument("--art-output", choices=("spectral", "srgb"), default="spectral")
     ap.add_argument("--json", help="also write the numbers to this file")
     args = ap.parse_args()
 
@@ -91,11 +110,12 @@ def main():
     rows, record = [], {}
     with tempfile.TemporaryDirectory() as tmp:
         for name, scene in scenes:
-            sc = runner.for_run(scene, {"spp": args.spp, "scale": args.scale})
+            sc = runner.for_run(scene, {"spp": args.spp, "scale": None})
             r = sc["render"]
+            r["width"] = r["height"] = args.size  # every scene is square
             results = {}
             for b in (mitsuba, art):
-                res, why = render(b, sc, Path(tmp) / name, args.spp, args.passes, args.seed)
+                res, why = render(b, sc, Path(tmp) / name, args.spp, args.passes, args.seed, args.art_output)
                 if res is None:
                     raise SystemExit(f"{name} / {b.name}: {why}")
                 results[b.name] = res
@@ -126,19 +146,22 @@ def main():
                                     f"{', '.join(f'{v:.4g}' for v in rec['measured'])} | | | "
                                     f"{'pass' if rec['pass'] else 'FAIL'} ({rec['error']:.1f} sigma beyond the film "
                                     f"allowance) |")
+    begin, end = markers(args.art_output)
+    route = ("its spectral EXR converted here with the CIE 1931 CMFs" if args.art_output == "spectral"
+             else "its own sRGB EXR (the ART backend's route)")
     text = "\n".join([
-        BEGIN,
-        f"Measured {dt.date.today().isoformat()} by `benchmarks/crosscheck_fluorescence.py --scale {args.scale} "
+        begin,
+        f"Measured {dt.date.today().isoformat()} by `benchmarks/crosscheck_fluorescence.py --size {args.size} "
         f"--spp {args.spp} --passes {args.passes}` ({platform.system()}, {os.cpu_count()} cores): Mitsuba "
         f"{next(iter(record.values()))['modes']['mitsuba'] if record else ''} with sb_fluorescent_path, ART "
-        f"{next(iter(record.values()))['modes']['art'] if record else ''} (`-s46e -wp d65`). Each cell: Mitsuba / ART "
+        f"{next(iter(record.values()))['modes']['art'] if record else ''} (`-s46e -wp d65`, {route}). Each cell: Mitsuba / ART "
         f"(ART's difference, z on both renders' own noise); agree: every channel's p >= the Sidak threshold for "
         f"alpha {ALPHA} over the scene's tests.",
         "",
         "| scene | region | R | G | B | agree |",
         "|---|---|---|---|---|---|",
         *rows,
-        END,
+        end,
     ])
     print(text)
     if args.json:
@@ -146,9 +169,9 @@ def main():
     if args.write:
         doc = Path(__file__).resolve().parent / "FLUORESCENCE.md"
         old = doc.read_text()
-        if BEGIN not in old or END not in old:
-            raise SystemExit(f"{doc} has no measured section between {BEGIN} and {END}")
-        doc.write_text(old[:old.index(BEGIN)] + text + old[old.index(END) + len(END):])
+        if begin not in old or end not in old:
+            raise SystemExit(f"{doc} has no measured section between {begin} and {end}")
+        doc.write_text(old[:old.index(begin)] + text + old[old.index(end) + len(end):])
 
 
 if __name__ == "__main__":

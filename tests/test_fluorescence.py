@@ -87,6 +87,16 @@ def test_probe_fails_when_the_emission_peak_moves_20nm(lone, shift):
     assert rec["pass"] is False and rec["error"] > 10, rec
 
 
+def test_uv_excitation_below_mitsubas_360nm_counts(golden, tmp_path, monkeypatch):
+    """Half of the lone sphere's absorption band lies below 360 nm, where Mitsuba's camera never
+    samples: the excitation wavelength is drawn there all the same, and the light there is the
+    scene's because fluorescent scenes tabulate spectra from 300 nm. Tabulated from 360 nm (as
+    other scenes are), Mitsuba's spectra read 0 below it and the probe sees the missing red."""
+    monkeypatch.setattr(fluorescence, "FLUORESCENT_SPECTRA_FROM", 360.0)
+    rec = _lone_probe(*_render(golden[LONE], tmp_path, PROBE_SPP, PROBE_SIZE))
+    assert rec["pass"] is False and rec["measured"][0] < rec["expected"][0], rec
+
+
 def test_probe_ground_truth_outweighs_the_renderers_tabulation(golden):
     """The renderers integrate a 1 nm tabulation of P; the probe integrates P itself. Their
     difference in the re-radiated light must be negligible (< 1e-3) against what the probe
@@ -257,7 +267,8 @@ def test_450nm_light_spheres_agree_with_their_references_dark_and_red(golden, mo
     dark, image_dark = _sphere_rgb(out, runs["fluorescent_sphere_mono_invisible"], golden["fluorescent_sphere_mono_invisible"])
     red, _ = _sphere_rgb(out, runs["fluorescent_sphere_mono_red"], golden["fluorescent_sphere_mono_red"])
     # absorbing at 370 nm, lit at 450 nm: only the yellow base's elastic 5 % of blue, no red
-    assert dark[0] < 0.05 * red[0] and dark.sum() < 0.1 * red.sum(), (dark, red)
+    luminance = np.array([0.2126, 0.7152, 0.0722])  # linear sRGB -> Y
+    assert dark[0] < 0.05 * red[0] and dark @ luminance < 0.1 * (red @ luminance), (dark, red)
     # absorbing at 450 nm: re-emitted red dominates
     assert red[0] > 3 * max(red[1], red[2]), red
 
@@ -335,9 +346,30 @@ def test_backends_say_what_they_cannot_model(golden):
     sc = _derive(sc)
     mode, why = backends.get("mitsuba").mode_for(sc)
     assert mode is None and "polarisation" in why
-    mode, why = backends.get("mitsuba", force_variant="llvm_ad_rgb").mode_for(_derive(copy.deepcopy(golden[LONE])))
-    assert mode is None and "spectral" in why
+    for variant in ("llvm_ad_rgb", "scalar_spectral"):  # RGB cannot; scalar would call Python per sample
+        mode, why = backends.get("mitsuba", force_variant=variant).mode_for(_derive(copy.deepcopy(golden[LONE])))
+        assert mode is None and "llvm_ad_spectral" in why, (variant, why)
     assert backends.get("mitsuba").mode_for(golden["yellow_sphere_F8"])[0].endswith("_spectral")
+
+
+def test_without_llvm_fluorescence_is_unsupported_with_the_reason(tmp_path):
+    """Scalar variants would call the Python integrator once per sample: refused, saying why."""
+    code = textwrap.dedent(f"""
+        import json, sys
+        sys.path.insert(0, {str(ROOT)!r})
+        import pkg_bootstrap; pkg_bootstrap.package()
+        from spectral_bench.batch.backends import llvm
+        from spectral_bench.batch import backends
+        from spectral_bench.exporters import ir_json
+        llvm.CANDIDATES = ()
+        llvm.glob.glob = lambda pattern: []
+        print(json.dumps(backends.get("mitsuba").mode_for(ir_json.load({str(ROOT / "golden" / "ir" / (LONE + ".json"))!r}))))
+    """)
+    env = dict(os.environ, DRJIT_LIBLLVM_PATH=str(tmp_path / "libLLVM-missing.so"))
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, env=env)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    mode, why = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert mode is None and "llvm_ad_spectral" in why and "libLLVM-missing" in why
 
 
 def test_writers_model_no_more_than_a_scene_needs(golden, tmp_path):
@@ -369,4 +401,41 @@ def test_art_renders_the_450nm_spheres_dark_and_red(golden, tmp_path):
     assert all(r["mode"] == "spectral46" and r["image"] for r in runs.values()), (runs, proc.stderr[-2000:])
     dark, _ = _sphere_rgb(out, runs[MONO[0]], golden[MONO[0]])
     red, _ = _sphere_rgb(out, runs[MONO[1]], golden[MONO[1]])
+    luminance = np.array([0.2126, 0.7152, 0.0722])
     assert red[0] > 3 * max(red[1], red[2]) and dark[0] < 0.05 * red[0], (dark, red)
+    assert dark @ luminance < 0.1 * (red @ luminance), (dark, red)
+
+
+# ---- Blender ------------------------------------------------------------------------------------------
+
+def test_blender_annotations_reach_the_ir_and_a_bad_matrix_file_is_named(tmp_path):
+    from conftest import run_bpy
+    good = tmp_path / "donaldson.json"
+    good.write_text(json.dumps({"wavelengths": [400.0, 450.0, 600.0],
+                                "matrix": [[0, 0, 0.002], [0, 0, 0.004], [0, 0, 0]]}))
+    out = run_bpy(f"""
+        from spectral_bench.exporters import extract_blender, validate
+        from spectral_bench.addon import validation
+        scene = bpy.data.scenes["{LONE}"]
+        mat = bpy.data.materials["yellow_fluorescent_360_600"]
+        bands = extract_blender.extract_scene(scene)["objects"][0]["bsdf"]["fluorescence"]
+        mat.spectral_bench.fluorescence = "MATRIX"
+        mat.spectral_bench.fluorescence_matrix_file = {str(good)!r}
+        matrix = extract_blender.extract_scene(scene)["objects"][0]["bsdf"]["fluorescence"]
+        mat.spectral_bench.fluorescence_matrix_file = {str(tmp_path / "missing.json")!r}
+        try:
+            extract_blender.extract_scene(scene)
+            problems = []
+        except validate.SceneError as exc:
+            problems = [list(p) for p in exc.problems]
+        mat.spectral_bench.fluorescence = "BANDS"
+        mat.spectral_bench.emission_peak = 300.0
+        panel = validation.material_problems(mat)
+        print(json.dumps({{"bands": bands, "matrix": matrix, "problems": problems, "panel": panel}}))
+    """)
+    assert out["bands"] == {"type": "bands", "absorption_peak": 360.0, "absorption_width": 40.0,
+                            "emission_peak": 600.0, "emission_width": 50.0, "strength": 0.01}
+    assert out["matrix"]["type"] == "matrix" and out["matrix"]["matrix"][1][2] == 0.004
+    assert [p[:2] for p in out["problems"]] == [
+        ["lone_sphere", "material[yellow_fluorescent_360_600].spectral_bench.fluorescence_matrix_file"]]
+    assert any("fluorescence.emission_peak" in p for p in out["panel"]), out["panel"]

@@ -68,10 +68,16 @@ class MitsubaBackend:
             return None, ("fluorescence with polarisation: sb_fluorescent_path traces unpolarised spectral "
                           "radiance only")
         if self.force_variant:
-            if "fluorescence" in needs and not self.force_variant.endswith("_spectral"):
-                return None, f"fluorescence needs an unpolarised spectral variant, not {self.force_variant}"
+            if "fluorescence" in needs and not (self.force_variant.endswith("_spectral")
+                                                and not self.force_variant.startswith("scalar_")):
+                return None, ("fluorescence needs an unpolarised spectral JIT variant (llvm_ad_spectral), "
+                              f"not {self.force_variant}")
             return self.force_variant, None
         llvm_ok = llvm.find()[0] is not None
+        if "fluorescence" in needs and not llvm_ok:
+            return None, ("fluorescence: sb_fluorescent_path is a Python integrator that Mitsuba's scalar "
+                          "variants would call once per sample; it needs llvm_ad_spectral: "
+                          + llvm.find()[1])
         prefix = "llvm_ad_" if llvm_ok else "scalar_"
         if "polarization" in needs:
             if "spectral" in needs or not llvm_ok:  # Mitsuba ships no scalar_mono_polarized
