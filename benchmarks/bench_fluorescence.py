@@ -11,7 +11,9 @@ Rows:
 
 Each child process loads the scene, renders once (tracing and JIT compilation: "cold") and then
 ``--repeat`` more times ("warm": Dr.Jit re-traces every render call, Python integrator included,
-but reuses the compiled kernel); its warm median is one sample of the round. Prints a Markdown
+but reuses the compiled kernel); its warm median is one sample of the round, and the ratio is the
+median over rounds of the two back-to-back samples' ratio (the machine's load drifts between
+rounds, far less within one). Prints a Markdown
 table; --write records it in benchmarks/RESULTS.md. The numbers are only as good as the machine's
 idleness: the ratio is what an interleaved run protects.
 """
@@ -123,11 +125,14 @@ def main():
                 print(f"{name} round {r + 1}/{args.rounds}: path {samples['path'][-1]['warm']:.3f} s, "
                       f"sb_fluorescent_path {samples['ours'][-1]['warm']:.3f} s", flush=True)
             med = {k: {m: statistics.median(s[m] for s in v) for m in ("cold", "warm")} for k, v in samples.items()}
-            ratio = med["ours"]["warm"] / med["path"]["warm"]
+            # each round's pair ran under the same load: the median of the paired ratios
+            ratios = [o["warm"] / p["warm"] for o, p in zip(samples["ours"], samples["path"])]
+            ratio = statistics.median(ratios)
             results[name] = ratio
             rows.append(f"| {name} | {what} | {sc['render']['width']}x{sc['render']['height']} | {args.spp} "
                         f"| {med['path']['warm']:.3f} ({med['path']['cold']:.3f}) "
-                        f"| {med['ours']['warm']:.3f} ({med['ours']['cold']:.3f}) | {ratio:.2f}x |")
+                        f"| {med['ours']['warm']:.3f} ({med['ours']['cold']:.3f}) | {ratio:.2f}x "
+                        f"({min(ratios):.2f}-{max(ratios):.2f}) |")
     verdict = results["yellow_sphere_F8"] <= TARGET
     text = "\n".join([
         f"## Fluorescent integrator against Mitsuba's path integrator, {dt.date.today().isoformat()}",
@@ -135,9 +140,10 @@ def main():
         f"Recorded by `benchmarks/bench_fluorescence.py`. Machine: {cpu_model()}, {os.cpu_count()} cores, "
         f"{platform.system()} {platform.release()}; Python {platform.python_version()}; {VARIANT}; "
         f"{args.rounds} interleaved rounds, each a fresh process with one cold and {args.repeat} warm renders; "
-        "medians of the rounds' warm medians (cold: first render call, tracing and JIT included).",
+        "times: medians of the rounds' warm medians (cold: first render call, tracing and JIT included); ratio: "
+        "median (range) over rounds of the round's warm ratio, both renders of a round having run back to back.",
         "",
-        "| scene | what | resolution | spp | `path` s (cold) | `sb_fluorescent_path` s (cold) | ratio (warm) |",
+        "| scene | what | resolution | spp | `path` s (cold) | `sb_fluorescent_path` s (cold) | ratio, warm (range) |",
         "|---|---|---|---|---|---|---|",
         *rows,
         "",

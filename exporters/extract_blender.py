@@ -54,9 +54,10 @@ def fluorescence(a):
                                      "strength")}}
     if a.fluorescence == "MATRIX":
         import json
+        from pathlib import Path
         path = bpy.path.abspath(a.fluorescence_matrix_file) if a.fluorescence_matrix_file else ""
         try:
-            data = json.loads(open(path).read())
+            data = json.loads(Path(path).read_text())
             return {"type": "matrix", "wavelengths": [float(w) for w in data["wavelengths"]],
                     "matrix": [[float(v) for v in row] for row in data["matrix"]]}
         except (OSError, ValueError, KeyError, TypeError) as exc:
