@@ -56,6 +56,13 @@ class SPECTRAL_BENCH_PT_material(_Base, bpy.types.Panel):
         self.layout.prop(a, "kind")
         if a.kind == "DIFFUSE":
             _draw_spectrum(self.layout, a.reflectance, "Reflectance", "material.reflectance")
+            self.layout.prop(a, "fluorescence")
+            if a.fluorescence == "BANDS":
+                box = self.layout.box()
+                for key in ("absorption_peak", "absorption_width", "emission_peak", "emission_width", "strength"):
+                    box.prop(a, key)
+            elif a.fluorescence == "MATRIX":
+                self.layout.prop(a, "fluorescence_matrix_file")
         elif a.kind == "CONDUCTOR":
             self.layout.prop(a, "conductor_named")
             if a.conductor_named:

@@ -52,6 +52,13 @@ DISTRIBUTIONS = [("SMOOTH", "Smooth", "Perfectly specular")] + [
     (d.upper(), d.upper() if d == "ggx" else d.title(), f"{d} microfacet distribution") for d in ir.DISTRIBUTIONS]
 
 
+FLUORESCENCE_KINDS = [
+    ("NONE", "None", "Not fluorescent"),
+    ("BANDS", "Bands", "Absorption and emission bands (ART's CONST_FLUORESCENT_COLOUR): a pyramid of re-radiation"),
+    ("MATRIX", "Matrix", "A re-radiation (Donaldson) matrix from a JSON file: wavelengths and matrix[i][o] in 1/nm"),
+]
+
+
 class MaterialProps(bpy.types.PropertyGroup):
     kind: EnumProperty(name="Model", items=MATERIAL_KINDS, default="NONE")
     reflectance: PointerProperty(type=SpectrumProps)
@@ -81,6 +88,21 @@ class MaterialProps(bpy.types.PropertyGroup):
                                   precision=1, description="0 is the bare conductor")
     film_ext_ior: FloatProperty(name="Exterior IOR", default=1.0, soft_min=1.0, soft_max=3.0, precision=6,
                                 description="Index of the medium above the film (1: vacuum, as for a bare conductor)")
+    # fluorescence of a diffuse material (exporters/fluorescence.py): re-radiation P(l_i, l_o) in 1/nm
+    fluorescence: EnumProperty(name="Fluorescence", items=FLUORESCENCE_KINDS, default="NONE")
+    absorption_peak: FloatProperty(name="Absorption Peak (nm)", default=370.0, soft_min=300.0, soft_max=830.0)
+    absorption_width: FloatProperty(name="Absorption Width (nm)", default=40.0, soft_min=1.0, soft_max=200.0,
+                                    description="Half the absorption band's base: re-radiation falls to 0 this far "
+                                                "from the peak")
+    emission_peak: FloatProperty(name="Emission Peak (nm)", default=650.0, soft_min=300.0, soft_max=830.0)
+    emission_width: FloatProperty(name="Emission Width (nm)", default=50.0, soft_min=1.0, soft_max=200.0,
+                                  description="Half the emission band's base")
+    strength: FloatProperty(name="Strength (1/nm)", default=0.01, soft_min=0.0, soft_max=0.05, precision=4,
+                            description="Peak of the re-radiation P in 1/nm (ART's fluo_power); the quantum "
+                                        "yield must stay <= 1")
+    fluorescence_matrix_file: StringProperty(name="Matrix File", subtype="FILE_PATH", default="",
+                                             description="JSON with \"wavelengths\" (nm) and \"matrix\" "
+                                                         "(matrix[i][o] = P(w_i, w_o) in 1/nm, 0 where o <= i)")
 
 
 class LightProps(bpy.types.PropertyGroup):

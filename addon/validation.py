@@ -10,6 +10,11 @@ def material_problems(mat):
         return ["Not annotated: set a Model, or the exporter reports this material"]
     if a.kind == "CONDUCTOR" and a.conductor_named and a.conductor not in spectra.NAMED_CONDUCTORS:
         return [f"Unknown conductor {a.conductor!r}"]
+    if a.kind == "DIFFUSE":
+        try:
+            extract_blender.fluorescence(a)
+        except ValueError as exc:
+            return [f"fluorescence_matrix_file: {exc}"]
     bsdf = extract_blender.material_bsdf(mat)
     return [f"{field}: {msg}" for field, msg in validate.bsdf_problems(bsdf)]
 

@@ -15,6 +15,13 @@ default white point is D50). Measured: the ColorChecker under ART's D65 table re
 spectrum came out 10 % darker under ``-s46e`` (identical under the default 8 samples), so
 illuminants with an ART table use it.
 
+Fluorescence: the IR's bands form is ART's CONST_FLUORESCENT_COLOUR(reflectance, strength,
+PNT2D(absorption, emission), VEC2D(absorption width, emission width)) under a LAMBERT_REFLECTOR,
+with the same meaning (exporters/fluorescence.py was written from ART's ArCrosstalk500.c). ART
+tabulates the re-radiation from 300 to 799 nm, so an emission band reaching 800 nm or beyond is
+reported, and a re-radiation matrix is not mapped (reported). Spectra of fluorescent scenes are
+written from 300 nm, as for Mitsuba, so that UV excitation sees the scene's values.
+
 What ART cannot express is returned per object and field, never silently replaced:
 upstream ART has no GGX or Beckmann microfacets (Blinn only), no thin-film interference, no light
 tracer and no collimated emitter; of the IOR models only Sellmeier (and named glasses, which are
@@ -26,18 +33,29 @@ from pathlib import Path
 
 import numpy as np
 
-from . import dispersion, ir, mesh_io, spectra
+from . import dispersion, fluorescence, ir, mesh_io, spectra
 
 # ART's own CIE illuminant tables are raw CIE data (D65 = 100 at 560 nm): the IR's scale s
-# (1.0 at 560 nm) becomes s / 100 on them
+# (1.0 at 560 nm) becomes s / (raw table value at 560 nm): s / 100 for A and the D series, s / 11.76
+# for FL8 (the CIE FL tables are not normalised at 560 nm; ART_Resources/SpectralData/CIEIlluminant.ark
+# holds the same CIE 15:2004 values as colour-science, exporters/data/cie_illuminants.json)
 ART_ILLUMINANTS = {"cie_a": "CIE_ILLUMINANT_A", "cie_d50": "CIE_ILLUMINANT_D50", "cie_d55": "CIE_ILLUMINANT_D55",
                    "cie_d65": "CIE_ILLUMINANT_D65", "cie_d75": "CIE_ILLUMINANT_D75", "cie_fl2": "CIE_ILLUMINANT_FL2",
-                   "cie_fl7": "CIE_ILLUMINANT_FL7", "cie_fl11": "CIE_ILLUMINANT_FL11"}
-ART_TABLE_AT_560NM = 100.0
+                   "cie_fl7": "CIE_ILLUMINANT_FL7", "cie_fl8": "CIE_ILLUMINANT_FL8", "cie_fl11": "CIE_ILLUMINANT_FL11"}
+ART_TABLE_AT_560NM = 100.0  # A and the D series
+ART_CROSSTALK_RANGE = (300.0, 799.0)  # nm: ART's ArCrosstalk500, 500 cells of 1 nm from 300 nm
 
 
 def _num(x):
     return repr(round(float(x), 9))
+
+
+def raw_table_at_560nm(name):
+    """The raw CIE table's value at 560 nm (what ART's table has there)."""
+    if name.startswith("cie_fl"):
+        t = spectra._named_tables()[name][0]
+        return float(np.interp(spectra.NORMALISATION_NM, t["wavelengths"], t["values"]))
+    return ART_TABLE_AT_560NM
 
 
 def _pnt(p):
@@ -49,17 +67,39 @@ class _Writer:
         self.scene, self.out, self.ggx = scene, Path(out_dir), ggx
         self.unsupported = []  # (object, field, message)
         self.lines = []
+        fluorescent = "fluorescence" in ir.derived_needs(scene)
+        self.spectra_from = fluorescence.FLUORESCENT_SPECTRA_FROM if fluorescent else spectra.LAMBDA_MIN
+
+    def fluorescent(self, name, b):
+        """CONST_FLUORESCENT_COLOUR under a Lambertian reflector (None when ART cannot take it)."""
+        fl = b["fluorescence"]
+        if fl["type"] != "bands":
+            self.unsupported.append((name, "bsdf.fluorescence", "a re-radiation matrix: this writer maps ART's "
+                                     "CONST_FLUORESCENT_COLOUR bands only"))
+            return None
+        lo, hi = ART_CROSSTALK_RANGE
+        for band in ("absorption", "emission"):
+            p, w = fl[f"{band}_peak"], fl[f"{band}_width"]
+            if p - w < lo or p + w > hi:
+                self.unsupported.append((name, f"bsdf.fluorescence.{band}_width",
+                                         f"the {band} band {p - w:g}-{p + w:g} nm leaves ART's re-radiation "
+                                         f"table ({lo:g}-{hi:g} nm)"))
+                return None
+        return (f"LAMBERT_REFLECTOR(CONST_FLUORESCENT_COLOUR({self.colour(b['reflectance'])},\n"
+                f"            {_num(fl['strength'])},\n"
+                f"            PNT2D({_num(fl['absorption_peak'])} NM, {_num(fl['emission_peak'])} NM),\n"
+                f"            VEC2D({_num(fl['absorption_width'])} NM, {_num(fl['emission_width'])} NM)))")
 
     def emission(self, spec):
         """(colour, brightness) of an emitted spectrum."""
         if spec.get("type") == "named" and spec["name"] in ART_ILLUMINANTS:
-            return ART_ILLUMINANTS[spec["name"]], spec.get("scale", 1.0) / ART_TABLE_AT_560NM
+            return ART_ILLUMINANTS[spec["name"]], spec.get("scale", 1.0) / raw_table_at_560nm(spec["name"])
         return self.colour(spec), 1.0
 
     def colour(self, spec):
         if spectra.is_constant(spec):
             return f"CONST_COLOUR_GREY({_num(spec['value'])})"
-        wl, vals = spectra.tabulate(spec)
+        wl, vals = spectra.tabulate(spec, lo=self.spectra_from)
         pts = [f"PNT2D({w:g} NM, {_num(v)})" for w, v in zip(wl, vals)]
         rows = ",\n            ".join(", ".join(pts[i:i + 6]) for i in range(0, len(pts), 6))
         return f"CONST_COLOUR_PSSPECTRUM(1.0,\n            {rows},\n            PSS_END)"
@@ -84,6 +124,8 @@ class _Writer:
     def surface(self, obj):
         """ART material expression of an object's BSDF (None when unsupported)."""
         b, name = obj["bsdf"], obj["name"]
+        if b["type"] == "diffuse" and b.get("fluorescence") is not None:
+            return self.fluorescent(name, b)
         if b["type"] == "diffuse":
             return f"LAMBERT_REFLECTOR({self.colour(b['reflectance'])})"
         if b.get("thin_film") is not None:

@@ -62,10 +62,37 @@ def _ior(a):
     return _clean(a.int_ior)
 
 
+def fluorescence(a):
+    """The IR ``fluorescence`` of a material's annotation (None when not fluorescent); raises
+    ValueError when the matrix file cannot be read."""
+    if a.fluorescence == "BANDS":
+        return {"type": "bands", **{k: _clean(getattr(a, k)) for k in
+                                    ("absorption_peak", "absorption_width", "emission_peak", "emission_width",
+                                     "strength")}}
+    if a.fluorescence == "MATRIX":
+        import json
+        from pathlib import Path
+        path = bpy.path.abspath(a.fluorescence_matrix_file) if a.fluorescence_matrix_file else ""
+        try:
+            data = json.loads(Path(path).read_text())
+            return {"type": "matrix", "wavelengths": [float(w) for w in data["wavelengths"]],
+                    "matrix": [[float(v) for v in row] for row in data["matrix"]]}
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise ValueError(f"cannot read a re-radiation matrix (JSON: wavelengths, matrix) from {path!r}: {exc}")
+    return None
+
+
 def material_bsdf(mat):
     a = mat.spectral_bench
     if a.kind == "DIFFUSE":
-        return {"type": "diffuse", "reflectance": spectrum(a.reflectance)}
+        out = {"type": "diffuse", "reflectance": spectrum(a.reflectance)}
+        try:
+            fl = fluorescence(a)
+        except ValueError:
+            fl = None  # reported by _mesh_object (and the material panel) with its field
+        if fl is not None:
+            out["fluorescence"] = fl
+        return out
     out = {}
     if a.kind == "CONDUCTOR":
         out = {"type": "conductor"}
@@ -93,6 +120,12 @@ def _mesh_object(obj, depsgraph, problems):
         problems.append((name, f"material[{mat.name}].spectral_bench.kind",
                          "material has no spectral annotation (set its Model)"))
         return None
+    if mat.spectral_bench.kind == "DIFFUSE":
+        try:
+            fluorescence(mat.spectral_bench)
+        except ValueError as exc:
+            problems.append((name, f"material[{mat.name}].spectral_bench.fluorescence_matrix_file", str(exc)))
+            return None
     kind = obj.spectral_bench.shape
     mw = _world(obj)
     if kind == "RECTANGLE":

@@ -17,6 +17,10 @@ Conventions (every writer follows them):
 - An emitter is ``area`` (Lambertian, ``radiance``) or ``collimated`` (a rectangle emitting only
   along its +Z normal, ``irradiance`` across the beam: Mitsuba's directionalarea); a collimated
   beam is reached only by light tracing (``render.integrator`` "ptracer").
+- Fluorescence: a diffuse BSDF's optional ``fluorescence`` (bands, as ART's
+  CONST_FLUORESCENT_COLOUR, or a re-radiation matrix) adds re-radiation P(l_i, l_o) in 1/nm to
+  its elastic ``reflectance``: L_o(l_o) = rho(l_o) L(l_o) + integral P(l_i, l_o) L(l_i) dl_i,
+  P = 0 for l_o <= l_i and outside 300-830 nm; quantum yield <= 1. See fluorescence.py.
 - Polarisation: ``camera.polarizer.angle`` is the transmission axis of an ideal linear
   polariser in front of the lens, in degrees counter-clockwise from image right as seen from the
   camera (0 = horizontal, 90 = vertical; ART's 0 degrees is horizontal too). ``render.output``
@@ -70,6 +74,8 @@ def derived_needs(scene):
         for key in ("reflectance", "eta", "k"):
             if spectral(bsdf.get(key)):
                 needs.add("spectral")
+        if bsdf.get("fluorescence"):
+            needs.update(("fluorescence", "spectral"))  # re-radiation moves light between wavelengths
         em = obj.get("emitter") or {}
         if spectral(em.get("radiance")) or spectral(em.get("irradiance")):
             needs.add("spectral")

@@ -2,13 +2,20 @@
 
 The folder loads with ``mitsuba scene.xml`` or ``mi.load_file`` unchanged. Sample count,
 seed and max depth are XML defaults ($spp, $seed, $max_depth) so a caller may override them.
+
+Fluorescent scenes (the IR's ``needs`` has "fluorescence") use this project's Python plugins:
+each fluorescent diffuse BSDF becomes ``sb_fluorescent_diffuse`` with its re-radiation table in
+fluorescence/<object>.txt (exporters/fluorescence.py), the integrator is ``sb_fluorescent_path``
+instead of ``path``, and every spectrum is tabulated from 300 nm (the re-radiation's lower end)
+rather than 360 nm, so that light at UV excitation wavelengths is the scene's. Every other scene
+keeps the stock ``path`` integrator and 360-830 nm tables.
 """
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
 
-from . import dispersion, ir, mesh_io, mitsuba_plugins, spectra
+from . import dispersion, fluorescence, ir, mesh_io, mitsuba_plugins, spectra
 
 # Blender/OpenGL cameras look down -Z with +Y up; Mitsuba's look down +Z with +X to the
 # image's left. Mitsuba to_world = IR to_world @ diag(-1, 1, -1).
@@ -33,12 +40,14 @@ class _Writer:
         self.out = Path(out_dir)
         self.files = []
         self.plugins = set()  # this project's Python plugins the scene uses (exporters/mitsuba_plugins)
+        self.fluorescent = "fluorescence" in ir.derived_needs(scene)
+        self.spectra_from = fluorescence.FLUORESCENT_SPECTRA_FROM if self.fluorescent else spectra.LAMBDA_MIN
 
     def spectrum(self, parent, name, spec, stem):
         if spectra.is_constant(spec):
             ET.SubElement(parent, "spectrum", name=name, value=repr(float(spec["value"])))
             return
-        wl, vals = spectra.tabulate(spec)
+        wl, vals = spectra.tabulate(spec, lo=self.spectra_from)
         rel = f"spectra/{stem}.spd"
         path = self.out / rel
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -51,6 +60,14 @@ class _Writer:
         stem = obj["name"]
         rough = b.get("roughness")
         is_rough = rough is not None and rough["alpha"] > 0
+        if b["type"] == "diffuse" and b.get("fluorescence") is not None:
+            node = ET.SubElement(parent, "bsdf", type="sb_fluorescent_diffuse")
+            self.spectrum(node, "reflectance", b["reflectance"], f"{stem}_reflectance")
+            rel = f"fluorescence/{stem}.txt"
+            self.files.append(fluorescence.write_table(b["fluorescence"], self.out / rel))
+            ET.SubElement(node, "string", name="reradiation", value=rel)
+            self.plugins.add("sb_fluorescent_diffuse")
+            return
         if b["type"] == "diffuse":
             node = ET.SubElement(parent, "bsdf", type="diffuse")
             self.spectrum(node, "reflectance", b["reflectance"], f"{stem}_reflectance")
@@ -159,7 +176,11 @@ class _Writer:
         parent = root
         if r.get("output") == "stokes":
             parent = ET.SubElement(root, "integrator", type="stokes")
-        integ = ET.SubElement(parent, "integrator", type=r.get("integrator", "path"))  # path | ptracer
+        # path | ptracer; a fluorescent scene is traced by this project's bispectral path tracer
+        integ = ET.SubElement(parent, "integrator",
+                              type="sb_fluorescent_path" if self.fluorescent else r.get("integrator", "path"))
+        if self.fluorescent:
+            self.plugins.add("sb_fluorescent_path")
         ET.SubElement(integ, "integer", name="max_depth", value="$max_depth")
         cam = sc["camera"]
         sensor = ET.SubElement(root, "sensor", type="perspective")

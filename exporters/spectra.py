@@ -115,16 +115,18 @@ def evaluate(spec, wavelengths):
     raise SpectrumError("type", f"unknown spectrum type {kind!r}")
 
 
-def tabulate(spec, step=5.0):
-    """(wavelengths, values) covering 360-830 nm; keeps a sampled spectrum's own points."""
-    grid = np.arange(LAMBDA_MIN, LAMBDA_MAX + 0.5 * step, step)
+def tabulate(spec, step=5.0, lo=LAMBDA_MIN):
+    """(wavelengths, values) covering lo-830 nm (360 nm unless a fluorescent scene needs its
+    light and reflectances at excitation wavelengths below: exporters/fluorescence.py); keeps a
+    sampled spectrum's own points."""
+    grid = np.arange(lo, LAMBDA_MAX + 0.5 * step, step)
     if spec.get("type") == "sampled":
-        inner = [w for w in spec["wavelengths"] if LAMBDA_MIN < w < LAMBDA_MAX]
-        grid = np.unique(np.concatenate([[LAMBDA_MIN], inner, [LAMBDA_MAX]]))
+        inner = [w for w in spec["wavelengths"] if lo < w < LAMBDA_MAX]
+        grid = np.unique(np.concatenate([[lo], inner, [LAMBDA_MAX]]))
     elif spec.get("type") == "named":
         t = _named_tables()[spec["name"]][0]
-        inner = [w for w in t["wavelengths"] if LAMBDA_MIN < w < LAMBDA_MAX]
-        grid = np.unique(np.concatenate([[LAMBDA_MIN], inner, [LAMBDA_MAX]]))
+        inner = [w for w in t["wavelengths"] if lo < w < LAMBDA_MAX]
+        grid = np.unique(np.concatenate([[lo], inner, [LAMBDA_MAX]]))
     return grid, evaluate(spec, grid)
 
 

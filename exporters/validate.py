@@ -10,7 +10,7 @@ from pathlib import Path
 
 import jsonschema
 
-from . import dispersion, ir, spectra
+from . import dispersion, fluorescence, ir, spectra
 
 SCHEMA_PATH = Path(__file__).resolve().parent / "schema" / "scene.schema.json"
 
@@ -34,9 +34,22 @@ def _finite(x):
     return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
 
 
+def _within_its_type(err):
+    """A oneOf over objects told apart by their "type" (BSDFs, shapes, spectra, fluorescence) fails
+    as a whole; the errors of the branch of the object's own type say what is wrong, and where."""
+    inst = err.instance
+    if err.validator == "oneOf" and isinstance(inst, dict) and "type" in inst:
+        own = [e for e in err.context if isinstance(err.validator_value[e.schema_path[0]], dict)
+               and err.validator_value[e.schema_path[0]].get("properties", {}).get("type", {}).get("const") == inst["type"]]
+        if own:
+            return [leaf for e in own for leaf in _within_its_type(e)]
+    return [err]
+
+
 def _schema_problems(data):
     validator = jsonschema.Draft202012Validator(schema())
-    for err in sorted(validator.iter_errors(data), key=lambda e: list(e.absolute_path)):
+    errors = [leaf for err in validator.iter_errors(data) for leaf in _within_its_type(err)]
+    for err in sorted(errors, key=lambda e: list(e.absolute_path)):
         path = list(err.absolute_path)
         obj = "scene"
         if len(path) >= 2 and path[0] == "objects" and isinstance(path[1], int):
@@ -134,6 +147,9 @@ def bsdf_problems(bsdf):
                 i = int(values.argmax())
                 yield "reflectance", (f"a diffuse reflectance above 1 creates energy: {values[i]:.4g} at "
                                       f"{wl[i]:g} nm (360-830 nm)")
+            elif bsdf.get("fluorescence") is not None:
+                rho = bsdf["reflectance"]
+                yield from fluorescence.problems(bsdf["fluorescence"], lambda wl: spectra.evaluate(rho, wl))
     if kind == "conductor":
         if "material" in bsdf and bsdf["material"] not in spectra.NAMED_CONDUCTORS:
             yield "material", (f"unknown conductor {bsdf['material']!r} "

@@ -315,6 +315,71 @@ def build_dispersion(square, sphere):
                             location=(0.3 * k, 2.999, 0), rotation=(math.radians(90), 0, 0))
         stripe.scale = (0.075, 4.0, 1.0)
     add_camera(scene, "fringes_camera", origin=(0, -6, 0), target=(0, 0, 0))
+MONO_450 = ((440.0, 0.0), (450.0, 30.0), (460.0, 0.0))  # a triangle, 10 nm FWHM: "monochromatic" 450 nm
+YELLOW_BAND_STRENGTH = 0.01  # 1/nm; the thesis' 0.025 re-emits 2.3 photons per absorbed photon (refused)
+
+
+def sampled_world(name, points):
+    world = bpy.data.worlds.new(name)
+    a = world.spectral_bench
+    a.enabled = True
+    a.radiance.kind = "SAMPLED"
+    for wavelength, value in points:
+        item = a.radiance.samples.add()
+        item.wavelength, item.value = wavelength, value
+    return world
+
+
+def fluorescent_material(name, absorption, emission):
+    """The thesis' yellow-based fluorescent material (ColorChecker yellow for its base, as ART's
+    CONST_FLUORESCENT_COLOUR: bands 40 nm and 50 nm wide)."""
+    return material(name, "DIFFUSE", reflectance_named="colorchecker_yellow", fluorescence="BANDS",
+                    absorption_peak=absorption, absorption_width=40.0, emission_peak=emission, emission_width=50.0,
+                    strength=YELLOW_BAND_STRENGTH)
+
+
+def build_fluorescence(square, sphere):
+    """Section 3.3.4 (after Mojzik et al. 2018): a yellow-based sphere on a grey floor under uniform
+    light, the camera 6 units from its centre (the thesis' geometry); plus a lone sphere under
+    uniform light for the exact probe."""
+    scenes = {
+        "fluorescent_sphere_D50_red": ("cie_d50", 370.0, "under a uniform CIE D50 environment: yellow base plus red"),
+        "fluorescent_sphere_mono_invisible": ("mono", 370.0, "under 450 nm light only (a 10 nm FWHM triangle): "
+                                              "nothing to absorb, dark"),
+        "fluorescent_sphere_mono_red": ("mono", 450.0, "under 450 nm light only (a 10 nm FWHM triangle): "
+                                        "absorbs it, bright red"),
+        "yellow_sphere_F8": ("cie_fl8", None, "a non-fluorescent yellow sphere under a uniform CIE F8 (FL8) "
+                             "environment"),
+    }
+    floor_mat = material("grey_0.8", "DIFFUSE", reflectance=0.8)
+    first = None
+    for name, (light, absorption, what) in scenes.items():
+        fl = (f", absorbing at {absorption:g} nm (40 nm) and emitting at 650 nm (50 nm), "
+              f"strength {YELLOW_BAND_STRENGTH:g}/nm" if absorption else "")
+        scene = new_scene(name, "fluorescence", 64, f"Yellow (ColorChecker) sphere on a grey floor{fl}, {what}")
+        scene.world = (sampled_world("mono_450", MONO_450) if light == "mono"
+                       else uniform_world(f"uniform_{light}", "NAMED", light))
+        if first is None:
+            first = scene
+            floor = add_object(scene, "fluo_floor", square, floor_mat, "RECTANGLE", location=(0, 0, -1), scale=20.0)
+            camera = add_camera(scene, "fluo_camera", origin=(0, -6, 0))
+        else:
+            for obj in (floor, camera):
+                scene.collection.objects.link(obj)
+            scene.camera = camera
+        mat = (fluorescent_material(f"yellow_fluorescent_{absorption:g}_650", absorption, 650.0) if absorption
+               else material("yellow", "DIFFUSE", reflectance_named="colorchecker_yellow"))
+        add_object(scene, f"sphere_{name}", sphere, mat, "SPHERE")
+    scene = new_scene("fluorescent_sphere_lone", "fluorescence", 64,
+                      "A lone yellow (ColorChecker) fluorescent sphere, absorbing at 360 nm (40 nm, half of it below "
+                      "Mitsuba's 360 nm) and emitting at 600 nm (50 nm), under a uniform CIE D65 environment, "
+                      "no floor: rho L + integral P L at every pixel", resolution=(128, 128))
+    scene.world = uniform_world("uniform_D65_lone", "NAMED", "cie_d65")
+    lone = material("yellow_fluorescent_360_600", "DIFFUSE", reflectance_named="colorchecker_yellow",
+                    fluorescence="BANDS", absorption_peak=360.0, absorption_width=40.0, emission_peak=600.0,
+                    emission_width=50.0, strength=YELLOW_BAND_STRENGTH)
+    add_object(scene, "lone_sphere", sphere, lone, "SPHERE")
+    add_camera(scene, "lone_camera", origin=(0, -6, 0))
 
 
 def build():
@@ -382,6 +447,7 @@ def build():
     build_polarization(square, sphere)
     build_iridescence(square, sphere)
     build_dispersion(square, sphere)
+    build_fluorescence(square, sphere)
     for s in list(bpy.data.scenes):
         if not s.spectral_bench.case or s.name == "Scene":
             bpy.data.scenes.remove(s)

@@ -24,7 +24,7 @@ import colour
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import pkg_bootstrap  # noqa: E402
 
-ILLUMINANTS = ["A", "D50", "D55", "D65", "D75", "E", "FL2", "FL7", "FL11"]
+ILLUMINANTS = ["A", "D50", "D55", "D65", "D75", "E", "FL2", "FL7", "FL8", "FL11"]
 DATA = Path(__file__).resolve().parents[1] / "exporters" / "data"
 
 

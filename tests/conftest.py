@@ -19,7 +19,9 @@ POLARIZATION = ["polarizing_plane_0", "polarizing_plane_90", "polarizing_spheres
 IRIDESCENCE = ["iridescent_sphere_smooth", "iridescent_spheres_film", "iridescent_spheres_height",
                "iridescent_spheres_materials"]
 DISPERSION = ["dispersion_fringes", "dispersion_prism"]
-ALL_SCENES = sorted(REFLECTANCE + SPECTRAL_ACCURACY + POLARIZATION + IRIDESCENCE + DISPERSION)
+FLUORESCENCE = ["fluorescent_sphere_D50_red", "fluorescent_sphere_lone", "fluorescent_sphere_mono_invisible",
+                "fluorescent_sphere_mono_red", "yellow_sphere_F8"]
+ALL_SCENES = sorted(REFLECTANCE + SPECTRAL_ACCURACY + POLARIZATION + IRIDESCENCE + DISPERSION + FLUORESCENCE)
 
 
 @pytest.fixture(scope="session")

@@ -26,7 +26,7 @@ def mitsuba(code, timeout=300):
 def test_export_loads_with_mi_load_file_and_renders(golden, tmp_path, name):
     sc = golden[name]
     variant = "scalar_spectral_polarized" if "polarization" in sc["needs"] else "scalar_spectral"
-    if "thin_film" in sc["needs"]:
+    if {"thin_film", "dispersion", "fluorescence"} & set(sc["needs"]):
         variant = variant.replace("scalar_", "llvm_ad_")  # a scalar variant calls a Python plugin per ray
     xml = mitsuba_writer.write(sc, tmp_path / name)
     out = mitsuba(f"""

@@ -25,7 +25,8 @@ from .. import exr
 from . import child
 from .mitsuba_backend import BackendFailure
 
-NATIVE = {"spectral", "polarization", "dispersion"}  # dispersion: CONST_SELLMEIER_DISPERSION_6
+NATIVE = {"spectral", "polarization", "dispersion", "fluorescence"}  # dispersion: CONST_SELLMEIER_DISPERSION_6;
+# fluorescence: CONST_FLUORESCENT_COLOUR (art_writer)
 
 
 def find_artist(executable=None):
@@ -45,13 +46,14 @@ def artist_env(artist):
 
 
 def stokes_to_rgb(channels):
-    """R, G, B and S0.R ... S3.B from ART's spectral EXR channels 'S<k>.<nm>,<frac>nm'."""
+    """R, G, B and S0.R ... S3.B from ART's spectral EXR channels 'S<k>.<nm>,<frac>nm' (R, G, B
+    alone when only S0 is there: an unpolarised render)."""
     bands = {}
     for name, arr in channels.items():
         m = re.match(r"S([0-3])\.(\d+)[,.](\d+)nm$", name)
         if m:
             bands.setdefault(int(m.group(1)), {})[float(f"{m.group(2)}.{m.group(3)}")] = arr
-    if sorted(bands) != [0, 1, 2, 3]:
+    if sorted(bands) not in ([0, 1, 2, 3], [0]):
         raise BackendFailure(f"ART's spectral EXR has no S0..S3 bands (channels: {sorted(channels)[:8]}...)")
     wls = np.array(sorted(bands[0]))
     cmf_wl, x_bar, y_bar, z_bar = spectra.cie_1931_cmfs()
@@ -59,12 +61,14 @@ def stokes_to_rgb(channels):
     step = np.gradient(wls) if len(wls) > 1 else np.ones(1)
     norm = np.trapz(y_bar, cmf_wl)  # Y of a flat spectrum 1 is 1, as in colorimetry.xyz
     out_names, planes = [], []
-    for k in range(4):
+    for k in sorted(bands):
         stack = np.stack([bands[k][w] for w in wls], axis=-1).astype(np.float64)  # H x W x bands
         xyz = np.stack([stack @ (xb * step), stack @ (yb * step), stack @ (zb * step)], axis=-1) / norm
         rgb = colorimetry.xyz_to_srgb(xyz)
         planes += [rgb[..., i] for i in range(3)]
         out_names += [f"S{k}.{c}" for c in "RGB"]
+    if sorted(bands) == [0]:  # an unpolarised render's spectral EXR: radiance only
+        return ["R", "G", "B"], np.stack(planes, axis=-1)
     names = ["R", "G", "B"] + out_names
     img = np.stack(planes[:3] + planes, axis=-1)
     return names, img

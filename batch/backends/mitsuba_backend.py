@@ -21,7 +21,8 @@ WORKER = Path(__file__).resolve().parent / "mitsuba_worker.py"
 NATIVE = {"spectral", "polarization"}
 # phenomena this project's Python plugins add (exporters/mitsuba_plugins): they load through the
 # Python API only, not through the mitsuba executable
-PLUGIN_NEEDS = {"thin_film", "dispersion"}  # sb_thin_film_conductor; sb_dispersive_dielectric (unpolarised)
+PLUGIN_NEEDS = {"thin_film", "dispersion", "fluorescence"}  # sb_thin_film_conductor; sb_dispersive_dielectric
+# (unpolarised); sb_fluorescent_diffuse + sb_fluorescent_path (unpolarised spectral variants)
 INTEGRATORS = ("path", "ptracer")  # the IR's render.integrator values Mitsuba renders
 
 
@@ -71,9 +72,20 @@ class MitsubaBackend:
                           "dispersion with polarisation is not supported")
         if scene.get("render", {}).get("integrator", "path") not in INTEGRATORS:
             return None, f"render.integrator {scene['render']['integrator']!r}: Mitsuba renders {', '.join(INTEGRATORS)}"
+        if "fluorescence" in needs and "polarization" in needs:
+            return None, ("fluorescence with polarisation: sb_fluorescent_path traces unpolarised spectral "
+                          "radiance only")
         if self.force_variant:
+            if "fluorescence" in needs and not (self.force_variant.endswith("_spectral")
+                                                and not self.force_variant.startswith("scalar_")):
+                return None, ("fluorescence needs an unpolarised spectral JIT variant (llvm_ad_spectral), "
+                              f"not {self.force_variant}")
             return self.force_variant, None
         llvm_ok = llvm.find()[0] is not None
+        if "fluorescence" in needs and not llvm_ok:
+            return None, ("fluorescence: sb_fluorescent_path is a Python integrator that Mitsuba's scalar "
+                          "variants would call once per sample; it needs llvm_ad_spectral: "
+                          + llvm.find()[1])
         prefix = "llvm_ad_" if llvm_ok else "scalar_"
         if "polarization" in needs:
             if "spectral" in needs or not llvm_ok:  # Mitsuba ships no scalar_mono_polarized

@@ -135,7 +135,8 @@ def sweep_modes(backend, scene, requested=None):
     if requested:
         return list(requested), None
     modes = [mode]
-    if mode.startswith("llvm_ad_"):
+    if mode.startswith("llvm_ad_") and "fluorescence" not in scene.get("needs", []):
+        # (fluorescent scenes render through a Python integrator, which needs a JIT variant)
         from ..backends.mitsuba_backend import scalar_twin
         modes.append(scalar_twin(mode))
     return modes, None

@@ -16,8 +16,12 @@ import shutil
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-MODULES = {"sb_thin_film_conductor": "thin_film_conductor",
-           "sb_dispersive_dielectric": "dispersive_dielectric"}  # {"sb_<name>": "<module file stem>"}: one entry per plugin
+MODULES = {  # {"sb_<name>": "<module file stem>"}: one entry per plugin
+    "sb_thin_film_conductor": "thin_film_conductor",  # conductor under a dielectric film (Airy)
+    "sb_dispersive_dielectric": "dispersive_dielectric",  # dielectric with n(lambda)
+    "sb_fluorescent_diffuse": "fluorescent_diffuse",  # Lambertian + re-radiation table (fluorescence)
+    "sb_fluorescent_path": "fluorescent_path",  # path tracer that re-radiates at those surfaces
+}
 
 LOADER = '''"""Registers this scene's Python plugins with Mitsuba 3 (written by spectral_bench).
 

@@ -9,16 +9,19 @@ a closed form, independently of any renderer (plain numpy; colour-science for CI
 - thin_film.py: a smooth filmed conductor sphere in a uniform environment (Airy reflectance);
 - prism.py: a collimated beam through a dispersive dielectric onto a screen (Snell's law per
   wavelength: band positions and order; Fresnel: the flux on the screen).
+- fluorescence.py: a lone (fluorescent) Lambertian sphere under a uniform environment
+  (rho L + integral P L, judged against the region's own standard error).
 
 Each probe is a dict {name, expected, measured, error, unit, pass}; ``pass`` is None when the
 probe cannot be measured at the render's resolution (fewer than MIN_PIXELS whole pixels).
 """
-from . import fresnel, ggx, lambert, prism, stokes, thin_film
+from . import fluorescence, fresnel, ggx, lambert, prism, stokes, thin_film
 from .common import MIN_PIXELS, Measurement  # noqa: F401 - part of the interface
 
 # Every probe: a function of one Measurement returning a list of probe records; a probe that does
 # not apply to the scene returns [].
-PROBES = [lambert.patches, fresnel.brewster, ggx.plates, stokes.validity, thin_film.smooth_film, prism.probes]
+PROBES = [lambert.patches, fresnel.brewster, ggx.plates, stokes.validity, thin_film.smooth_film, prism.probes,
+          fluorescence.lone_sphere]
 
 
 def evaluate(scene, names, image, reference=None, stderr=None, passes=None, observers=()):

@@ -1,0 +1,70 @@
+"""A lone Lambertian sphere (fluorescent or not) under a uniform environment, nothing else in the
+scene: every point of the sphere sees only the environment, so its radiance is the same in every
+direction and at every pixel (Mojzik et al. 2018's bispectral reflection with a Lambertian BRRDF,
+exporters/fluorescence.py):
+
+    L_o(l_o) = rho(l_o) L(l_o) + integral P(l_i, l_o) L(l_i) dl_i,
+
+integrated here in numpy from the scene's own IR (P and L piecewise linear, a 0.05 nm trapezoid
+rule for l_i, the CIE 1931 CMFs at 1 nm for l_o as exporters/colorimetry.py does). Pixels whose
+footprint lies wholly on the sphere are independent draws of that value (box filter,
+independent sampling), so the region's mean residual is judged against its own standard error
+(batch/verdict/stats.py, Student's t, Sidak over the three channels), beyond a film allowance:
+a spectral film's colour matching is its own tabulation of the CIE 1931 observer, and Mitsuba
+3.9.1's (5 nm tables, Y normalised by 1/106.7503 while its table integrates to 106.857) lies
+0.10 % of Y above the 1 nm CIE integral in red and 0.05 % in green on this scene's spectra
+(benchmarks/CALIBRATION.md, benchmarks/calibrate_fluorescence.py), so each channel may differ by
+FILM_ALLOWANCE_Y times the expected luminance before the noise judges it. The renderers integrate
+a 1 nm tabulation of P (exporters/fluorescence.table): 2e-4 of the re-radiated light away from
+P itself, recorded there too and far below the noise at the scene's settings."""
+import numpy as np
+
+from ....exporters import colorimetry, fluorescence as fluo, spectra
+from .. import raycast, stats
+from .common import MIN_PIXELS, probe as _probe
+
+FILM_ALLOWANCE_Y = 0.002  # per channel, times the expected Y: twice Mitsuba's measured film offset
+
+
+def expected_radiance(bsdf, radiance, wavelengths):
+    """rho(l) L(l) + integral P(l_i, l) L(l_i) dl_i at ``wavelengths`` (IR dicts)."""
+    light = lambda wl: spectra.evaluate(radiance, wl)  # noqa: E731
+    value = spectra.evaluate(bsdf["reflectance"], wavelengths) * light(wavelengths)
+    if bsdf.get("fluorescence") is not None:
+        value = value + fluo.emitted(bsdf["fluorescence"], light, wavelengths)
+    return value
+
+
+def expected_rgb(bsdf, radiance):
+    wl = spectra.cie_1931_cmfs()[0]
+    return colorimetry.xyz_to_srgb(colorimetry.xyz(expected_radiance(bsdf, radiance, wl)))
+
+
+def lone_sphere(m):
+    scene, image = m.scene, m.image
+    env, objs = scene.get("environment"), scene["objects"]
+    if not env or len(objs) != 1:
+        return []
+    obj = objs[0]
+    b = obj.get("bsdf") or {}
+    if obj["shape"]["type"] != "sphere" or b.get("type") != "diffuse" or obj.get("emitter"):
+        return []
+    cam = np.asarray(scene["camera"]["to_world"], dtype=np.float64)[:3, 3]
+    if np.linalg.norm(cam - np.asarray(obj["shape"]["center"])) <= obj["shape"]["radius"]:
+        return []  # the camera is inside
+    kind = "fluorescent " if b.get("fluorescence") is not None else ""
+    name = f"lone {kind}Lambertian sphere {obj['name']}: rho L + integral P L"
+    expected = expected_rgb(b, env["radiance"])
+    h, w = image.shape[:2]
+    mask = raycast.pixels_inside(scene["camera"], w, h, objs, 0)
+    if mask.sum() < MIN_PIXELS:
+        return [_probe(name, expected, None, None, "sigma", None, pixels=int(mask.sum()))]
+    measured = image[mask][:, :3].astype(np.float64)
+    test = stats.region_mean_test(measured - expected, tests=3)
+    allowance = FILM_ALLOWANCE_Y * float(colorimetry.srgb_to_xyz(expected)[1])
+    excess = np.maximum(np.abs(np.asarray(test["mean"])) - allowance, 0.0)
+    z = excess / np.maximum(np.asarray(test["se"]), 1e-300)
+    p = float(np.min(stats.two_sided_p(z, test["n"] - 1)))
+    return [_probe(name, expected, measured.mean(axis=0), float(z.max()), "sigma beyond the film allowance",
+                   p >= test["threshold"], pixels=int(mask.sum()), p=p, threshold=test["threshold"],
+                   se=test["se"], allowance=allowance, z_without_allowance=test["z"])]
