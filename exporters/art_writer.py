@@ -234,11 +234,12 @@ class _Writer:
             # ART's filter angle: transmission axis, 0 = horizontal, counter-clockwise as seen
             # from the camera (the IR's convention; tests/test_art.py checks it when ART is present)
             acts.append(f"[ LINEAR_POLARISATION_FILTER angle: {_num(pol['angle'])} DEGREES strength: 1.0 ]")
-        if r.get("output") == "stokes":
-            acts.append("[ IMAGECONVERSION_ARTRAW_TO_SPECTRAL_EXR removeSource: NO ]")
-        else:
-            acts += ["[ IMAGECONVERSION_ARTRAW_TO_ARTCSP removeSource: NO ]",
-                     "[ IMAGECONVERSION_ARTCSP_TO_EXR removeSource: YES ]"]
+        # always ART's spectral EXR (its 46 bands, S0..S3 with -p): the backend integrates it with
+        # the CIE 1931 CMFs to linear sRGB as the IR defines colour. ART's own sRGB output maps
+        # out-of-gamut colours into the gamut (measured: ColorChecker cyan's negative red comes out
+        # positive, a 450 nm light's blue 1.06 instead of 5.26), which is ART's display choice, not
+        # its light transport.
+        acts.append("[ IMAGECONVERSION_ARTRAW_TO_SPECTRAL_EXR removeSource: NO ]")
         return ",\n        ".join(acts + ["ACTION_SEQUENCE_END"])
 
     def write(self):

@@ -4,11 +4,12 @@ artist compiles the .arm with gcc at render time, edits it in place and writes i
 beside it, so every render works on a copy. It needs ART_RESOURCE_PATH and ART_LIBRARY_PATH
 (and the library on LD_LIBRARY_PATH); when they are unset they are derived from the
 executable's install prefix (<prefix>/bin/artist, <prefix>/lib). Options used:
-``-b`` (no viewer), ``-wp d65`` (linear sRGB with a D65 white, as Mitsuba's film), ``-s46e``
-(46 spectral samples at 10 nm instead of the default 8), ``-seed`` (reproducible passes), ``-p``
-when the scene needs polarisation. ART's EXR is linear float RGBA; a Stokes scene is written as
-ART's spectral EXR (S0..S3 per band, signs kept), converted here to R, G, B and S0.R ... S3.B
-with the CIE 1931 CMFs.
+``-b`` (no viewer), ``-wp d65``, ``-s46e`` (46 spectral bands of 10 nm, 320-780 nm, instead of
+the default 8), ``-seed`` (reproducible passes), ``-p`` when the scene needs polarisation. Every
+scene is written out as ART's spectral EXR (S0, or S0..S3 with signs kept, per band; the band
+labels are their centres), integrated here with the CIE 1931 CMFs to linear sRGB exactly as the
+IR defines colour (exporters/colorimetry.py): R, G, B and, for Stokes output, S0.R ... S3.B.
+ART's own sRGB EXR is not used: it maps out-of-gamut colours into the gamut.
 """
 import math
 import os
@@ -121,12 +122,7 @@ class ArtBackend:
         if proc.returncode != 0 or not (run_dir / "scene.exr").is_file():
             tail = [l for l in proc.stderr.splitlines() if "Error" in l or "Reason" in l or "error:" in l][-3:]
             raise BackendFailure(f"artist exited with {proc.returncode}: {' | '.join(tail)[-600:]}")
-        ch = exr.read(run_dir / "scene.exr")
-        if "S0.G" in ch or not any(k.startswith("S0.") for k in ch):
-            names = ["R", "G", "B"]
-            img = np.stack([ch[c] for c in "RGB"], axis=-1)
-        else:
-            names, img = stokes_to_rgb(ch)
+        names, img = stokes_to_rgb(exr.read(run_dir / "scene.exr"))  # always the spectral EXR (art_writer)
         shutil.rmtree(run_dir, ignore_errors=True)
         return names, img.astype(np.float64), wall
 
