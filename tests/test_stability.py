@@ -25,6 +25,8 @@ def test_every_sweep_value_is_rendered_and_stable(stability_run):
         "ggx_grazing", "roughness_furnace", "ior_furnace", "polarizer_malus", "film_thickness_furnace",
         "film_ior_furnace", "dispersion_ior", "dispersion_abbe"}
     assert all(r["status"] != "skipped" for r in rows)
+    # rendered as jobs on the engine, each row keeps the layout readers rely on
+    assert all({"sweep", "value", "backend", "mode", "status", "problems", "mean"} <= set(r) for r in rows)
     assert all("limit_z" in r for r in rows if r["sweep"].startswith("dispersion_") and r["value"] in (1.0001, 1e6))
     assert len([r for r in rows if r["sweep"].startswith("film_")]) == 18
     assert all("limit_z" in r for r in rows if r["sweep"].startswith("film_") and r["value"] in (0.0, 1.0001))

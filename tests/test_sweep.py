@@ -43,6 +43,10 @@ def test_sweep_flags_the_biased_mode_and_passes_the_unbiased_one(sweep_run):
     assert spectral["converges"] is True and spectral["slope"] == pytest.approx(-0.5, abs=0.05)
     assert all(p["test"]["noise"] == "own" for p in spectral["points"])
     assert rgb["converges"] is False and "does not converge" in rgb["flag"]
+    # rendered as jobs on the engine, the sweep keeps the metrics.json layout readers rely on
+    assert {"scene", "backend", "mode", "points", "slope", "tail_slope", "noise_floor_rmse", "own_variance",
+            "error_floor_rmse", "top_ratio_to_reference_noise", "converges", "flag", "chart", "equal"} <= set(spectral)
+    assert {"spp", "time_s", "wall_s", "rmse", "relmse", "mape", "predicted_rmse", "test"} <= set(spectral["points"][-1])
     assert all(p["time_s"] > 0 for l in lines.values() for p in l["points"])
 
 
