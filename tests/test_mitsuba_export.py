@@ -105,11 +105,17 @@ def test_emitter_radiance_is_one_at_560nm_times_scale(tmp_path):
 @pytest.mark.parametrize("name", ALL_SCENES)
 def test_writer_output_matches_golden_folder(golden, tmp_path, name):
     """Any change of the Mitsuba writer shows as a reviewable diff of golden/mitsuba/
-    (regenerate with scripts/update_golden.py)."""
+    (regenerate with scripts/update_golden.py). The Python plugins an export carries in plugins/
+    are verbatim copies of exporters/mitsuba_plugins/ (checked here, not stored again)."""
     from conftest import ROOT
+    from spectral_bench.exporters import mitsuba_plugins
     expected_dir = ROOT / "golden" / "mitsuba" / name
     mitsuba_writer.write(golden[name], tmp_path / name)
     written = sorted(p.relative_to(tmp_path / name) for p in (tmp_path / name).rglob("*") if p.is_file())
+    carried = [rel for rel in written if rel.parts[0] == "plugins"]
+    for rel in carried:
+        assert (tmp_path / name / rel).read_bytes() == (mitsuba_plugins.HERE / rel.name).read_bytes(), rel
+    written = [rel for rel in written if rel not in carried]
     expected = sorted(p.relative_to(expected_dir) for p in expected_dir.rglob("*") if p.is_file())
     assert written == expected
     for rel in written:
