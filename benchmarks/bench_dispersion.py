@@ -15,8 +15,6 @@ import argparse
 import copy
 import datetime as dt
 import json
-import os
-import platform
 import statistics
 import subprocess
 import sys
@@ -26,6 +24,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import pkg_bootstrap  # noqa: E402
+from record import machine  # noqa: E402
 
 CHILD = r"""
 import json, sys, time
@@ -56,10 +55,9 @@ print(json.dumps({"first": times[0], "steady": sorted(times[1:])[len(times[1:]) 
 
 def main():
     pkg_bootstrap.package()
-    from spectral_bench.batch import backends, scene_sources
+    from spectral_bench.batch import scene_sources
     from spectral_bench.batch.backends import llvm
     from spectral_bench.exporters import ir, mitsuba_writer
-    from bench_export_render import cpu_model
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--size", type=int, default=128)
@@ -106,7 +104,7 @@ def main():
     text = "\n".join([
         f"## Dispersive dielectric plugin against Mitsuba's native dielectric, {dt.date.today().isoformat()}",
         "",
-        f"Machine: {cpu_model()}, {os.cpu_count()} cores, {platform.system()} {platform.release()}; "
+        f"Machine: {machine()}; "
         f"{variant}; dispersion_fringes with its sphere's IOR 1.5 (native: a number; plugin: a constant "
         f"Sellmeier model); medians of {args.repeat} interleaved runs, each a fresh process: steady = median "
         f"of {args.calls} render calls after the first (compiled kernels), first = the first call (JIT included).",
@@ -124,9 +122,8 @@ def main():
     ])
     print(text)
     if args.write:
-        from record import prepend
-        prepend(Path(__file__).resolve().parent / "RESULTS.md",
-                "# Benchmark results\n\nRecorded by `benchmarks/bench_export_render.py --write`; newest first.\n\n", text)
+        from record import record_result
+        record_result(text)
 
 
 if __name__ == "__main__":

@@ -15,7 +15,6 @@ Prints a Markdown table; --write records it in benchmarks/ENGINES.md. Run it on 
 import argparse
 import datetime as dt
 import json
-import os
 import platform
 import subprocess
 import sys
@@ -25,16 +24,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from record import machine  # noqa: E402
 
-
-def cpu_model():
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown CPU"
 
 
 def suite(out, scale, cluster=None):
@@ -75,7 +66,7 @@ def main():
             rows.append(r)
             print(label, r, flush=True)
         refs = {w: reference(args.reference_scene, w, Path(tmp) / f"ref{w}") for w in (1, 2)}
-    text = [f"Machine: {cpu_model()}, {os.cpu_count()} cores, {platform.system()} {platform.release()}; "
+    text = [f"Machine: {machine()}; "
             f"Python {platform.python_version()}; scale {args.scale}.", "",
             "| suite on | jobs | wall s | sum of render wall s | wall / renders | overhead per job s | exit |",
             "|---|---|---|---|---|---|---|"]

@@ -8,7 +8,6 @@ Run it on a quiet machine: the numbers are only as good as the machine's idlenes
 """
 import argparse
 import datetime as dt
-import os
 import platform
 import statistics
 import sys
@@ -18,17 +17,9 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from record import machine  # noqa: E402
 import pkg_bootstrap  # noqa: E402
 
-
-def cpu_model():
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown CPU"
 
 
 def main():
@@ -79,7 +70,7 @@ def main():
     text = "\n".join([
         f"## Export and render times, {dt.date.today().isoformat()}",
         "",
-        f"Machine: {cpu_model()}, {os.cpu_count()} cores, {platform.system()} {platform.release()}; "
+        f"Machine: {machine()}; "
         f"Python {platform.python_version()}; medians of {args.repeat} runs.",
         "",
         f"Export of all {n} scenes from scenes.blend (extract + Mitsuba XML + JSON): "
@@ -92,8 +83,8 @@ def main():
     ])
     print(text)
     if args.write:
-        from record import prepend
-        prepend(Path(__file__).resolve().parent / "RESULTS.md", "# Benchmark results\n\nRecorded by `benchmarks/bench_export_render.py --write`; newest first.\n\n", text)
+        from record import record_result
+        record_result(text)
 
 
 if __name__ == "__main__":

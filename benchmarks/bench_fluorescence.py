@@ -20,7 +20,6 @@ idleness: the ratio is what an interleaved run protects.
 import argparse
 import datetime as dt
 import json
-import os
 import platform
 import re
 import statistics
@@ -33,6 +32,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import pkg_bootstrap  # noqa: E402
+from record import machine  # noqa: E402
 
 TARGET = 1.3
 VARIANT = "llvm_ad_spectral"
@@ -50,15 +50,6 @@ for k in range(repeat + 1):
 print(json.dumps({"cold": times[0], "warm": sorted(times[1:])[len(times[1:]) // 2]}))
 '''
 
-
-def cpu_model():
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown CPU"
 
 
 def export_pair(scene, out, elastic_only=False):
@@ -137,8 +128,8 @@ def main():
     text = "\n".join([
         f"## Fluorescent integrator against Mitsuba's path integrator, {dt.date.today().isoformat()}",
         "",
-        f"Recorded by `benchmarks/bench_fluorescence.py`. Machine: {cpu_model()}, {os.cpu_count()} cores, "
-        f"{platform.system()} {platform.release()}; Python {platform.python_version()}; {VARIANT}; "
+        f"Recorded by `benchmarks/bench_fluorescence.py`. Machine: {machine()}; "
+        f"Python {platform.python_version()}; {VARIANT}; "
         f"{args.rounds} interleaved rounds, each a fresh process with one cold and {args.repeat} warm renders; "
         "times: medians of the rounds' warm medians (cold: first render call, tracing and JIT included); ratio: "
         "median (range) over rounds of the round's warm ratio, both renders of a round having run back to back.",
@@ -153,9 +144,8 @@ def main():
     ])
     print(text)
     if args.write:
-        from record import prepend
-        prepend(Path(__file__).resolve().parent / "RESULTS.md",
-                "# Benchmark results\n\nRecorded by `benchmarks/bench_export_render.py --write`; newest first.\n\n", text)
+        from record import record_result
+        record_result(text)
 
 
 if __name__ == "__main__":

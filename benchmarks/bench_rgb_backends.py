@@ -57,7 +57,7 @@ def chart_table(out, runs, chart):
     if not per:
         return ""
     patches = list(next(iter(per.values())))
-    rows = [f"| patch | rule predicts | " + " | ".join(cols) + " |", "|---|---|" + "---|" * len(cols)]
+    rows = ["| patch | rule predicts | " + " | ".join(cols) + " |", "|---|---|" + "---|" * len(cols)]
     for p in patches:
         pred = next(iter(per.values()))[p][1]
         rows.append(f"| {p.replace('patch_', '')} | {pred:.2f} | " + " | ".join(f"{per[b][p][0]:.2f}" for b in cols) + " |")

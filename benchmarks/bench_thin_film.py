@@ -14,8 +14,6 @@ in benchmarks/RESULTS.md. Run it on a quiet machine: the ratio is robust to load
 import argparse
 import copy
 import datetime as dt
-import os
-import platform
 import statistics
 import sys
 import tempfile
@@ -24,6 +22,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from record import machine  # noqa: E402
 import pkg_bootstrap  # noqa: E402
 
 SCENE = "iridescent_spheres_height"
@@ -102,7 +101,7 @@ def main():
         "",
         f"`benchmarks/bench_thin_film.py`: {SCENE} with four identical bare Beckmann spheres (eta 1.9, k 1.5, "
         f"alpha 0.1) through Mitsuba's roughconductor and through sb_thin_film_conductor at thickness 0. "
-        f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores; medians of {args.repeat} "
+        f"Machine: {machine()}; medians of {args.repeat} "
         f"interleaved renders after one compiling render (its time in parentheses). Target: plugin within {TARGET}x.",
         "",
         "| variant | resolution | spp | native s (first call) | plugin s (first call) | plugin / native | within target |",
@@ -112,9 +111,8 @@ def main():
     ])
     print(text)
     if args.write:
-        from record import prepend
-        prepend(Path(__file__).resolve().parent / "RESULTS.md",
-                "# Benchmark results\n\nRecorded by `benchmarks/bench_export_render.py --write`; newest first.\n\n", text)
+        from record import record_result
+        record_result(text)
 
 
 if __name__ == "__main__":

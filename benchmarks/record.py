@@ -1,5 +1,32 @@
-"""Record a benchmark's Markdown section in a results file under a fixed heading, newest first."""
+"""Record a benchmark's Markdown section in a results file under a fixed heading, newest first,
+and describe the machine it ran on."""
+import os
+import platform
 from pathlib import Path
+
+RESULTS = Path(__file__).resolve().parent / "RESULTS.md"
+RESULTS_HEAD = "# Benchmark results\n\nRecorded by the scripts in `benchmarks/` with `--write`; newest first.\n\n"
+
+
+def cpu_model():
+    """The CPU's model name (from /proc/cpuinfo where there is one)."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine() or "unknown CPU"
+
+
+def machine():
+    """One line naming the CPU, its core count and the OS, for a results section."""
+    return f"{cpu_model()}, {os.cpu_count()} cores, {platform.system()} {platform.release()}"
+
+
+def record_result(text):
+    """Prepend a section to benchmarks/RESULTS.md."""
+    prepend(RESULTS, RESULTS_HEAD, text)
 
 
 def prepend(path, head, text):

@@ -13,7 +13,7 @@ import pytest
 from conftest import IRIDESCENCE, metrics, noise_test, render, render_with_noise, run_batch
 from spectral_bench.batch import backends, exr
 from spectral_bench.batch.verdict import airy, probes, references, stats
-from spectral_bench.exporters import art_writer, colorimetry, ir, mitsuba_plugins, mitsuba_writer, spectra, validate
+from spectral_bench.exporters import art_writer, ir, mitsuba_plugins, mitsuba_writer, spectra, validate
 
 PLUGIN = "sb_thin_film_conductor"
 

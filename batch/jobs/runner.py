@@ -7,14 +7,12 @@ becomes a result with status "failed" and a reason, and metrics.json is rewritte
 every job, so finished results survive a crash of the runner itself. ``--resume OUT`` finishes an
 interrupted run: results whose job id (batch/jobs/job.py) still matches are kept, the rest run.
 """
-import copy
 import datetime as _dt
 import json
 import logging
 import time
 from pathlib import Path
 
-import numpy as np
 
 from ...exporters import art_writer, ir_json
 from .. import backends, scene_sources

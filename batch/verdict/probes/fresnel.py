@@ -22,19 +22,10 @@ import numpy as np
 
 from ....exporters import colorimetry, dispersion
 from .. import raycast, stats
+from ..optics import fresnel_dielectric
 from .common import MIN_PIXELS, probe as _probe
 
 FOOTPRINT = 3  # Gauss-Legendre points per pixel axis
-
-
-def fresnel_dielectric(cos_i, eta):
-    """(Rs, Rp) for light from outside (eta = n_inside / n_outside)."""
-    cos_i = np.clip(cos_i, 0.0, 1.0)
-    sin_t2 = (1 - cos_i**2) / eta**2
-    cos_t = np.sqrt(np.clip(1 - sin_t2, 0.0, 1.0))
-    rs = ((cos_i - eta * cos_t) / (cos_i + eta * cos_t)) ** 2
-    rp = ((eta * cos_i - cos_t) / (eta * cos_i + cos_t)) ** 2
-    return np.where(sin_t2 >= 1, 1.0, rs), np.where(sin_t2 >= 1, 1.0, rp)
 
 
 def _reflection(scene, di, li, w, h, points):
