@@ -9,6 +9,7 @@ a child process), then starts batch/run.py on those files as a child process wit
 Python and sys.path (so the extension's bundled wheels are found). Results land in an ordinary
 outputs folder: the panel reads runs started from the command line the same way.
 """
+import collections
 import datetime as dt
 import tempfile
 import time
@@ -36,6 +37,8 @@ STATUS_ORDER = {"failed": 0, "unjudged": 2, "known": 3, "fixed": 4, "unsupported
 STATUS_ICONS = {"ok": "CHECKMARK", "failed": "ERROR", "unjudged": "QUESTION", "known": "INFO", "fixed": "CHECKMARK",
                 "skipped": "CANCEL", "unsupported": "CANCEL"}
 STOKES = ("S0", "S1", "S2", "S3")
+# the batch runner's exit status (batch/verdict/status.py) as the panel says it
+FINISHED_WORDS = {0: "passed", 1: "failed", 3: "finished, some renders unjudged", 130: "interrupted"}
 
 
 class RunSettings(bpy.types.PropertyGroup):
@@ -191,8 +194,11 @@ def poll_run(context):
             if results.load(job.out_dir) is not None and not (job.out_dir / "report.html").exists():
                 report_html.write(job.out_dir)  # the report of what finished
         else:
-            word = "passed" if job.returncode() == 0 else "finished with failures"
-        s.status = f"{word}: {done}/{total} jobs"
+            word = FINISHED_WORDS.get(job.returncode(), f"stopped (exit {job.returncode()})")
+        data = results.load(job.out_dir) or {}
+        counts = collections.Counter(r.get("status") for r in data.get("runs", []))
+        tally = ", ".join(f"{counts[k]} {k}" for k in STATUS_ICONS if counts[k])
+        s.status = f"{word}: {done}/{total} jobs" + (f" ({tally})" if tally else "")
         return False
     s.status = f"running: {done}/{total} jobs"
     return True

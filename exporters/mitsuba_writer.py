@@ -15,14 +15,13 @@ from pathlib import Path
 
 import numpy as np
 
-from . import dispersion, fluorescence, ir, mesh_io, mitsuba_plugins, spectra
+from . import camera_filter, dispersion, fluorescence, ir, mesh_io, mitsuba_plugins, spectra
 
 # Blender/OpenGL cameras look down -Z with +Y up; Mitsuba's look down +Z with +X to the
 # image's left. Mitsuba to_world = IR to_world @ diag(-1, 1, -1).
 _CAMERA_FLIP = np.diag([-1.0, 1.0, -1.0, 1.0])
 THIN_FILM_PLUGIN = "sb_thin_film_conductor"  # a conductor with bsdf.thin_film
 DISPERSIVE_PLUGIN = "sb_dispersive_dielectric"  # exporters/mitsuba_plugins/dispersive_dielectric.py
-POLARIZER_DISTANCE = 0.05  # scene units in front of the lens (the sensor's near clip is 0.01)
 
 
 def _matrix_text(m):
@@ -151,21 +150,6 @@ class _Writer:
             em = ET.SubElement(node, "emitter", type="area")
             self.spectrum(em, "radiance", obj["emitter"]["radiance"], f"{obj['name']}_radiance")
 
-    def polarizer(self, root, cam, r):
-        """The IR's ideal linear polariser as Mitsuba's ``polarizer`` BSDF on a rectangle just in
-        front of the lens, spanning the whole field of view. Its local x/y are the camera's
-        right/up and its normal faces the camera; in that frame Mitsuba's theta turns the
-        transmission axis clockwise as seen from the camera (measured), hence theta = -angle."""
-        d = POLARIZER_DISTANCE
-        half = d * np.tan(np.radians(cam["fov"]) / 2) * max(r["width"], r["height"]) / min(r["width"], r["height"])
-        size = 2.0 * half  # twice the field of view's half-extent, so no edge is in view
-        m = np.asarray(cam["to_world"], dtype=np.float64) @ np.array(
-            [[size, 0, 0, 0], [0, size, 0, 0], [0, 0, 1, -d], [0, 0, 0, 1]], dtype=np.float64)
-        node = ET.SubElement(root, "shape", type="rectangle", id="camera_polarizer")
-        _transform(node, m)
-        bsdf = ET.SubElement(node, "bsdf", type="polarizer")
-        ET.SubElement(bsdf, "spectrum", name="theta", value=repr(-float(cam["polarizer"]["angle"])))
-
     def write(self):
         sc, r = self.scene, self.scene["render"]
         root = ET.Element("scene", version="3.0.0")
@@ -174,7 +158,11 @@ class _Writer:
         ET.SubElement(root, "default", name="seed", value="0")
         ET.SubElement(root, "default", name="max_depth", value=str(r.get("max_depth", 64)))
         parent = root
-        if r.get("output") == "stokes":
+        cam = sc["camera"]
+        polarizer = cam.get("polarizer")
+        if r.get("output") == "stokes" or polarizer:
+            # Mitsuba has no camera-side filter: the IR's ideal polariser is applied to the Stokes
+            # vector after rendering (exporters/camera_filter.py)
             parent = ET.SubElement(root, "integrator", type="stokes")
         # path | ptracer; a fluorescent scene is traced by this project's bispectral path tracer
         integ = ET.SubElement(parent, "integrator",
@@ -182,7 +170,6 @@ class _Writer:
         if self.fluorescent:
             self.plugins.add("sb_fluorescent_path")
         ET.SubElement(integ, "integer", name="max_depth", value="$max_depth")
-        cam = sc["camera"]
         sensor = ET.SubElement(root, "sensor", type="perspective")
         ET.SubElement(sensor, "float", name="fov", value=repr(float(cam["fov"])))
         ET.SubElement(sensor, "string", name="fov_axis", value=cam.get("fov_axis", "x"))
@@ -199,16 +186,21 @@ class _Writer:
         if env:
             em = ET.SubElement(root, "emitter", type="constant", id="environment")
             self.spectrum(em, "radiance", env["radiance"], "environment_radiance")
-        if cam.get("polarizer"):
-            self.polarizer(root, cam, r)
         for obj in sc["objects"]:
             self.shape(root, obj)
+        if polarizer:
+            root.insert(1, ET.Comment(
+                f" renders S0..S3; the camera's ideal linear polariser at {float(polarizer['angle'])!r} deg "
+                f"(counter-clockwise from image right, S1 > 0 horizontal) is applied afterwards: I = (S0 + S1 cos 2t "
+                f"+ S2 sin 2t) / 2, as {camera_filter.POSTPROCESS} says "))
         if self.plugins:
             root.insert(1, ET.Comment(f" needs Python plugins {', '.join(sorted(self.plugins))}: see load_plugins.py "))
         ET.indent(root, space="  ")
         self.out.mkdir(parents=True, exist_ok=True)
         if self.plugins:
             mitsuba_plugins.write_into(self.out, self.plugins)
+        if polarizer:
+            camera_filter.write(self.out, polarizer["angle"], keep_stokes=r.get("output") == "stokes")
         xml_path = self.out / "scene.xml"
         ET.ElementTree(root).write(xml_path, encoding="utf-8", xml_declaration=True)
         return xml_path

@@ -52,7 +52,7 @@ def main(argv=None):
     import pkg_bootstrap
     pkg_bootstrap.package()
     from spectral_bench.batch import exr
-    from spectral_bench.exporters import mitsuba_plugins
+    from spectral_bench.exporters import camera_filter, mitsuba_plugins
     import drjit as dr
     import mitsuba as mi
     import numpy as np
@@ -91,6 +91,9 @@ def main(argv=None):
         for i, n in enumerate(names):
             if "." in n:
                 stack[..., i] *= tint["RGB".index(n[-1])]
+    camera = camera_filter.read(Path(args.xml).parent)
+    if camera:  # the IR's ideal polariser, on every pass (so the noise is the filtered image's)
+        names, stack = camera_filter.apply(camera, names, stack)
     mean = stack.mean(axis=0)
     extra = {}
     if args.passes > 1:

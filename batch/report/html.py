@@ -72,9 +72,12 @@ def _viewer(out, run):
     m = run.get("metrics") or {}
     numbers = [f"<li>{k}: {_fmt(v)}</li>" for k, v in m.items()]
     test = run.get("test")
-    if test:
+    if test and test.get("p_min") is not None and test.get("pass") is not None:
         numbers.append(f"<li>noise test: p_min {test['p_min']:.3g} vs {test['threshold']:.3g} "
                        f"({'pass' if test['pass'] else 'FAIL'})</li>")
+    elif test:
+        numbers.append(f"<li>noise test: {html.escape(test.get('reason') or '')} "
+                       f"({ {True: 'pass', False: 'FAIL', None: 'not judged'}[test.get('pass')]})</li>")
     for p in run.get("probes") or []:
         mark = {True: "pass", False: "FAIL", None: "not measured"}[p["pass"]]
         numbers.append(f"<li>{html.escape(p['name'])}: {_fmt(p['error'])} {html.escape(p['unit'] or '')} ({mark})</li>")

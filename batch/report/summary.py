@@ -14,8 +14,9 @@ def table(runs):
     for r in sorted(runs, key=lambda r: (ORDER.get(r["status"], 9), r["scene"], r["backend"])):
         m = r.get("metrics") or {}
         t = r.get("test")
-        test = (f"p_min {t['p_min']:.2g} / {t['threshold']:.2g}" if t and t.get("p_min") is not None
-                else "not judged" if t else "")
+        test = ("" if not t else "not judged" if t.get("pass") is None
+                else f"p_min {t['p_min']:.2g} / {t['threshold']:.2g}" if t.get("p_min") is not None
+                else "failed (see reason)")
         res = "x".join(map(str, r["resolution"])) if r.get("resolution") else ""
         reason = (r.get("reason") or "").replace("|", "/").replace("\n", " ")
         rows.append(f"| {r['status']} | {r['scene']} | {r['backend']} | {r.get('mode') or ''} | {_num(r.get('spp'), '{}')} "

@@ -48,15 +48,26 @@ def render_verdict(entry, scene, rendered, image, res_dir, settings, deviations)
 def noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings):
     """The noise test against the reference, on the render's own noise (entry["test"]); the
     diff, z-score and FLIP images. Returns the in-memory test (for re-judging) or None."""
-    test = test_all[..., :3]
     entry["reference"] = {"path": str(ref.path), "spp": ref.spp, "backend": ref.provenance.get("backend"),
                           "mode": ref.provenance.get("mode"), "versions": ref.provenance.get("versions"),
                           "date": ref.provenance.get("date")}
-    if names != ref.names:
-        entry["test"] = {"pass": False, "reason": f"render channels {names} differ from the reference's {ref.names}"}
+    # judged on the channels both have (a renderer may add Stokes channels the reference lacks)
+    shared = [n for n in ref.names if n in names]
+    if shared[:3] != ["R", "G", "B"]:
+        entry["test"] = {"pass": False, "reason": f"render channels {names} lack the reference's colour {ref.names}"}
         return None
+    if shared != names or shared != ref.names:
+        entry["channels_without_reference"] = [n for n in names if n not in shared]
+        entry["channels_not_rendered"] = [n for n in ref.names if n not in shared]
+        pick, ref_pick = [names.index(n) for n in shared], [ref.names.index(n) for n in shared]
+        test_all = test_all[..., pick]
+        stderr = None if stderr is None else stderr[..., pick]
+        ref_mean, ref_stderr = ref.mean[..., ref_pick], None if ref.stderr is None else ref.stderr[..., ref_pick]
+    else:
+        ref_mean, ref_stderr = ref.mean, ref.stderr
+    test = test_all[..., :3]
     try:
-        at = compare.reference_at(ref.mean, ref.stderr, ref.spp, test_all.shape, ref.provenance.get("passes", 8))
+        at = compare.reference_at(ref_mean, ref_stderr, ref.spp, test_all.shape, ref.provenance.get("passes", 8))
     except ValueError as exc:
         entry["test"] = {"pass": None, "reason": f"cannot compare with the reference: {exc}"}
         return None
