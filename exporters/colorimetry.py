@@ -16,7 +16,11 @@ import numpy as np
 from . import spectra
 
 GROUND_TRUTH = "cie1931"
-OBSERVERS = ("cie1931", "mitsuba3")
+OBSERVERS = ("cie1931", "mitsuba3", "art46")
+# ART 2.1.2's film (-s46e): 46 bands of 10 nm from 320 nm, each the box average of the radiance
+# over its band (ArSpectrum46.c; measured band by band), read by the ART backend with the CMFs at
+# the band centres (batch/backends/art_backend.py)
+ART_BANDS_NM = (320.0, 10.0, 46)
 
 
 @lru_cache(maxsize=None)
@@ -28,7 +32,29 @@ def observer(name=GROUND_TRUTH):
     if name == "mitsuba3":
         knots = (wl % 5) == 0
         return (wl, *(np.interp(wl, wl[knots], c[knots]) for c in (xb, yb, zb)), 106.7502593994140625)
+    if name == "art46":
+        return (wl, *(_band_stairs(wl, c) for c in (xb, yb, zb)), float(np.trapz(yb, wl)))
     raise KeyError(f"unknown observer {name!r} (known: {', '.join(OBSERVERS)})")
+
+
+def _band_stairs(wl, cmf):
+    """A CMF as ART's band film sees it, on the 1 nm grid: constant over each 10 nm band at the
+    band centre's value, so that integrating it against a radiance (trapezoid rule) gives the
+    band average times the centre's CMF times the width; a band edge takes the mean of its two
+    neighbours (half a band's value at the film's ends), zero outside the film."""
+    start, width, count = ART_BANDS_NM
+    centres = start + width * (np.arange(count) + 0.5)
+    at_centre = np.interp(centres, wl, cmf, left=0.0, right=0.0)
+    pos = (wl - start) / width
+    inside = (pos >= 0) & (pos <= count)
+    band = np.clip(np.floor(pos).astype(int), 0, count - 1)
+    out = np.where(inside, at_centre[band], 0.0)
+    edge = inside & (pos == np.round(pos))
+    k = np.round(pos[edge]).astype(int)
+    below = np.where(k >= 1, at_centre[np.clip(k - 1, 0, count - 1)], 0.0)
+    above = np.where(k < count, at_centre[np.clip(k, 0, count - 1)], 0.0)
+    out[edge] = 0.5 * (below + above)
+    return out
 
 
 def xyz(values_at_cmf_wavelengths, obs=GROUND_TRUTH):

@@ -17,6 +17,7 @@ import re
 import shutil
 import subprocess
 import time
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -44,6 +45,18 @@ def artist_env(artist):
     env.setdefault("ART_RESOURCE_PATH", str(prefix / "lib" / "ART_Resources"))
     env["LD_LIBRARY_PATH"] = os.pathsep.join(p for p in (env["ART_LIBRARY_PATH"], env.get("LD_LIBRARY_PATH")) if p)
     return env
+
+
+@lru_cache(maxsize=None)
+def art_version(artist):
+    """ART's version as its banner states it ("ART version 2.1.2"), or "unknown"."""
+    try:
+        proc = subprocess.run([str(artist), "-h"], capture_output=True, text=True, timeout=60,
+                              env=artist_env(artist))
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+    m = re.search(r"ART version ([0-9][0-9.]*)", proc.stdout + proc.stderr)
+    return m.group(1) if m else "unknown"
 
 
 def stokes_to_rgb(channels):
@@ -141,7 +154,7 @@ class ArtBackend:
             stderr = stack.std(axis=0, ddof=1) / math.sqrt(passes)
             extra = {f"stderr.{n}": stderr[..., i].astype(np.float32) for i, n in enumerate(names)}
         exr.write_image(out_exr, names, stack.mean(axis=0), extra)
-        versions = {"art": f"artist {self.artist}"}
+        versions = {"art": art_version(self.artist), "artist": str(self.artist)}
         return {"variant": mode, "spp": per_pass * passes, "passes": passes, "seed": seed, "time_s": total,
                 "wall_s": total, "resolution": [int(stack.shape[2]), int(stack.shape[1])], "channels": names,
                 "versions": versions}
