@@ -38,7 +38,6 @@ Multiple bounces compound it. Gamut clipping adds error for out-of-gamut reflect
 ColorChecker cyan patch is R = -0.033 in sRGB under D65, clipped to 0, 2.43 dE00 even under D65.
 """
 from functools import lru_cache
-from pathlib import Path
 
 import numpy as np
 
@@ -101,22 +100,6 @@ def fresnel_conductor(cos_theta, eta, k):
     return 0.5 * (np.abs(rs) ** 2 + np.abs(rp) ** 2)
 
 
-@lru_cache(maxsize=None)
-def mitsuba_ior_table(name, which):
-    """(wavelengths nm, values) of Mitsuba 3's ``data/ior/<name>.<which>.spd`` (which: eta | k),
-    the table Mitsuba's conductor plugin reads for ``material=<name>``."""
-    import importlib.util
-    found = importlib.util.find_spec("mitsuba")
-    if found is None or not found.submodule_search_locations:
-        raise ReductionError("bsdf.material", "the mitsuba package (its data/ior tables) is not installed")
-    path = Path(list(found.submodule_search_locations)[0]) / "data" / "ior" / f"{name}.{which}.spd"
-    if not path.is_file():
-        raise ReductionError("bsdf.material", f"no table {path.name} in Mitsuba's data/ior")
-    rows = [line.split() for line in path.read_text().splitlines() if line.strip() and not line.lstrip().startswith("#")]
-    data = np.array([[float(a), float(b)] for a, b in rows])
-    return data[:, 0], data[:, 1]
-
-
 def conductor_spectra(bsdf):
     """(eta(l), k(l)) at the CMF wavelengths of an IR conductor (named or explicit)."""
     wl = spectra.cie_1931_cmfs()[0]
@@ -124,11 +107,8 @@ def conductor_spectra(bsdf):
         name = bsdf["material"]
         if name not in spectra.NAMED_CONDUCTORS:
             raise ReductionError("bsdf.material", f"unknown named conductor {name!r}")
-        out = []
-        for which in ("eta", "k"):
-            x, y = mitsuba_ior_table(name, which)
-            out.append(np.interp(wl, x, y))  # Mitsuba interpolates its tables linearly too
-        return tuple(out)
+        # Mitsuba's own tables (exporters/data/conductors.json), interpolated linearly as Mitsuba does
+        return tuple(spectra.evaluate(s, wl) for s in spectra.named_conductor(name))
     return spectra.evaluate(bsdf["eta"], wl), spectra.evaluate(bsdf["k"], wl)
 
 

@@ -307,7 +307,7 @@ def test_validation_names_object_and_field(golden):
         assert f"object {obj['name']!r}, field 'bsdf.{text}'" in str(err.value)
     bad = copy.deepcopy(sc)
     next(o for o in bad["objects"] if o["name"] == obj["name"])["bsdf"]["thin_film"]["colour"] = 1
-    with pytest.raises(validate.SceneError, match=f"object {obj['name']!r}, field 'bsdf'"):
+    with pytest.raises(validate.SceneError, match=f"object {obj['name']!r}, field 'bsdf.thin_film'.*'colour' was unexpected"):
         validate.check(bad)
 
 

@@ -75,8 +75,8 @@ def test_reduction_predicts_no_error_under_d65_but_under_d50():
 
 
 def test_conductors_fit_the_reduced_fresnel_reflectance_from_mitsubas_tables():
-    x, eta = rgb_reduction.mitsuba_ior_table("Cu", "eta")
-    assert x[0] < 360 and x[-1] > 830 and len(x) == len(eta)  # Mitsuba's data/ior/Cu.eta.spd
+    eta, _ = spectra.named_conductor("Cu")  # Mitsuba's data/ior/Cu.eta.spd (exporters/data/conductors.json)
+    assert eta["wavelengths"][0] < 360 and eta["wavelengths"][-1] > 830
     e, k, info = rgb_reduction.conductor_rgb({"type": "conductor", "material": "Cu"})
     assert info["fit_max_abs_residual"] < 0.01
     # the fitted (eta, k) reproduce the reduced normal-incidence reflectance
@@ -200,11 +200,12 @@ def lamp(tmp_path_factory):
 def test_render_is_judged_on_its_own_noise(lamp, name):
     info, names, img, se = lamp[name]
     assert info["passes"] == PASSES and names == ["R", "G", "B"] and se is not None and (se > 0).mean() > 0.9
-    _, _, ref, ref_se = lamp["mitsuba"]
-    z = compare.z_test(img, ref, ref_se**2, np.zeros_like(ref), info["spp"], block=8, test_var_of_mean=se**2)
+    ref_info, _, ref, ref_se = lamp["mitsuba"]
+    at = compare.reference_at(ref, ref_se, ref_info["spp"], img.shape, ref_passes=ref_info["passes"])
+    z = compare.z_test(img, at, info["spp"], own_var_of_mean=se**2, own_passes=info["passes"], block=8)
     assert z.passed, z.as_dict()
     w_info, _, w_img, w_se = lamp["wrong"]
-    wz = compare.z_test(w_img, ref, ref_se**2, np.zeros_like(ref), w_info["spp"], block=8, test_var_of_mean=w_se**2)
+    wz = compare.z_test(w_img, at, w_info["spp"], own_var_of_mean=w_se**2, own_passes=w_info["passes"], block=8)
     assert not wz.passed, wz.as_dict()
 
 

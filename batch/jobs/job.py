@@ -78,6 +78,8 @@ def execute(job):
     record.update(time_s=info["time_s"], wall_s=info["wall_s"], spp=info["spp"], passes=info.get("passes", 1),
                   versions=info.get("versions"), image_path=str(image), image=str(image.relative_to(out)),
                   job_wall_s=time.perf_counter() - t0)
+    if info.get("approximated"):  # an RGB backend's approximations (--approximate)
+        record["approximated"] = info["approximated"]
     return record
 
 
@@ -90,7 +92,8 @@ def judge(job, record, deviations=None):
         if record["status"] != "rendered":
             entry.update(status="failed", reason=record["reason"])
             return entry
-        entry.update({k: record[k] for k in ("time_s", "wall_s", "spp", "passes", "image", "versions")})
+        entry.update({k: record[k] for k in ("time_s", "wall_s", "spp", "passes", "image", "versions", "approximated")
+                      if k in record})
         if deviations is None:
             deviations = known.load(job["verdict"].get("known"))
         out = Path(job["out"])
