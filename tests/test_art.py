@@ -91,6 +91,49 @@ def test_missing_artist_gives_skipped_jobs_never_passed(golden, tmp_path):
     assert "skipped" in (out / "summary.md").read_text()
 
 
+def test_art46_observer_is_the_backends_band_film():
+    """The art46 observer (exporters/colorimetry.py) must be exactly what the backend computes
+    from ART's band film: each 10 nm band's box average times the CMFs at the band centre. And
+    it must differ from the CIE observer where the deviation says it does (a saturated colour)."""
+    import numpy as np
+    from spectral_bench.batch.backends.art_backend import stokes_to_rgb
+    from spectral_bench.exporters import colorimetry, spectra
+    start, width, count = colorimetry.ART_BANDS_NM
+    fine = np.linspace(300.0, 850.0, 55001)
+    wl = spectra.cie_1931_cmfs()[0]
+    for centre, sigma in ((450.0, 12.0), (610.0, 25.0), (540.0, 150.0)):
+        radiance = lambda x: np.exp(-0.5 * ((x - centre) / sigma) ** 2) * ((x >= 360) & (x <= 830))  # noqa: E731
+        channels = {}
+        for b in range(count):
+            lo, hi = start + width * b, start + width * (b + 1)
+            inside = fine[(fine >= lo) & (fine <= hi)]
+            channels[f"S0.{lo + width / 2:.0f},000000nm"] = np.full((1, 1), np.trapz(radiance(inside), inside) / width)
+        names, img = stokes_to_rgb(channels)
+        assert names == ["R", "G", "B"]
+        model = colorimetry.xyz_to_srgb(colorimetry.xyz(radiance(wl), "art46"))
+        truth = colorimetry.xyz_to_srgb(colorimetry.xyz(radiance(wl)))
+        np.testing.assert_allclose(img[0, 0], model, rtol=2e-4, atol=2e-4 * np.abs(model).max())
+        if sigma < 20:  # saturated: the band film is measurably not the CIE integral
+            assert (np.abs(model - truth) / np.abs(truth)).max() > 0.01, (centre, model, truth)
+
+
+@needs_artist
+def test_art_chart_at_default_settings_is_known_only_for_the_recorded_version(tmp_path):
+    """ART 2.1.2's ColorChecker at the product's defaults fails the CIE probes exactly as the
+    band film predicts (art-46-band-film): `known`. The same record from another ART version is
+    not covered by the deviation and fails."""
+    from spectral_bench.batch.verdict import known, status
+    out = tmp_path / "o"
+    proc = run_batch("-r", "art", "-s", "macbeth_chart_D65", "-o", out)
+    run = metrics(out)["runs"][0]
+    assert run["status"] == "known" and run["known"] == ["art-46-band-film"], (run["reason"], proc.stderr[-2000:])
+    assert run["versions"]["art"] == "2.1.2"
+    assert any(p["pass"] is False for p in run["probes"])  # the deviation is seen, not absent
+    other = copy.deepcopy(run)
+    other["versions"]["art"] = "2.2.0"
+    assert status.decide(other, known.load())["status"] == "failed"
+
+
 @needs_artist
 def test_art_renders_the_chart_judged_on_its_own_noise(golden, tmp_path):
     """ART's spectral EXR integrated with the CIE CMFs (the backend's route): every patch meets

@@ -339,6 +339,8 @@ def test_needs_writers_and_art(golden, tmp_path):
     missing = art_writer.unsupported(sc)
     filmed = [o["name"] for o in sc["objects"] if (o.get("bsdf") or {}).get("thin_film")]
     assert sorted(o for o, f, _ in missing if f == "bsdf.thin_film") == sorted(filmed) and len(filmed) == 3
+    mode, why = backends.get("art").mode_for(sc)  # what the user reads: per object and field
+    assert mode is None and all(f"{o}.bsdf.thin_film" in why for o in filmed), why
     xml = mitsuba_writer.write(sc, tmp_path / "m")
     assert xml.read_text().count(f'type="{PLUGIN}"') == 3 and (tmp_path / "m" / "plugins" / "thin_film_conductor.py").is_file()
 

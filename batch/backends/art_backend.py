@@ -105,12 +105,12 @@ class ArtBackend:
         return True, ""
 
     def mode_for(self, scene):
+        problems = art_writer.unsupported(scene, ggx=self.ggx)  # per object and field, first
+        if problems:
+            return None, "ART cannot express: " + "; ".join(f"{o}.{f}: {m}" for o, f, m in problems)
         missing = sorted(set(scene.get("needs", [])) - NATIVE)
         if missing:
             return None, f"the ART writer does not map {', '.join(missing)} yet"
-        problems = art_writer.unsupported(scene, ggx=self.ggx)
-        if problems:
-            return None, "ART cannot express: " + "; ".join(f"{o}.{f}: {m}" for o, f, m in problems)
         return ("spectral46_polarized" if "polarization" in scene.get("needs", []) else "spectral46"), None
 
     def export(self, scene, out_dir):
