@@ -5,11 +5,31 @@ Blender it is imported as ``bl_ext.<repo>.spectral_bench``. Outside, this loads 
 under one fixed name so that every module has a single identity.
 """
 import importlib.util
+import os
 import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent
 NAME = "spectral_bench"
+
+
+def single_threaded_blas():
+    """One BLAS thread in this process. Its matrix products are small (verdicts; renders run in
+    child processes), and OpenBLAS 0.3.23, which numpy 1.26.4's wheels carry, can spin forever in
+    a threaded gemv called from a worker thread (numpy/numpy#17752; seen here in the default
+    engine's verdict thread after ~450 jobs). The variable reaches numpy when it loads after this
+    and every child; where numpy is loaded already (bpy, Blender's start-up), threadpoolctl sets
+    the loaded library."""
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    if "numpy" in sys.modules:
+        try:
+            from threadpoolctl import threadpool_limits
+        except ImportError:  # Blender's own Python without the project's packages
+            return
+        threadpool_limits(1, user_api="blas")
+
+
+single_threaded_blas()
 
 
 def package():

@@ -8,6 +8,7 @@ import sys
 import time
 
 import numpy as np
+import pytest
 
 from conftest import ROOT, metrics, run_batch
 from spectral_bench.batch import exr
@@ -101,3 +102,19 @@ def test_a_killed_worker_loses_no_job(golden, tmp_path):
         engine.close()
     assert len(results) == 3
     assert all(r["status"] in ("ok", "known", "unjudged") for _, r in results), [(r["scene"], r["reason"]) for _, r in results]
+
+
+@pytest.mark.parametrize("numpy_first", [False, True])
+def test_the_runner_process_uses_one_blas_thread(numpy_first):
+    """The default engine judges in a worker thread; OpenBLAS 0.3.23 (numpy 1.26.4) can spin
+    forever in a threaded gemv there (pkg_bootstrap.single_threaded_blas). Whether numpy loads
+    after the project (python batch/run.py) or before it (bpy, Blender, a Dask worker), the
+    process ends with one BLAS thread, and its children inherit the limit."""
+    code = ("import numpy\n" if numpy_first else "") + (
+        "import os, sys; sys.path.insert(0, sys.argv[1]); import pkg_bootstrap, numpy, threadpoolctl\n"
+        "print(sorted({i['num_threads'] for i in threadpoolctl.threadpool_info() if i['user_api'] == 'blas'}),"
+        " os.environ.get('OPENBLAS_NUM_THREADS'))")
+    env = {k: v for k, v in os.environ.items() if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")}
+    proc = subprocess.run([sys.executable, "-c", code, str(ROOT)], capture_output=True, text=True, env=env, timeout=120)
+    assert proc.stdout.split() == ["[1]", "1"], proc.stdout + proc.stderr
+
