@@ -1,6 +1,7 @@
 """Exported Mitsuba folders load in Mitsuba unchanged and render; the radiometry follows the IR."""
 import copy
 import os
+import re
 import subprocess
 import sys
 import textwrap
@@ -106,7 +107,8 @@ def test_emitter_radiance_is_one_at_560nm_times_scale(tmp_path):
 def test_writer_output_matches_golden_folder(golden, tmp_path, name):
     """Any change of the Mitsuba writer shows as a reviewable diff of golden/mitsuba/
     (regenerate with scripts/update_golden.py). The Python plugins an export carries in plugins/
-    are verbatim copies of exporters/mitsuba_plugins/ (checked here, not stored again)."""
+    are verbatim copies of exporters/mitsuba_plugins/, and its load_plugins.py is that module's
+    loader naming exactly those plugins (checked here, not stored again)."""
     from conftest import ROOT
     from spectral_bench.exporters import mitsuba_plugins
     expected_dir = ROOT / "golden" / "mitsuba" / name
@@ -115,7 +117,14 @@ def test_writer_output_matches_golden_folder(golden, tmp_path, name):
     carried = [rel for rel in written if rel.parts[0] == "plugins"]
     for rel in carried:
         assert (tmp_path / name / rel).read_bytes() == (mitsuba_plugins.HERE / rel.name).read_bytes(), rel
-    written = [rel for rel in written if rel not in carried]
+    loader = Path("load_plugins.py")
+    assert (loader in written) == bool(carried)
+    if carried:
+        names = sorted(n for n, module in mitsuba_plugins.MODULES.items() if Path("plugins", f"{module}.py") in carried)
+        text = (tmp_path / name / loader).read_text()
+        variant = re.search(r'mi.set_variant\("([a-z_]+)"\)', text).group(1)
+        assert text == mitsuba_plugins.LOADER.format(variant_hint=variant, names=", ".join(names))
+    written = [rel for rel in written if rel not in carried and rel != loader]
     expected = sorted(p.relative_to(expected_dir) for p in expected_dir.rglob("*") if p.is_file())
     assert written == expected
     for rel in written:
