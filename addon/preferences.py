@@ -70,11 +70,4 @@ def reference_folders(context=None, prefs=None):
 CLASSES = (SpectralBenchPreferences,)
 
 
-def register():
-    for cls in CLASSES:
-        bpy.utils.register_class(cls)
-
-
-def unregister():
-    for cls in reversed(CLASSES):
-        bpy.utils.unregister_class(cls)
+register, unregister = bpy.utils.register_classes_factory(CLASSES)
