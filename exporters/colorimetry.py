@@ -23,6 +23,14 @@ OBSERVERS = ("cie1931", "mitsuba3", "art46")
 ART_BANDS_NM = (320.0, 10.0, 46)
 
 
+# Mitsuba 3.9.1's XYZ -> linear sRGB matrix (include/mitsuba/core/spectrum.h, xyz_to_srgb): six
+# digits, not the IEC 61966-2-1 matrix derived from the primaries; for a D65 white it gives
+# R, G, B +0.6e-5, -8.6e-5, +24.6e-5 relative (measured on renders: README, "Findings")
+MITSUBA_XYZ_TO_SRGB = np.array([[3.240479, -1.537150, -0.498535],
+                                [-0.969256, 1.875991, 0.041556],
+                                [0.055648, -0.204043, 1.057311]])
+
+
 @lru_cache(maxsize=None)
 def observer(name=GROUND_TRUTH):
     """(wavelengths, x_bar, y_bar, z_bar, normalisation) on the 1 nm grid of 360-830 nm."""
@@ -31,7 +39,11 @@ def observer(name=GROUND_TRUTH):
         return wl, xb, yb, zb, float(np.trapz(yb, wl))
     if name == "mitsuba3":
         knots = (wl % 5) == 0
-        return (wl, *(np.interp(wl, wl[knots], c[knots]) for c in (xb, yb, zb)), 106.7502593994140625)
+        cmfs = np.array([np.interp(wl, wl[knots], c[knots]) for c in (xb, yb, zb)])
+        # Mitsuba's film then maps XYZ to sRGB with its own rounded matrix; folded into the CMFs so
+        # that xyz_to_srgb (the IEC 61966-2-1 matrix) of this observer's XYZ is Mitsuba's RGB
+        cmfs = np.linalg.solve(_srgb_matrix(), MITSUBA_XYZ_TO_SRGB) @ cmfs
+        return (wl, *cmfs, 106.7502593994140625)
     if name == "art46":
         return (wl, *(_band_stairs(wl, c) for c in (xb, yb, zb)), float(np.trapz(yb, wl)))
     raise KeyError(f"unknown observer {name!r} (known: {', '.join(OBSERVERS)})")
@@ -77,9 +89,12 @@ def _colour():
     return colour
 
 
+def _srgb_matrix():
+    return np.asarray(_colour().RGB_COLOURSPACES["sRGB"].matrix_XYZ_to_RGB, dtype=np.float64)
+
+
 def xyz_to_srgb(x):
-    m = _colour().RGB_COLOURSPACES["sRGB"].matrix_XYZ_to_RGB
-    return np.asarray(x, dtype=np.float64) @ np.asarray(m).T
+    return np.asarray(x, dtype=np.float64) @ _srgb_matrix().T
 
 
 def srgb_to_xyz(rgb):
