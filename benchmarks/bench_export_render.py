@@ -25,7 +25,7 @@ import pkg_bootstrap  # noqa: E402
 def main():
     pkg_bootstrap.package()
     from spectral_bench.batch import backends, scene_sources
-    from spectral_bench.batch.jobs import runner
+    from spectral_bench.batch.jobs import plan
     from spectral_bench.exporters import ir_json, mitsuba_writer
 
     ap = argparse.ArgumentParser()
@@ -51,7 +51,7 @@ def main():
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for name, sc in scenes:
-            sc = runner.for_run(sc, {"spp": None, "scale": args.scale})
+            sc = plan.for_run(sc, {"spp": None, "scale": args.scale})
             xml = backend.export(sc, Path(tmp) / name)
             mode, _ = backend.mode_for(sc)
             from spectral_bench.batch.backends.mitsuba_backend import scalar_twin

@@ -88,7 +88,7 @@ def main():
     pkg_bootstrap.package()
     from spectral_bench.batch import scene_sources
     from spectral_bench.batch.backends import llvm
-    from spectral_bench.batch.jobs import runner
+    from spectral_bench.batch.jobs import plan
 
     ap = argparse.ArgumentParser()
     ap.add_argument("--scale", type=float, default=1.0)
@@ -106,7 +106,7 @@ def main():
     rows, results = [], {}
     with tempfile.TemporaryDirectory() as tmp:
         for name, elastic_only, what in cases:
-            sc = runner.for_run(scenes[name], {"spp": args.spp, "scale": args.scale})
+            sc = plan.for_run(scenes[name], {"spp": args.spp, "scale": args.scale})
             stock, ours = export_pair(sc, Path(tmp) / name, elastic_only)
             samples = {"path": [], "ours": []}
             for r in range(args.rounds):

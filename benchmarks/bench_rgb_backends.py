@@ -102,7 +102,7 @@ def timing_table(runs):
 def interleaved(args):
     """Median render time per backend over interleaved repeats, same scene, spp and passes."""
     from spectral_bench.batch import backends, scene_sources
-    from spectral_bench.batch.jobs.runner import for_run
+    from spectral_bench.batch.jobs.plan import for_run
     golden = dict(scene_sources.load([str(scene_sources.DEFAULT_BLEND)]))
     rows = ["| scene | resolution, spp | " + " | ".join(f"{b} median (s)" for b in ("mitsuba", "cycles", "luxcore"))
             + " | cycles / mitsuba | luxcore / mitsuba |", "|---|---|---|---|---|---|---|"]

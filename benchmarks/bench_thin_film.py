@@ -54,7 +54,7 @@ def timed_render(mi, dr, scene, spp, seed):
 def main():
     pkg_bootstrap.package()
     from spectral_bench.batch import scene_sources
-    from spectral_bench.batch.jobs import runner
+    from spectral_bench.batch.jobs import plan
     from spectral_bench.exporters import ir, mitsuba_plugins, mitsuba_writer
     import drjit as dr
     import mitsuba as mi
@@ -69,7 +69,7 @@ def main():
     variants = args.variant or ["llvm_ad_spectral", "llvm_ad_spectral_polarized"]
 
     scene = dict(scene_sources.load([str(scene_sources.DEFAULT_BLEND)]))[SCENE]
-    scene = runner.for_run(scene, {"spp": args.spp, "scale": args.scale})
+    scene = plan.for_run(scene, {"spp": args.spp, "scale": args.scale})
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         folders = {}

@@ -44,7 +44,7 @@ def main():
     pkg_bootstrap.package()
     from spectral_bench.batch import backends, exr, scene_sources
     from spectral_bench.batch.backends import llvm
-    from spectral_bench.batch.jobs import runner
+    from spectral_bench.batch.jobs import plan
     from spectral_bench.batch.verdict import probes
     from spectral_bench.batch.verdict.probes import fluorescence as probe
     from spectral_bench.exporters import colorimetry, fluorescence, spectra
@@ -92,7 +92,7 @@ def main():
 
     # renders: transport exactness and the probe's false alarms / power
     backend = backends.get("mitsuba")
-    sc = runner.for_run(lone, {"spp": None, "scale": None})
+    sc = plan.for_run(lone, {"spp": None, "scale": None})
     sc["render"]["width"] = sc["render"]["height"] = args.size
     mode, _ = backend.mode_for(sc)
     sphere = sc["objects"][0]["bsdf"]

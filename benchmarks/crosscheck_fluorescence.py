@@ -103,7 +103,7 @@ def render(backend, scene, folder, spp, passes, seed, art_output="spectral"):
 def main():
     pkg_bootstrap.package()
     from spectral_bench.batch import backends, scene_sources
-    from spectral_bench.batch.jobs import runner
+    from spectral_bench.batch.jobs import plan
     from spectral_bench.batch.verdict import probes, stats
 
     ap = argparse.ArgumentParser()
@@ -129,7 +129,7 @@ def main():
     rows, record = [], {}
     with tempfile.TemporaryDirectory() as tmp:
         for name, scene in scenes:
-            sc = runner.for_run(scene, {"spp": args.spp, "scale": None})
+            sc = plan.for_run(scene, {"spp": args.spp, "scale": None})
             r = sc["render"]
             r["width"] = r["height"] = args.size  # every scene is square
             results = {}
