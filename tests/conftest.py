@@ -96,3 +96,7 @@ def run_bpy(body, timeout=600, env=None):
                           env=dict(os.environ, **(env or {})))
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-3000:]
     return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def pytest_configure(config):
+    config.addinivalue_line("markers", "slow: renders whole cases or runs long studies; `pytest -m 'not slow'` is the fast subset")
