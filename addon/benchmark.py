@@ -23,6 +23,7 @@ from ..batch.jobs import background as background_job
 from ..batch.report import html as report_html
 from ..batch.report import results
 from ..exporters import extract_blender, ir_json, validate
+from ..exporters import names as ir_names
 from . import canonical, preferences
 
 _ACTIVE = {}  # "job": the BackgroundRun in progress (Python objects cannot live in properties)
@@ -128,9 +129,10 @@ def scenes_to_run(context, s):
     out = []
     for scene in chosen:
         try:
-            out.append((scene.name, extract_blender.extract_scene(scene)))
+            data = extract_blender.extract_scene(scene)
+            out.append((data["name"], data))
         except validate.SceneError as exc:
-            out.append((scene.name, exc))
+            out.append((exc.scene, exc))
     return out
 
 
@@ -153,7 +155,8 @@ def start_run(context):
         if isinstance(data, Exception):
             problems.append(str(data))
             continue
-        inputs.append(ir_json.write(data, out.parent / f"{out.name}.inputs" / f"{name}.json"))
+        # the IR's name, never Blender's: it is checked to name a file (exporters/names.py)
+        inputs.append(ir_json.write(data, out.parent / f"{out.name}.inputs" / f"{ir_names.file_stem(data['name'])}.json"))
     if not inputs:
         raise RuntimeError("no scene could be exported: " + "; ".join(problems))
     args = [a for n in names for a in ("-r", n)] + ["--scale", str(s.scale), "--passes", str(s.passes)]

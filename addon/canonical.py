@@ -59,9 +59,10 @@ def extract(names=None):
             dst.scenes = wanted
         for scene in dst.scenes:
             try:
-                out.append((scene.name, extract_blender.extract_scene(scene)))
+                data = extract_blender.extract_scene(scene)
+                out.append((data["name"], data))
             except validate.SceneError as exc:
-                out.append((scene.name, exc))
+                out.append((exc.scene, exc))
     return out
 
 

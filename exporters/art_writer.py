@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import dispersion, fluorescence, ir, mesh_io, spectra
+from . import dispersion, fluorescence, ir, mesh_io, names, spectra
 
 # ART's own CIE illuminant tables are raw CIE data (D65 = 100 at 560 nm): the IR's scale s
 # (1.0 at 560 nm) becomes s / (raw table value at 560 nm): s / 100 for A and the D series, s / 11.76
@@ -163,7 +163,7 @@ class _Writer:
 
     def shape(self, k, obj, material):
         s, var = obj["shape"], f"obj{k}"
-        self.lines.append(f"    // {obj['name']}")
+        self.lines.append(f"    // {names.comment_text(obj['name'])}")
         if s["type"] == "rectangle":
             m = np.asarray(s["to_world"], dtype=np.float64)
             corners = [m @ np.array([x, y, 0.0, 1.0]) for x, y in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
@@ -184,7 +184,7 @@ class _Writer:
             if "to_world" in s:
                 m = np.asarray(s["to_world"], dtype=np.float64)
                 v = v @ m[:3, :3].T + m[:3, 3]
-            rel = f"meshes/{obj['name']}.ply"
+            rel = f"meshes/{names.file_stem(obj['name'])}.ply"
             mesh_io.write_ply(self.out / rel, v, faces)
             self.lines.append(f'    ArObj {var} = [ PLY_MESH("{rel}") apply : {material} ];')
         return var
@@ -244,10 +244,10 @@ class _Writer:
 
     def write(self):
         sc = self.scene
-        self.lines = [f"// {sc['name']} ({sc.get('case')}), written from the scene IR v{ir.VERSION} by spectral_bench",
+        self.lines = [f"// {names.comment_text(sc['name'])} ({names.comment_text(sc.get('case'))}), written from the scene IR v{ir.VERSION} by spectral_bench",
                       f"#ifndef SAMPLES\n#define SAMPLES {sc['render']['spp']}\n#endif", "",
                       "ARM_MAIN_FUNCTION(scene)", "{"]
-        names = []
+        parts = []
         self.scene_problems()
         for k, obj in enumerate(sc["objects"]):
             if (obj.get("emitter") or {}).get("type") == "collimated":
@@ -261,13 +261,13 @@ class _Writer:
                 material = self.surface(obj)
             if material is None:
                 continue
-            names.append(self.shape(k, obj, material))
+            parts.append(self.shape(k, obj, material))
         env = sc.get("environment")
         env_line = None
         if env:
             colour, brightness = self.emission(env["radiance"])
             env_line = f"UNIFORM_ENVIRONMENT_MATERIAL({colour}, {_num(brightness)})"
-        self.lines += ["", f"    id geometry = UNION({', '.join(names)}, UNION_END);",
+        self.lines += ["", f"    id geometry = UNION({', '.join(parts)}, UNION_END);",
                        f"    id camera = {self.camera()};",
                        f"    id actions = ACTION_SEQUENCE(\n        {self.actions()}\n        );",
                        "    return [ SCENE", "        sceneGeometry: geometry"]

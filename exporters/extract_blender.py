@@ -9,7 +9,7 @@ import math
 import bpy
 from mathutils import Matrix
 
-from . import ir, validate
+from . import ir, names, validate
 
 
 def _clean(x):
@@ -190,7 +190,7 @@ def _camera(scene, problems):
     else:
         axis, sensor = "y", d.sensor_height
     fov = math.degrees(2 * math.atan(sensor / (2 * d.lens)))
-    out = {"name": cam.name, "to_world": _matrix(_world(cam)), "fov": _clean(fov), "fov_axis": axis}
+    out = {**_named(cam.name, ()), "to_world": _matrix(_world(cam)), "fov": _clean(fov), "fov_axis": axis}
     if d.spectral_bench.polarizer:
         out["polarizer"] = {"angle": _clean(d.spectral_bench.polarizer_angle)}
     return out
@@ -203,7 +203,7 @@ def extract_scene(scene):
     r = scene.render
     pct = r.resolution_percentage / 100.0
     out = {
-        "format": ir.FORMAT, "version": ir.VERSION, "name": scene.name, "case": a.case,
+        "format": ir.FORMAT, "version": ir.VERSION, **_named(scene.name, (), names.scene_problem), "case": a.case,
         "needs": [n for n, on in (("polarization", a.needs_polarization),
                                   ("fluorescence", a.needs_fluorescence)) if on],
         "render": {"spp": a.spp, "max_depth": a.max_depth, "width": int(r.resolution_x * pct),
@@ -220,6 +220,7 @@ def extract_scene(scene):
     if world is not None and world.spectral_bench.enabled:
         out["environment"] = {"type": "uniform", "radiance": spectrum(world.spectral_bench.radiance)}
     depsgraph = scene.view_layers[0].depsgraph if scene.view_layers else None
+    taken = []
     for obj in sorted(scene.objects, key=lambda o: o.name):
         if obj.hide_render:
             continue
@@ -230,28 +231,41 @@ def extract_scene(scene):
         else:
             continue
         if item is not None:
+            named = _named(obj.name, taken, names.object_problem)
+            item = {**named, **{k: v for k, v in item.items() if k != "name"}}
+            taken.append(named["name"])
             out["objects"].append(item)
     if problems:
-        raise validate.SceneError(scene.name, problems)
+        raise validate.SceneError(out["name"], problems)
     validate.check(out)
     out["needs"] = ir.derived_needs(out)
     return out
+
+
+def _named(blender_name, taken, problem=names.problem):
+    """{"name": a valid IR name} for a Blender name, and {"label": the Blender name} when the two
+    differ: Blender allows any text in a name ("Key Light", "Würfel", "a/b"), the IR's names name
+    files (exporters/names.py)."""
+    if problem(blender_name) is None and blender_name.lower() not in {t.lower() for t in taken}:
+        return {"name": blender_name}
+    return {"name": names.safe_id(blender_name, taken), "label": blender_name}
 
 
 def scene_names():
     return [s.name for s in bpy.data.scenes]
 
 
-def extract(names=None):
+def extract(wanted=None):
     """[(scene name, IR dict or SceneError)] for the named Blender scenes (all by default)."""
     results = []
-    for name in names or scene_names():
+    for name in wanted or scene_names():
+        ir_name = _named(name, (), names.scene_problem)["name"]
         scene = bpy.data.scenes.get(name)
         if scene is None:
-            results.append((name, validate.SceneError(name, [("scene", "name", "no such scene in the .blend file")])))
+            results.append((ir_name, validate.SceneError(ir_name, [("scene", "name", f"no scene {name!r} in the .blend file")])))
             continue
         try:
-            results.append((name, extract_scene(scene)))
+            results.append((ir_name, extract_scene(scene)))
         except validate.SceneError as exc:
-            results.append((name, exc))
+            results.append((ir_name, exc))
     return results

@@ -39,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import mesh_io, rgb_scene
+from . import mesh_io, names, rgb_scene
 
 
 
@@ -123,7 +123,7 @@ def write(rgb, out_dir):
     """Write the RGB scene ``rgb`` into ``out_dir``; returns the path of render.cfg."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    lines = [f"# {rgb['name']} ({rgb.get('case')}), reduced to linear sRGB by spectral_bench (see reduction.json)"]
+    lines = [f"# {names.comment_text(rgb['name'])} ({names.comment_text(rgb.get('case'))}), reduced to linear sRGB by spectral_bench (see reduction.json)"]
     lines += camera_lines(rgb["camera"], rgb["render"]["width"], rgb["render"]["height"])
     if rgb["environment"]:
         lines += ['scene.lights.environment.type = "constantinfinite"',
@@ -132,7 +132,7 @@ def write(rgb, out_dir):
                   "scene.lights.environment.visibilitymapcache.enable = 0"]
     for k, obj in enumerate(rgb["objects"]):
         name = f"obj{k}"
-        lines.append(f"# {obj['name']}")
+        lines.append(f"# {names.comment_text(obj['name'])}")
         lines += material_lines(name, obj["material"], obj["emission"])
         verts, faces, normals = shape_geometry(obj["shape"])
         rel = f"meshes/{name}.ply"

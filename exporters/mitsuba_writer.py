@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import camera_filter, dispersion, fluorescence, ir, mesh_io, mitsuba_plugins, spectra
+from . import camera_filter, dispersion, fluorescence, ir, mesh_io, mitsuba_plugins, names, spectra
 
 # Blender/OpenGL cameras look down -Z with +Y up; Mitsuba's look down +Z with +X to the
 # image's left. Mitsuba to_world = IR to_world @ diag(-1, 1, -1).
@@ -56,7 +56,7 @@ class _Writer:
 
     def bsdf(self, parent, obj):
         b = obj["bsdf"]
-        stem = obj["name"]
+        stem = names.file_stem(obj["name"])
         rough = b.get("roughness")
         is_rough = rough is not None and rough["alpha"] > 0
         if b["type"] == "diffuse" and b.get("fluorescence") is not None:
@@ -124,7 +124,7 @@ class _Writer:
             ET.SubElement(node, "float", name="radius", value=repr(float(s["radius"])))
         elif s["type"] == "mesh":
             verts, faces = mesh_io.load_mesh(s, self.scene.get("_base_dir"))
-            rel = f"meshes/{obj['name']}.ply"
+            rel = f"meshes/{names.file_stem(obj['name'])}.ply"
             self.files.append(mesh_io.write_ply(self.out / rel, verts, faces))
             node = ET.SubElement(root, "shape", type="ply", id=obj["name"])
             ET.SubElement(node, "string", name="filename", value=rel)
@@ -145,15 +145,16 @@ class _Writer:
             # Mitsuba's directionalarea emits along the shape's normal; its "radiance" is the
             # irradiance across the beam (power per area: the ray weight is area x radiance)
             em = ET.SubElement(node, "emitter", type="directionalarea")
-            self.spectrum(em, "radiance", obj["emitter"]["irradiance"], f"{obj['name']}_irradiance")
+            self.spectrum(em, "radiance", obj["emitter"]["irradiance"], f"{names.file_stem(obj['name'])}_irradiance")
         elif obj.get("emitter"):
             em = ET.SubElement(node, "emitter", type="area")
-            self.spectrum(em, "radiance", obj["emitter"]["radiance"], f"{obj['name']}_radiance")
+            self.spectrum(em, "radiance", obj["emitter"]["radiance"], f"{names.file_stem(obj['name'])}_radiance")
 
     def write(self):
         sc, r = self.scene, self.scene["render"]
         root = ET.Element("scene", version="3.0.0")
-        root.append(ET.Comment(f" {sc['name']} ({sc.get('case')}), written from the scene IR v{ir.VERSION} "))
+        root.append(ET.Comment(f" {names.comment_text(sc['name'])} ({names.comment_text(sc.get('case'))}), "
+                               f"written from the scene IR v{ir.VERSION} "))
         ET.SubElement(root, "default", name="spp", value=str(r["spp"]))
         ET.SubElement(root, "default", name="seed", value="0")
         ET.SubElement(root, "default", name="max_depth", value=str(r.get("max_depth", 64)))

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import jsonschema
 
-from . import dispersion, fluorescence, ir, spectra
+from . import dispersion, fluorescence, ir, mesh_io, names, spectra
 
 SCHEMA_PATH = Path(__file__).resolve().parent / "schema" / "scene.schema.json"
 
@@ -67,11 +67,39 @@ def _schema_problems(data):
         yield obj, field, msg
 
 
+MAX_PIXELS = 1 << 26  # 8192 x 8192: a render and its reference are held in memory as float32
+
+
+def _name_problems(scene):
+    """Names name files: the pattern of exporters/names.py, checked here with fullmatch (the
+    schema's pattern is applied with re.search, where "$" also matches before a final newline)."""
+    why = names.scene_problem(scene["name"])
+    if why:
+        yield "scene", "name", why
+    why = names.problem(scene["case"], "case")
+    if why:
+        yield "scene", "case", why
+    if "name" in scene["camera"]:
+        why = names.problem(scene["camera"]["name"], "camera name")
+        if why:
+            yield "camera", "name", why
+    seen = {}
+    for i, obj in enumerate(scene["objects"]):
+        why = names.object_problem(obj["name"])
+        if why:
+            yield f"objects[{i}]", "name", f"{why}; got {obj['name']!r}"
+        elif obj["name"].lower() in seen:
+            yield obj["name"], "name", (f"is used by two objects (objects[{seen[obj['name'].lower()]}] and "
+                                        f"objects[{i}]; names are compared ignoring case: they name files)")
+        else:
+            seen[obj["name"].lower()] = i
+
+
 def _value_problems(scene):
     r = scene["render"]
-    for key in ("spp", "width", "height"):
-        if r[key] < 1:
-            yield "render", key, f"must be >= 1, got {r[key]}"
+    if r["width"] * r["height"] > MAX_PIXELS:
+        yield "render", "width", (f"{r['width']} x {r['height']} is {r['width'] * r['height']} pixels, more than "
+                                  f"{MAX_PIXELS} (8192 x 8192)")
     cam = scene["camera"]
     cam_name = cam.get("name", "camera")
     if not _finite(cam["fov"]) or not 0 < cam["fov"] < 180:
@@ -87,12 +115,8 @@ def _value_problems(scene):
     if env:
         for field, msg in spectra.check(env["radiance"], "radiance"):
             yield "environment", field, msg
-    names = set()
     for obj in scene["objects"]:
         name = obj["name"]
-        if name in names:
-            yield name, "name", "is used by two objects"
-        names.add(name)
         yield from ((name, f, m) for f, m in _shape_problems(obj["shape"], scene.get("_base_dir")))
         bsdf = obj.get("bsdf")
         if bsdf:
@@ -120,19 +144,49 @@ def _shape_problems(shape, base_dir):
             yield "shape.center", f"must be finite, got {shape['center']!r}"
     if shape["type"] == "mesh":
         if "file" in shape:
-            path = Path(shape["file"])
-            if not path.is_absolute() and base_dir:
-                path = Path(base_dir) / path
-            if not path.is_file():
-                yield "shape.file", f"mesh file not found: {path}"
+            yield from _mesh_file_problems(shape, base_dir)
         else:
-            if not shape["faces"] or not shape["vertices"]:
-                yield "shape.faces", "mesh has no faces (missing mesh data)"
-            n = len(shape["vertices"])
-            if any(i >= n for f in shape["faces"] for i in f):
-                yield "shape.faces", f"face index out of range (mesh has {n} vertices)"
-            if not all(_finite(c) for v in shape["vertices"] for c in v):
-                yield "shape.vertices", "must be finite"
+            yield from _mesh_data_problems(shape["vertices"], shape["faces"], "shape")
+
+
+def _mesh_data_problems(vertices, faces, where):
+    if not len(faces) or not len(vertices):
+        yield f"{where}.faces", "mesh has no faces (missing mesh data)"
+        return
+    n = len(vertices)
+    if any(i < 0 or i >= n for f in faces for i in f):
+        yield f"{where}.faces", f"face index out of range (mesh has {n} vertices)"
+    if not all(_finite(c) for v in vertices for c in v):
+        yield f"{where}.vertices", "must be finite"
+
+
+def _mesh_file_problems(shape, base_dir):
+    """A mesh file is a relative path inside the scene's folder (the folder of its JSON file),
+    and is read here, so that a file that is not a mesh fails this scene at validation."""
+    raw = shape["file"]
+    rel = Path(raw)
+    if not raw or rel.is_absolute() or raw.startswith(("/", "\\")) or ".." in rel.parts or "\\" in raw \
+            or any(ord(c) < 32 for c in raw):
+        yield "shape.file", (f"{raw!r}: a mesh file must be a relative path inside the scene's folder "
+                             "(no absolute path, no '..', no backslash or control character)")
+        return
+    base = Path(base_dir or ".").resolve()
+    path = (base / rel).resolve()
+    if base not in path.parents:
+        yield "shape.file", f"{raw!r} resolves to {path}, outside the scene's folder {base} (a link?)"
+        return
+    if not path.is_file():
+        yield "shape.file", f"mesh file not found: {path}"
+        return
+    if path.suffix.lower() not in (".ply", ".obj"):
+        yield "shape.file", f"{raw!r}: a mesh file is .ply or .obj"
+        return
+    try:
+        vertices, faces = mesh_io.load_mesh({"file": str(path)})
+    except Exception as exc:  # noqa: BLE001 - any parser error is this scene's problem, named
+        yield "shape.file", f"{raw!r} is not a readable {path.suffix[1:].upper()} mesh: {type(exc).__name__}: {exc}"
+        return
+    yield from _mesh_data_problems(vertices, faces, "shape.file")
 
 
 def bsdf_problems(bsdf):
@@ -181,16 +235,21 @@ def bsdf_problems(bsdf):
 def check(scene):
     """Raise SceneError listing every problem of ``scene`` (an IR dict); return it otherwise."""
     name = scene.get("name", "?") if isinstance(scene, dict) else "?"
+    if names.scene_problem(name) is not None:
+        name = "?"  # the problem is reported below; a bad name never labels anything
     if not isinstance(scene, dict):
         raise SceneError(name, [("scene", "(root)", "a scene must be a JSON object")])
     if scene.get("format") != ir.FORMAT or scene.get("version") != ir.VERSION:
         raise SceneError(name, [("scene", "version", f"expected format {ir.FORMAT!r} version {ir.VERSION}, "
                                  f"got {scene.get('format')!r} version {scene.get('version')!r}")])
     data = {k: v for k, v in scene.items() if not k.startswith("_")}
-    problems = list(_schema_problems(data))
-    if problems:
-        raise SceneError(name, problems)
-    problems = list(_value_problems(scene))
+    try:
+        problems = list(_schema_problems(data))
+        if problems:
+            raise SceneError(name, problems)
+        problems = list(_name_problems(scene)) + list(_value_problems(scene))
+    except RecursionError:
+        problems = [("scene", "(root)", "nested too deeply to be a scene")]
     if problems:
         raise SceneError(name, problems)
     return scene
