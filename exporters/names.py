@@ -96,10 +96,7 @@ def safe_id(text, taken=()):
     """A valid name for ``text`` (a Blender name, a label), not in ``taken`` (compared without
     case: names become file names, and some file systems ignore case)."""
     ascii_text = unicodedata.normalize("NFKD", str(text)).encode("ascii", "ignore").decode()
-    base = re.sub(r"[^A-Za-z0-9_.-]+", "_", ascii_text).strip("_") or "object"
-    if not re.match(r"[A-Za-z0-9_]", base):
-        base = "_" + base
-    base = base[:MAX_LENGTH]
+    base = re.sub(r"[^A-Za-z0-9_.-]+", "_", ascii_text).strip("_.-")[:MAX_LENGTH] or "object"
     if problem(base) is not None or base.lower() in RESERVED_OBJECTS or base.lower() in OUTPUT_ENTRIES:
         base = ("_" + base)[:MAX_LENGTH]
     lowered = {t.lower() for t in taken}

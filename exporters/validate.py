@@ -46,8 +46,13 @@ def _within_its_type(err):
     return [err]
 
 
+@lru_cache(maxsize=1)
+def _validator():
+    return jsonschema.Draft202012Validator(schema())
+
+
 def _schema_problems(data):
-    validator = jsonschema.Draft202012Validator(schema())
+    validator = _validator()
     errors = [leaf for err in validator.iter_errors(data) for leaf in _within_its_type(err)]
     for err in sorted(errors, key=lambda e: list(e.absolute_path)):
         path = list(err.absolute_path)
@@ -55,7 +60,8 @@ def _schema_problems(data):
         if len(path) >= 2 and path[0] == "objects" and isinstance(path[1], int):
             objs = data.get("objects", [])
             name = objs[path[1]].get("name") if isinstance(objs[path[1]], dict) else None
-            obj = name or f"objects[{path[1]}]"
+            # a name that is itself wrong (not a string, a path) never labels the object
+            obj = name if names.problem(name) is None else f"objects[{path[1]}]"
             path = path[2:]
         elif path and path[0] in ("camera", "render", "environment"):
             obj = path[0]
@@ -146,18 +152,25 @@ def _shape_problems(shape, base_dir):
         if "file" in shape:
             yield from _mesh_file_problems(shape, base_dir)
         else:
-            yield from _mesh_data_problems(shape["vertices"], shape["faces"], "shape")
+            yield from _mesh_data_problems(shape["vertices"], shape["faces"])
 
 
-def _mesh_data_problems(vertices, faces, where):
+def _mesh_data_problems(vertices, faces, file=None):
+    """Problems of mesh data, inline (fields shape.faces, shape.vertices) or read from ``file``
+    (field shape.file)."""
+    def field(sub):
+        return ("shape.file", f"{file!r}: ") if file else (f"shape.{sub}", "")
     if not len(faces) or not len(vertices):
-        yield f"{where}.faces", "mesh has no faces (missing mesh data)"
+        f, what = field("faces")
+        yield f, what + "mesh has no faces (missing mesh data)"
         return
     n = len(vertices)
     if any(i < 0 or i >= n for f in faces for i in f):
-        yield f"{where}.faces", f"face index out of range (mesh has {n} vertices)"
+        f, what = field("faces")
+        yield f, what + f"face index out of range (mesh has {n} vertices)"
     if not all(_finite(c) for v in vertices for c in v):
-        yield f"{where}.vertices", "must be finite"
+        f, what = field("vertices")
+        yield f, what + "vertices must be finite"
 
 
 def _mesh_file_problems(shape, base_dir):
@@ -186,7 +199,7 @@ def _mesh_file_problems(shape, base_dir):
     except Exception as exc:  # noqa: BLE001 - any parser error is this scene's problem, named
         yield "shape.file", f"{raw!r} is not a readable {path.suffix[1:].upper()} mesh: {type(exc).__name__}: {exc}"
         return
-    yield from _mesh_data_problems(vertices, faces, "shape.file")
+    yield from _mesh_data_problems(vertices, faces, raw)
 
 
 def bsdf_problems(bsdf):

@@ -1,0 +1,266 @@
+"""Hostile scenes for property-based tests (tests/test_fuzz_scenes.py) and the long fuzzing run
+(benchmarks/fuzz_scenes.py).
+
+Two sources of scenes:
+- ``schema_scenes()``: anything exporters/schema/scene.schema.json admits (hypothesis-jsonschema),
+  names and free text included;
+- ``mutated_scenes()``: a golden scene with some of its values replaced by hostile ones (path
+  walks, newlines and comment terminators of every export format, control characters, reserved
+  names, huge and non-finite numbers, wrong types, nesting), names and mesh files most often.
+
+``check(text, root)`` pushes one scene (the JSON text of an IR file) through load -> validate ->
+every writer inside ``root`` and returns what happened: "invalid" (a SceneError naming scene,
+object and field) or "exported" (every export parsed and stayed in its folder). Anything else
+raises AssertionError (or the unexpected exception), which is what a fuzzer reports.
+"""
+import functools
+import hashlib
+import json
+import os
+import re
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+from hypothesis import strategies as st
+
+from spectral_bench.exporters import art_writer, ir_json, luxcore_writer, mitsuba_writer, names, rgb_scene, validate
+
+ROOT = Path(__file__).resolve().parents[1]
+GOLDEN = ROOT / "golden"
+
+HOSTILE_TEXT = [
+    "..", ".", "", " ", "../../../../escaped/light", "../x", "/tmp/absolute", "a/b", "a\\b", "C:\\x",
+    "light\n__attribute__((constructor)) static void pwn(void) { system(\"touch pwned\"); }\n//",
+    "x\nscene.lights.injected.type = \"sky2\"", " --> <emitter type=\"point\"/> <!-- ", "--", "a--b", "*/ int x; /*",
+    "end\\", "\x00", "a\rb", "tab\there", "\u2028", "metrics.json", "report.html", "sweeps", "CON", "nul.txt", "Würfel",
+    "Key Light", "x" * 65, "x" * 5000, "$spp", "${seed}", "%s%n", "'\"", "<svg onload=alert(1)>", "-leading", ".hidden",
+    "environment", "camera",
+]
+HOSTILE_NUMBERS = [0, -1, -5, 1, 2 ** 31, 10 ** 12, 100000, 16385, 1e308, -1e308, 1e-320, float("nan"), float("inf"),
+                   -float("inf"), 0.5, True, None]
+VALID_NAMES = st.from_regex(r"\A[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}\Z")
+NAME_PATHS = [("name",), ("case",), ("camera", "name")]
+
+
+@functools.lru_cache(maxsize=1)
+def _golden_texts():
+    return {p.stem: p.read_text() for p in sorted((GOLDEN / "ir").glob("*.json"))}
+
+
+def golden_scenes():
+    return {name: json.loads(text) for name, text in _golden_texts().items()}
+
+
+def _paths(node, prefix=()):
+    """Every path into a JSON tree (containers and leaves)."""
+    yield prefix
+    if isinstance(node, dict):
+        for k, v in node.items():
+            yield from _paths(v, prefix + (k,))
+    elif isinstance(node, list):
+        for i, v in enumerate(node):
+            yield from _paths(v, prefix + (i,))
+
+
+def _set(tree, path, value):
+    if not path:
+        return value
+    node = tree
+    for key in path[:-1]:
+        node = node[key]
+    node[path[-1]] = value
+    return tree
+
+
+def hostile_values():
+    json_leaf = st.one_of(st.none(), st.booleans(), st.integers(-2 ** 40, 2 ** 40),
+                          st.floats(allow_nan=True, allow_infinity=True), st.text(max_size=20))
+    nested = st.recursive(json_leaf, lambda inner: st.one_of(st.lists(inner, max_size=4),
+                                                              st.dictionaries(st.text(max_size=8), inner, max_size=4)),
+                          max_leaves=12)
+    return st.one_of(st.sampled_from(HOSTILE_TEXT), st.sampled_from(HOSTILE_NUMBERS), st.text(max_size=80), nested)
+
+
+@st.composite
+def mutated_scenes(draw):
+    """A golden scene with 1-3 values replaced; names and mesh files are chosen most often."""
+    texts = _golden_texts()
+    scene = json.loads(texts[draw(st.sampled_from(sorted(texts)))])
+    for _ in range(draw(st.integers(1, 3))):
+        name_paths = NAME_PATHS + [("objects", i, "name") for i in range(len(scene.get("objects", [])))
+                                   if isinstance(scene.get("objects"), list)]
+        if draw(st.booleans()):
+            path = draw(st.sampled_from(name_paths))
+            value = draw(st.one_of(st.sampled_from(HOSTILE_TEXT), st.text(max_size=70), VALID_NAMES))
+        elif draw(st.integers(0, 9)) == 0 and isinstance(scene.get("objects"), list) and scene["objects"]:
+            i = draw(st.integers(0, len(scene["objects"]) - 1))
+            path = ("objects", i, "shape")
+            value = {"type": "mesh", "file": draw(st.sampled_from(HOSTILE_TEXT + ["mesh.ply", "mesh.obj", "scene.json"]))}
+        else:
+            paths = list(_paths(scene))
+            path = draw(st.sampled_from(paths[1:]))
+            value = draw(hostile_values())
+        try:
+            scene = _set(scene, path, value)
+        except (KeyError, IndexError, TypeError):  # an earlier replacement removed the path
+            pass
+    return scene
+
+
+def schema_scenes():
+    from hypothesis_jsonschema import from_schema
+    return from_schema(validate.schema())
+
+
+def scene_text(scene):
+    return json.dumps(scene, allow_nan=True)
+
+
+# -- checking one scene -------------------------------------------------------------------------
+def snapshot(root):
+    """{relative path: sha256 or 'dir'} of everything under ``root`` (links not followed)."""
+    out = {}
+    for dirpath, dirnames, filenames in os.walk(root):
+        for d in dirnames:
+            out[os.path.relpath(os.path.join(dirpath, d), root)] = "dir"
+        for f in filenames:
+            p = os.path.join(dirpath, f)
+            out[os.path.relpath(p, root)] = hashlib.sha256(Path(p).read_bytes()).hexdigest() if not os.path.islink(p) else "link"
+    return out
+
+
+def _inside(path, folder):
+    path, folder = Path(path).resolve(), Path(folder).resolve()
+    return path == folder or folder in path.parents
+
+
+def _tree_inside(folder):
+    for dirpath, dirnames, filenames in os.walk(folder):
+        for f in dirnames + filenames:
+            p = Path(dirpath) / f
+            assert not p.is_symlink(), f"an export wrote a link: {p}"
+            assert _inside(p, folder), p
+
+
+_ART_IDENT = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+_ART_STRING = re.compile(r'"(?:[^"\\\n]|\\.)*"')
+
+
+def art_vocabulary():
+    """Identifiers the ART writer emits: those of every golden .arm and of the writer's source."""
+    words = set(_ART_IDENT.findall((ROOT / "exporters" / "art_writer.py").read_text()))
+    for p in (GOLDEN / "art").glob("*/scene.arm"):
+        words |= set(_ART_IDENT.findall(_art_code(p.read_text())))
+    return words
+
+
+_NUMBER = re.compile(r"(?<![A-Za-z0-9_])[0-9]*\.?[0-9]+(?:[eE][+-]?[0-9]+)?")
+
+
+def _art_code(text):
+    """The .arm text without its // comments, string literals and numbers."""
+    lines = []
+    for line in text.splitlines():
+        line = _ART_STRING.sub('""', line)
+        lines.append(_NUMBER.sub("0", line.split("//", 1)[0]))
+    return "\n".join(lines)
+
+
+def check_art(path, vocabulary):
+    text = Path(path).read_text()
+    for line in text.splitlines():
+        if "//" in line:
+            comment = line.split("//", 1)[1]
+            assert re.fullmatch(r"[ A-Za-z0-9_.,:;()\[\]+=%/'?*-]*", comment) and not comment.endswith("\\"), line
+    for s in _ART_STRING.findall(text):
+        assert re.fullmatch(r'"meshes/[A-Za-z0-9_][A-Za-z0-9_.-]*\.ply"', s), f"unexpected string in .arm: {s}"
+        assert _inside(Path(path).parent / s.strip('"'), Path(path).parent)
+    unknown = {w for w in _ART_IDENT.findall(_art_code(text))
+               if w not in vocabulary and not re.fullmatch(r"obj\d+(?:_points)?", w)}
+    assert not unknown, f"identifiers outside the ART writer's grammar: {sorted(unknown)[:10]}"
+
+
+XML_TAGS = {"scene", "default", "integrator", "integer", "float", "string", "boolean", "spectrum", "rgb", "point", "vector",
+            "sensor", "sampler", "film", "rfilter", "emitter", "shape", "bsdf", "transform", "matrix", "lookat", "ref"}
+
+
+def check_mitsuba(path, scene):
+    folder = Path(path).parent
+    root = ET.parse(path).getroot()  # raises on anything an injected comment terminator broke
+    tags = {el.tag for el in root.iter() if isinstance(el.tag, str)}
+    assert tags <= XML_TAGS, f"unexpected elements {tags - XML_TAGS}"
+    shapes = [el for el in root if el.tag == "shape"]
+    assert len(shapes) == len(scene["objects"]), "a shape was injected or lost"
+    emitters = len([el for el in root.iter("emitter")])
+    expected = sum(1 for o in scene["objects"] if o.get("emitter")) + (1 if scene.get("environment") else 0)
+    assert emitters == expected, f"{emitters} emitters for {expected} in the IR"
+    for el in root.iter():
+        value = el.get("filename") or (el.get("value") if el.get("name") in ("filename", "reradiation") else None)
+        if value is not None:
+            assert _inside(folder / value, folder) and (folder / value).is_file(), value
+
+
+def check_luxcore(cfg, rgb):
+    scn = Path(cfg).parent / "scene.scn"
+    objects = set()
+    for line in scn.read_text().splitlines() + Path(cfg).read_text().splitlines():
+        if line.startswith("#"):
+            assert re.fullmatch(r"# [ A-Za-z0-9_.,:;()\[\]+=%/'?*-]*", line), line
+            continue
+        m = re.fullmatch(r"([a-z][A-Za-z0-9_.]*) = (.*)", line)
+        assert m, f"not an SDL property line: {line!r}"
+        key = m.group(1)
+        o = re.match(r"scene\.(?:objects|shapes|materials)\.([A-Za-z0-9_]+)\.", key)
+        if o:
+            assert re.fullmatch(r"obj\d+(?:_black|_front)?", o.group(1)), key
+            if key.startswith("scene.objects."):
+                objects.add(o.group(1))
+    assert len(objects) == len(rgb["objects"])
+
+
+def check(text, root):
+    """Push one IR file's text through load -> validate -> writers inside ``root``."""
+    root = Path(root)
+    src = root / "in" / "scene.json"
+    src.parent.mkdir(parents=True, exist_ok=True)
+    src.write_text(text)
+    out = root / "out"
+    before = snapshot(root)
+    try:
+        scene = ir_json.load(src)
+    except validate.SceneError as err:
+        assert err.problems, "a SceneError without problems"
+        for problem in err.problems:
+            assert len(problem) == 3 and all(isinstance(p, str) and p for p in problem), problem
+        assert str(err).startswith("scene ") or str(err).startswith("\n  scene "), str(err)[:200]
+        assert snapshot(root) == before, "a scene that failed validation wrote files"
+        return "invalid"
+    name = names.file_stem(scene["name"])
+    path = mitsuba_writer.write(scene, out / name / "mitsuba")
+    check_mitsuba(path, scene)
+    arm, _missing = art_writer.write(scene, out / name / "art")
+    check_art(arm, art_vocabulary_cached())
+    json_path = ir_json.write(scene, out / name / "json" / f"{name}.json")
+    assert json.loads(json_path.read_text()) == {k: v for k, v in scene.items() if not k.startswith("_")}
+    try:
+        rgb = rgb_scene.build(scene, ("ggx", "beckmann"), approximate=True)
+    except ValueError as exc:  # what even an approximation cannot express: "object.field: why" (unsupported)
+        assert re.match(r"[^:]+\.[^:]+: ", str(exc)), repr(exc)
+    else:
+        cfg = luxcore_writer.write(rgb, out / name / "luxcore")
+        check_luxcore(cfg, rgb)
+    after = snapshot(root)
+    changed = {p for p in set(before) | set(after) if before.get(p) != after.get(p)}
+    outside = {p for p in changed if not (p == "out" or p.startswith("out" + os.sep))}
+    assert not outside, f"written outside OUT: {sorted(outside)[:5]}"
+    _tree_inside(out)
+    return "exported"
+
+
+_VOCAB = {}
+
+
+def art_vocabulary_cached():
+    if "v" not in _VOCAB:
+        _VOCAB["v"] = art_vocabulary()
+    return _VOCAB["v"]
