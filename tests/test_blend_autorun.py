@@ -113,7 +113,6 @@ def test_the_hostile_blend_runs_its_code_when_opened_or_appended_plainly(evil):
     assert set(appended) == {"driver_import", "driver_node_tree"}
 
 
-@pytest.mark.slow
 def test_the_runner_reads_a_hostile_blend_without_running_it(evil, tmp_path):
     blend, markers = evil
     out = tmp_path / "out"
@@ -135,7 +134,6 @@ def test_the_runner_reads_a_hostile_blend_without_running_it(evil, tmp_path):
     assert exported["name"] == SCENE
 
 
-@pytest.mark.slow
 def test_the_extension_lists_runs_appends_and_opens_a_hostile_canonical_file_without_running_it(evil):
     """The extension's canonical scenes pointed at the hostile file: listed, extracted for a run
     (the panel's scenes_to_run), appended (and the appended scene evaluated, as the window does
