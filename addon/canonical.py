@@ -2,7 +2,9 @@
 
 They are read through a temporary BlendData (``bpy.data.temp_data``), so listing or running them
 never touches the open file; opening works on a copy (saving never writes into the installed
-extension) and appending brings one scene into the open file.
+extension) and appending brings one scene into the open file. Nothing a .blend carries runs, whatever
+Blender's Auto Run preference: the copy is opened with scripts off, and what a library load brings
+loses its drivers that would run Python before anything evaluates them (batch/blend_input.py).
 """
 import shutil
 import tempfile
@@ -10,7 +12,7 @@ from pathlib import Path
 
 import bpy
 
-from ..batch import scene_sources
+from ..batch import blend_input, scene_sources
 from ..exporters import extract_blender, validate
 
 BLEND = scene_sources.DEFAULT_BLEND
@@ -57,6 +59,7 @@ def extract(names=None):
     with bpy.data.temp_data() as temp:
         with temp.libraries.load(str(_source())) as (_src, dst):
             dst.scenes = wanted
+        blend_input.drop_python_drivers(blend_input.ids_of(temp).values())  # the IR has no drivers
         for scene in dst.scenes:
             try:
                 data = extract_blender.extract_scene(scene)
@@ -75,9 +78,13 @@ def working_copy():
 
 def append(name):
     """Append canonical scene ``name`` (and what it uses) to the open file; returns the new scene
-    (renamed by Blender if the file already has a scene of that name)."""
+    (renamed by Blender if the file already has a scene of that name) and what was removed from the
+    appended data because it would run Python (see ``blend_input.drop_python_drivers``)."""
     if name not in scene_names():
         raise KeyError(f"no canonical scene {name!r} (known: {', '.join(scene_names())})")
+    before = blend_input.ids_of(bpy.data)
     with bpy.data.libraries.load(str(_source()), link=False) as (_src, dst):
         dst.scenes = [name]
-    return dst.scenes[0]
+    removed = blend_input.drop_python_drivers(
+        block for address, block in blend_input.ids_of(bpy.data).items() if address not in before)
+    return dst.scenes[0], removed

@@ -10,6 +10,7 @@ import bpy
 from bpy.props import BoolProperty, EnumProperty, StringProperty
 from bpy_extras.io_utils import ExportHelper, ImportHelper
 
+from ..batch import blend_input
 from ..batch.report import results
 from ..exporters import art_writer, extract_blender, ir_json, mitsuba_writer, validate
 from . import benchmark, canonical
@@ -247,7 +248,7 @@ class SPECTRAL_BENCH_OT_open_canonical_scenes(bpy.types.Operator):
             return {"CANCELLED"}
         path = canonical.working_copy()
         self.report({"INFO"}, f"opening the canonical scenes (a copy in {path.parent})")
-        bpy.ops.wm.open_mainfile(filepath=str(path), load_ui=False)
+        blend_input.open_blend(path)  # its scripts off, whatever the Auto Run preference
         return {"FINISHED"}
 
 
@@ -264,10 +265,12 @@ class SPECTRAL_BENCH_OT_append_canonical_scene(bpy.types.Operator):
             self.report({"ERROR"}, "choose one canonical scene to append")
             return {"CANCELLED"}
         try:
-            scene = canonical.append(name)
+            scene, removed = canonical.append(name)
         except KeyError as exc:
             self.report({"ERROR"}, exc.args[0])
             return {"CANCELLED"}
+        for line in removed:
+            self.report({"WARNING"}, f"appending {name}: {line}")
         if getattr(context, "window", None) is not None:
             context.window.scene = scene
         self.report({"INFO"}, f"appended the canonical scene {name} as {scene.name!r}")

@@ -1,6 +1,70 @@
 """Scenes from a .blend file: opens it with bpy (unless it is already open, as under
-``blender -b scenes.blend -P batch/run.py``), registers the annotations, extracts the IR."""
+``blender -b scenes.blend -P batch/run.py``), registers the annotations, extracts the IR.
+
+A .blend can carry code: a text block registered as a module runs when the file is opened, and a
+driver's scripted expression runs in Python whenever the scene is evaluated. Blender runs both
+when its Auto Run Python Scripts preference is on (or under ``blender -y``). Nothing here trusts a
+.blend: files are opened with scripts off whatever the preference (``open_blend``), and data read
+from a file without opening it (a library load: appending, ``bpy.data.temp_data``) loses its
+drivers that would need Python before anything evaluates them (``drop_python_drivers``); the
+registered text blocks of such data are unregistered (they would run when the file is next opened
+with Auto Run on). A file that Blender itself opened before the runner started (``blender -b
+FILE -P batch/run.py``) was opened under Blender's own setting: add ``--disable-autoexec`` there.
+"""
 from pathlib import Path
+
+
+def open_blend(path):
+    """Open ``path`` as the main file with its scripts off: no registered text block runs and no
+    driver runs Python, whatever Blender's Auto Run preference (until another file is opened)."""
+    import bpy
+    bpy.ops.wm.open_mainfile(filepath=str(path), load_ui=False, use_scripts=False)
+
+
+def _ids(data):
+    """Every ID of a BlendData (bpy.data or a temp_data), with the node trees embedded in them
+    (a material's, a world's, a light's: their drivers are their own)."""
+    import bpy
+    for prop in data.bl_rna.properties:
+        if prop.type != "COLLECTION":
+            continue
+        for block in getattr(data, prop.identifier):
+            if not isinstance(block, bpy.types.ID):
+                break
+            yield block
+            tree = getattr(block, "node_tree", None)
+            if isinstance(tree, bpy.types.ID):
+                yield tree
+
+
+def ids_of(data):
+    """{address: ID} of every ID of ``data`` (``bpy.data`` or a temp_data): take it before a library
+    load and pass what is new after it to ``drop_python_drivers``."""
+    return {block.as_pointer(): block for block in _ids(data)}
+
+
+def drop_python_drivers(blocks):
+    """Remove from ``blocks`` (IDs, e.g. what a library load brought) every driver that would run
+    Python (a scripted expression that is not a simple expression, which Blender evaluates without
+    Python), and unregister the text blocks among them. Returns what was removed, one line each
+    ("Object 'Evil': driver location[0] = evil(frame)"), for the caller to report."""
+    import bpy
+    removed = []
+    for block in blocks:
+        label = f"{type(block).__name__} {block.name!r}"
+        if isinstance(block, bpy.types.Text) and block.use_module:
+            block.use_module = False
+            removed.append(f"{label}: no longer registered as a module (it would run on opening the file)")
+        anim = getattr(block, "animation_data", None)
+        if anim is None:
+            continue
+        for fcurve in list(anim.drivers):
+            driver = fcurve.driver
+            if driver.type == "SCRIPTED" and not driver.is_simple_expression:
+                removed.append(f"{label}: driver {fcurve.data_path}[{fcurve.array_index}] = {driver.expression!r} "
+                               "removed (it would run Python)")
+                anim.drivers.remove(fcurve)
+    return removed
 
 
 def load_blend(path, names=None):
@@ -9,7 +73,7 @@ def load_blend(path, names=None):
     path = Path(path).resolve()
     already_open = bool(bpy.data.filepath) and Path(bpy.data.filepath).resolve() == path
     if not already_open:
-        bpy.ops.wm.open_mainfile(filepath=str(path), load_ui=False)
+        open_blend(path)
     from .. import register
     if not hasattr(bpy.types.Scene, "spectral_bench"):
         register()

@@ -4,12 +4,12 @@ Blender user folder (BLENDER_USER_RESOURCES in a temporary folder, so nothing re
 real configuration), then used: the canonical scenes opened from the installed copy, one scene
 run through the panel's operator and judged against a reference shipped in the extension, every
 panel drawn, the references folder preference saved with Blender's preferences and used, and the
-platform zip with its wheels within the platform's size limit and sufficient on its own to run
-the benchmark.
+platform zip built by the README's command (in a copy of the repository), with margin under the
+platform's size limit, its size recorded in README.md, and sufficient on its own to run the benchmark.
 
 Each test runs in child processes (bpy has one global state per process). Building the zip with
-wheels is slow (it downloads them on first use): it happens once per session, for one test; the
-others install the zip without wheels (the test venv provides the packages).
+wheels is slow (it downloads them on first use, into build/wheels/): it happens once per session,
+for one test (slow); the others install the zip without wheels (the test venv provides the packages).
 """
 import importlib.util
 import json
@@ -92,17 +92,83 @@ def extension_zip(tmp_path_factory):
     return zip_path
 
 
+DOCUMENTED_BUILD = [".venv/bin/python", "scripts/build_extension.py", "--platform", "linux-x64"]  # README, "Install"
+
+
+def readme_sizes(text):
+    """{platform: recorded MB} of README.md's extension-size block."""
+    block = _build_script().README_BLOCK.search(text)
+    assert block is not None, "README.md lacks its <!-- extension-size --> block"
+    return {m[0]: float(m[1]) for m in re.findall(r"^- ([\w-]+): ([\d.]+) MB", block.group(2), re.M)}
+
+
 @pytest.fixture(scope="session")
-def platform_zip(tmp_path_factory):
-    """The extension for this platform with every wheel (what would be uploaded), built once."""
+def platform_build(tmp_path_factory):
+    """The README's build command, exactly, run in a copy of the repository (so that the README it
+    rewrites is the copy's); its wheel cache is this checkout's build/wheels. Returns the copy."""
     if sys.platform != "linux" or platform.machine() != "x86_64":
         pytest.skip("the platform build is checked on linux-x64 only (its wheels must run here)")
-    out = tmp_path_factory.mktemp("dist_wheels")
-    proc = subprocess.run([sys.executable, str(ROOT / "scripts" / "build_extension.py"), "--platform", "linux-x64",
-                           "--out", str(out)], capture_output=True, text=True, timeout=1800)
+    build = _build_script()
+    clone = tmp_path_factory.mktemp("clone") / "spectral_bench"
+    shutil.copytree(ROOT, clone, ignore=build.IGNORE)
+    os.symlink(sys.prefix, clone / ".venv")
+    build.WHEEL_CACHE.mkdir(parents=True, exist_ok=True)
+    (clone / "build").mkdir()
+    os.symlink(build.WHEEL_CACHE, clone / "build" / "wheels")
+    proc = subprocess.run(DOCUMENTED_BUILD, cwd=clone, capture_output=True, text=True, timeout=1800)
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
-    (zip_path,) = out.glob("spectral_bench-*.zip")
+    return clone
+
+
+@pytest.fixture(scope="session")
+def platform_zip(platform_build):
+    """The extension for this platform with every wheel (what would be uploaded), built once."""
+    (zip_path,) = (platform_build / "dist").glob("spectral_bench-*.zip")
     return zip_path
+
+
+def test_size_record_keeps_other_platforms_and_the_text_around(tmp_path):
+    build = _build_script()
+    readme = tmp_path / "README.md"
+    readme.write_text("before\n<!-- extension-size -->\n- windows-x64: 98.7 MB: old\n- linux-x64: 1.0 MB: old\n"
+                      "<!-- /extension-size -->\nafter\n")
+    assert build.record_size("linux-x64", "149.2 MB: new", readme)
+    assert build.record_size("macos-arm64", "95.1 MB: new", readme)
+    assert readme.read_text() == ("before\n<!-- extension-size -->\n- linux-x64: 149.2 MB: new\n"
+                                  "- macos-arm64: 95.1 MB: new\n- windows-x64: 98.7 MB: old\n"
+                                  "<!-- /extension-size -->\nafter\n")
+    assert readme_sizes(readme.read_text()) == {"linux-x64": 149.2, "macos-arm64": 95.1, "windows-x64": 98.7}
+
+
+def test_default_references_exist_and_every_case_keeps_one(golden):
+    """The shipped subset names real references, and no case is left without one."""
+    build = _build_script()
+    assert set(build.DEFAULT_REFERENCES) <= {p.stem for p in (ROOT / "references").glob("*.exr")}
+    assert {golden[n]["case"] for n in build.DEFAULT_REFERENCES} == {scene["case"] for scene in golden.values()}
+
+
+@pytest.mark.slow
+def test_the_documented_build_fits_with_margin_records_its_size_and_ships_every_reference_beside(platform_build):
+    """The README's command: a zip within SIZE_TARGET_MB (margin under the platform's limit), its
+    measured size written into the copy's README.md (and the committed README agrees with it to
+    within 1 MB), the default references inside and every reference in the zip beside it."""
+    import zipfile
+    build = _build_script()
+    (zip_path,) = (platform_build / "dist").glob("spectral_bench-*.zip")
+    size_mb = zip_path.stat().st_size / 1e6
+    assert size_mb <= build.SIZE_TARGET_MB < build.PLATFORM_LIMIT_MB
+    recorded = readme_sizes((platform_build / "README.md").read_text())
+    assert recorded["linux-x64"] == round(size_mb, 1)
+    committed = readme_sizes((ROOT / "README.md").read_text())
+    assert abs(committed["linux-x64"] - size_mb) <= 1.0, (committed, size_mb)
+    names = zipfile.ZipFile(zip_path).namelist()
+    assert sorted(n[len("references/"):-4] for n in names if n.startswith("references/") and n.endswith(".exr")) \
+        == sorted(build.DEFAULT_REFERENCES)
+    (refs,) = (platform_build / "dist").glob("spectral_bench_references-*.zip")
+    every = sorted(p.name for p in (ROOT / "references").iterdir() if p.suffix in (".exr", ".json"))
+    assert sorted(n.split("/", 1)[1] for n in zipfile.ZipFile(refs).namelist()) == every
+
+
 
 
 def test_repository_manifest_validates(tmp_path):
@@ -254,11 +320,12 @@ def test_references_folder_preference_persists_and_each_reference_names_its_orig
     assert any(t.startswith("reference (extension): mitsuba") for t in second["labels"] if t)
 
 
+@pytest.mark.slow
 def test_platform_zip_with_wheels_fits_the_platform_and_runs_on_its_wheels_alone(platform_zip, tmp_path):
-    """The upload: within the platform's size limit; installed, Blender unpacks its wheels, and the
-    installed batch runner judges a scene against a shipped reference in a Python that sees only
-    the standard library, those wheels and numpy (which Blender ships)."""
-    limit = _build_script().PLATFORM_LIMIT_MB
+    """The upload: within the size target; installed, Blender unpacks its wheels, and the installed
+    batch runner judges a scene against a shipped reference in a Python that sees only the standard
+    library, those wheels and numpy (which Blender ships)."""
+    limit = _build_script().SIZE_TARGET_MB
     assert platform_zip.stat().st_size <= limit * 1e6, platform_zip.stat().st_size
     user = tmp_path / "user"
     out = run_bpy(script(install(platform_zip), """

@@ -213,7 +213,7 @@ def render(args):
     from spectral_bench.batch import exr
     from spectral_bench.batch.backends import rgb_common
     t0 = time.perf_counter()
-    bpy.ops.wm.open_mainfile(filepath=str(args.blend))
+    bpy.ops.wm.open_mainfile(filepath=str(args.blend), use_scripts=False)  # a .blend runs nothing here
     sc = bpy.context.scene
     meta = json.loads(sc.get("spectral_bench", "{}"))
     per_pass = rgb_common.split_spp(args.spp, args.passes)
