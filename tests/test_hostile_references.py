@@ -177,8 +177,8 @@ def test_a_crash_between_the_two_renames_is_seen_and_passed_over(tmp_path, golde
     monkeypatch.setattr(os, "replace", crash_on(1))
     with pytest.raises(OSError, match="simulated crash"):
         _save(scene, a, 0.75)
-    found = references.search(name, [a, b], scene=scene)
-    assert found.ref.path == a / f"{name}.exr" and float(found.ref.mean.mean()) == 0.25 and found.problems == []
+    ref = references.load(name, [a, b], scene=scene)
+    assert ref.path == a / f"{name}.exr" and float(ref.mean.mean()) == 0.25
     # a crash between the two renames
     calls.clear()
     monkeypatch.setattr(os, "replace", crash_on(2))
@@ -189,6 +189,7 @@ def test_a_crash_between_the_two_renames_is_seen_and_passed_over(tmp_path, golde
         assert os.path.dirname(src) == os.path.dirname(dst) and src not in (dst + ".tmp", dst[:-4] + ".exr.tmp",
                                                                          dst[:-5] + ".json.tmp")
     assert sorted(p.name for p in a.iterdir() if p.name != ".work") == [f"{name}.exr", f"{name}.json"]
+    assert references.load(name, [a, b], scene=scene).path == b / f"{name}.exr"  # passed over
     found = references.search(name, [a, b], scene=scene)
     assert found.ref.path == b / f"{name}.exr"
     assert found.problems == [{"file": str(a / f"{name}.exr"), "problem": found.problems[0]["problem"]}]

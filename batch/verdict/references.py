@@ -29,7 +29,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Optional
 
-import filelock
 import numpy as np
 
 from ...exporters import ir_json, mesh_io, spectra
@@ -106,6 +105,11 @@ def sha256_of(path):
     return h.hexdigest()
 
 
+def _shown(value, limit=60):
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit] + "..."
+
+
 def _positive_int(value):
     return isinstance(value, int) and not isinstance(value, bool) and value > 0
 
@@ -123,11 +127,11 @@ def read_record(meta_path):
     if not isinstance(meta.get("fingerprint"), str):
         return None, "not a reference record: no fingerprint"
     if not _positive_int(meta.get("spp")):
-        return None, f"record field spp is {meta.get('spp')!r}, not a positive integer"
+        return None, f"record field spp is {_shown(meta.get('spp'))}, not a positive integer"
     if "passes" in meta and not _positive_int(meta["passes"]):
-        return None, f"record field passes is {meta['passes']!r}, not a positive integer"
+        return None, f"record field passes is {_shown(meta['passes'])}, not a positive integer"
     if "exr_sha256" in meta and not isinstance(meta["exr_sha256"], str):
-        return None, f"record field exr_sha256 is {meta['exr_sha256']!r}, not a string"
+        return None, f"record field exr_sha256 is {_shown(meta['exr_sha256'])}, not a string"
     return meta, None
 
 
@@ -145,7 +149,7 @@ def usable_for(ref, shape=None, names=None):
         h, w = shape[:2]
         if h <= 0 or w <= 0 or H % h or W % w or H // h != W // w:
             return (f"its resolution {W}x{H} cannot judge a {w}x{h} render (the reference must be the "
-                    "render's resolution times an integer; re-render it with batch/make_references.py)")
+                    "render's resolution times an integer)")
     return None
 
 
@@ -169,7 +173,7 @@ def examine(folder, scene_name, fp=None, shape=None, names=None):
         if meta.get("exr_sha256") is not None and sha256_of(exr_path) != meta["exr_sha256"]:
             return None, problem(exr_path, (
                 f"the image is not the one its record {meta_path.name} describes (sha256 differs): the "
-                "pair was not replaced together (an interrupted save?); re-render it with batch/make_references.py"))
+                f"pair was not replaced together (an interrupted save?); {_remake(scene_name, exr_path)}"))
         names_, mean, stderr = exr.read_image_and_stderr(exr_path)
     except Exception as exc:  # noqa: BLE001 - any unreadable file is a problem of that file
         return None, problem(exr_path, f"unreadable EXR: {exc}")
@@ -178,7 +182,7 @@ def examine(folder, scene_name, fp=None, shape=None, names=None):
     if not (np.isfinite(mean).all() and np.isfinite(stderr).all() and (stderr >= 0).all()):
         return None, problem(exr_path, "non-finite values (NaN or Inf) in its mean or noise channels")
     res = meta.get("resolution")
-    if res is not None and list(res) != [mean.shape[1], mean.shape[0]]:
+    if res is not None and res != [mean.shape[1], mean.shape[0]]:
         return None, problem(exr_path, (f"its resolution {mean.shape[1]}x{mean.shape[0]} is not the "
                                         f"{res} its record {meta_path.name} gives"))
     ref = Reference(names_, mean, stderr, meta, exr_path)
@@ -186,13 +190,20 @@ def examine(folder, scene_name, fp=None, shape=None, names=None):
     if why:
         return None, problem(exr_path, why)
     if fp is not None and meta["fingerprint"] != fp:
-        return ref, problem(exr_path, _stale(ref))
+        return ref, problem(exr_path, _stale(ref, scene_name))
     return ref, None
 
 
-def _stale(ref):
+def _remake(scene_name, path):
+    """The command that renders this reference again, into the folder it is in."""
+    folder = Path(path).parent
+    out = "" if folder.resolve() == REFERENCE_DIR else f" --out {folder}"
+    return f"re-render it with batch/make_references.py -s {scene_name}{out} --replace"
+
+
+def _stale(ref, scene_name):
     return (f"stale: the scene changed since it was rendered ({ref.provenance.get('date')}); "
-            "re-render it with batch/make_references.py")
+            f"{_remake(scene_name, ref.path)}")
 
 
 @dataclass
@@ -239,7 +250,7 @@ def check_usable(ref, scene, shape=None, names=None):
     if ref is None:
         return "no reference for this scene"
     if ref.provenance.get("fingerprint") != fingerprint(scene):
-        return f"reference {ref.path.name} is {_stale(ref)}"
+        return f"reference {ref.path.name} is {_stale(ref, ref.path.stem)}"
     why = usable_for(ref, shape, names)
     return f"reference {ref.path.name}: {why}" if why else None
 
@@ -262,7 +273,8 @@ def scene_lock(directory, scene_name):
     ``directory``/.work/, which git and the extension build leave out). One lock object per file
     in this process (filelock's singletons), re-entrant and not bound to a thread, so that
     make_references can hold it for a whole scene and save() take it again from an engine's
-    callback."""
+    callback. (filelock is imported here: only writers need it, not the extension.)"""
+    import filelock
     work = Path(directory) / ".work"
     work.mkdir(parents=True, exist_ok=True)
     return filelock.FileLock(str(work / f"{scene_name}.lock"), is_singleton=True, thread_local=False)
