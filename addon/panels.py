@@ -234,7 +234,8 @@ class SPECTRAL_BENCH_PT_benchmark_references(_Base, bpy.types.Panel):
 
 class SPECTRAL_BENCH_PT_benchmark_results(_Base, bpy.types.Panel):
     """The results of an outputs folder (also one made on the command line): per scene and backend
-    the status (failures first), the reference judged against, metrics, probes and images."""
+    the status (failures first), the reference judged against and every reference problem (file and
+    problem), metrics, probes and images."""
     bl_label = "Results"
     bl_context = "scene"
     bl_parent_id = "SPECTRAL_BENCH_PT_benchmark"
@@ -251,7 +252,9 @@ class SPECTRAL_BENCH_PT_benchmark_results(_Base, bpy.types.Panel):
             box = layout.box()
             box.label(text=f"{scene} / {backend}: {run['status']}", icon=benchmark.status_icon(run["status"]))
             if run.get("reason"):
-                box.label(text=run["reason"][:160])
+                box.label(text=run["reason"][:160], icon="ERROR" if results.judged_without_reference(run) else "NONE")
+            for text in results.reference_problems(run):  # every reference passed over, with its file
+                box.label(text=f"reference problem: {text}"[:200], icon="ERROR")
             ref = run.get("reference") or {}
             if ref.get("path"):
                 box.label(text=f"reference ({reference_sources.origin_of(ref['path'], search)}): "

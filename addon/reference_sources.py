@@ -2,9 +2,12 @@
 each holds and where a result's reference came from (plain Python: no bpy).
 
 The order matters: the batch runner takes every folder (``--references DIR`` per folder) and, for
-each scene, uses the first one holding a reference whose fingerprint matches the scene.
+each scene, uses the first one holding a usable reference (batch/verdict/references.py ``search``:
+a readable record and EXR with noise channels, a resolution the render can be judged at, the
+scene's fingerprint); a broken, wrong-sized or stale one is passed over and reported, with its file,
+in the run's results (the Results sub-panel draws them). The catalog here lists what each folder
+holds (records that are no reference's are left out).
 """
-import json
 from pathlib import Path
 
 from ..batch.verdict import references
@@ -31,12 +34,9 @@ def _records(folder):
     for meta in sorted(folder.glob("*.json")):
         if not meta.with_suffix(".exr").is_file():
             continue
-        try:
-            data = json.loads(meta.read_text())
-        except ValueError:
-            continue
-        if not isinstance(data, dict) or "fingerprint" not in data:
-            continue  # not a reference's provenance
+        data, _bad = references.read_record(meta)
+        if data is None:
+            continue  # not a reference's record (or an unreadable one: a run reports it with its file)
         out.append(dict(scene=data.get("scene", meta.stem), backend=data.get("backend"), mode=data.get("mode"),
                         spp=data.get("spp"), passes=data.get("passes"), date=data.get("date"),
                         resolution=data.get("resolution"), path=str(meta.with_suffix(".exr"))))

@@ -1,7 +1,13 @@
 """Render reference images (an explicit request: this is the only thing that changes references/).
 
     .venv/bin/python batch/make_references.py [-s SCENE ...] [--spp 4096 | --factor F] [--passes 8]
-                                              [--cluster ADDRESS | local:N]
+                                              [--cluster ADDRESS | local:N] [--replace]
+
+References change only on request: a scene whose reference (its .exr or .json) is already in the
+output folder is left alone and named, with what is wrong with it if anything (stale, broken), unless
+``--replace`` asks to render it again. Two makers never write one scene's reference at once: each
+holds the scene's lock (references/.work/<scene>.lock) from planning to writing; a scene locked by
+another maker is skipped and named (exit status 1).
 
 Each reference is rendered with the Mitsuba backend at the scene's resolution with ``spp`` samples
 per pixel in all (or ``factor`` x the scene's own), in ``passes`` independent passes (distinct
@@ -9,9 +15,13 @@ seeds). Every pass is a job (batch/jobs/job.py) on the chosen engine (this machi
 cluster: passes of one scene run on several workers at once); each finished pass is kept in
 references/.work/, so a run that is stopped resumes where it was. When every pass of a scene is
 there, their mean and the standard error of that mean (the pass-to-pass spread) are written as
-the reference with its provenance, and the passes are removed.
+the reference with its provenance, and the passes are removed. The reference is saved as one step
+(batch/verdict/references.py ``save``: unique temporary files, synced, the record carrying the
+image's sha256 and renamed first, so an interrupted save is seen as a broken reference, never as a
+new image with an old record).
 """
 import argparse
+import contextlib
 import datetime as dt
 import json
 import math
@@ -20,6 +30,8 @@ import platform
 import shutil
 import sys
 from pathlib import Path
+
+import filelock
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import pkg_bootstrap  # noqa: E402
@@ -60,7 +72,6 @@ def merge(work, passes):
 def main(argv=None):
     pkg_bootstrap.package()
     from spectral_bench.batch import backends, scene_sources
-    from spectral_bench.batch.jobs import engines, job as jobs
     from spectral_bench.batch.verdict import references
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -72,10 +83,29 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=1000, help="first seed (distinct from the runner's default 0)")
     ap.add_argument("--out", default=str(references.REFERENCE_DIR))
     ap.add_argument("--cluster", metavar="ADDRESS", help="a Dask scheduler, or local:N (default: this machine)")
+    ap.add_argument("--replace", action="store_true",
+                    help="render again scenes whose reference is already in the output folder (default: leave them)")
     args = ap.parse_args(argv)
-    backend = backends.get("mitsuba")
-    print(backend.llvm_message(), flush=True)
+    print(backends.get("mitsuba").llvm_message(), flush=True)
     out = Path(args.out)
+    with contextlib.ExitStack() as held:  # the scenes' locks, released however this ends
+        return _make(args, argv, out, held)
+
+
+def existing_state(out, name, scene):
+    """What the output folder holds for ``name``: current, stale or broken (naming the file)."""
+    from spectral_bench.batch.verdict import references
+    found = references.search(name, out, scene=scene)
+    if found.ref is not None:
+        return f"its reference {found.ref.path} exists and is current"
+    return "its reference exists but is not usable: " + "; ".join(f"{p['file']}: {p['problem']}" for p in found.problems)
+
+
+def _make(args, argv, out, held):
+    from spectral_bench.batch import backends, scene_sources
+    from spectral_bench.batch.jobs import engines, job as jobs
+    from spectral_bench.batch.verdict import references
+    backend = backends.get("mitsuba")
     plans, failed = [], 0
     for name, scene in scene_sources.load(args.input):
         if args.scene and name not in args.scene:
@@ -87,6 +117,20 @@ def main(argv=None):
         mode, why = backend.mode_for(scene)
         if mode is None:
             print(f"{name}: unsupported: {why}", flush=True)
+            continue
+        lock = references.scene_lock(out, name)
+        try:
+            lock.acquire(timeout=0)
+        except filelock.Timeout:
+            print(f"{name}: another make_references is writing this reference (lock {lock.lock_file}); skipped",
+                  flush=True)
+            failed += 1
+            continue
+        held.callback(lock.release)
+        # checked under the lock: a reference another maker has just written counts as existing
+        if not args.replace and any(p.exists() for p in (out / f"{name}.exr", out / f"{name}.json")):
+            print(f"{name}: {existing_state(out, name, scene)}; left as it is (--replace renders it again)",
+                  flush=True)
             continue
         spp = scene["render"]["spp"] * args.factor if args.factor else args.spp
         work = out / ".work" / name

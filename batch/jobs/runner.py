@@ -116,6 +116,8 @@ class Run:
         self.save()
         log.info("%-8s %s / %s %s%s", entry["status"].upper(), entry["scene"], entry["backend"], entry.get("mode") or "",
                  f": {entry['reason']}" if entry.get("reason") else "")
+        for p in entry.get("reference_problems") or []:  # every reference problem, with its file
+            log.warning("reference problem (%s / %s): %s: %s", entry["scene"], entry["backend"], p["file"], p["problem"])
 
     # -- export only ------------------------------------------------------------------------
     def export_only(self, scenes):

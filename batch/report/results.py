@@ -43,3 +43,16 @@ def chart_path(out_dir, scene):
     """The error-against-time chart of a sweep over ``scene``, or None."""
     path = Path(out_dir) / "sweeps" / f"{scene}.png"
     return path if path.is_file() else None
+
+
+def reference_problems(run):
+    """["<file>: <problem>"] for a run entry's reference problems (metrics.json's
+    ``reference_problems``: every candidate reference passed over, with its file)."""
+    return [f"{p.get('file')}: {p.get('problem')}" for p in run.get("reference_problems") or []
+            if isinstance(p, dict)]
+
+
+def judged_without_reference(run):
+    """True for a render judged (by its probes) although no usable reference was found: never a
+    plain ok (its reason says why the reference could not be used)."""
+    return bool(run.get("reference_problem")) and run.get("status") not in ("unjudged", "skipped", "unsupported")

@@ -2,6 +2,7 @@
 from pathlib import Path
 
 from ..verdict.status import ORDER
+from .results import judged_without_reference
 
 
 def _num(x, fmt="{:.4g}"):
@@ -18,11 +19,41 @@ def table(runs):
                 else f"p_min {t['p_min']:.2g} / {t['threshold']:.2g}" if t.get("p_min") is not None
                 else "failed (see reason)")
         res = "x".join(map(str, r["resolution"])) if r.get("resolution") else ""
-        reason = (r.get("reason") or "").replace("|", "/").replace("\n", " ")
-        rows.append(f"| {r['status']} | {r['scene']} | {r['backend']} | {r.get('mode') or ''} | {_num(r.get('spp'), '{}')} "
+        reason = _cell(r.get("reason") or "")
+        shown = f"{r['status']} (without reference)" if judged_without_reference(r) else r["status"]
+        rows.append(f"| {shown} | {r['scene']} | {r['backend']} | {r.get('mode') or ''} | {_num(r.get('spp'), '{}')} "
                     f"| {res} | {_num(r.get('time_s'), '{:.2f}')} | {_num(m.get('rmse'))} | {_num(m.get('relmse'))} "
                     f"| {_num(m.get('mape'))} | {_num(m.get('flip'))} | {test} | {reason[:300]} |")
     return "\n".join(rows)
+
+
+def _cell(text):
+    return str(text).replace("|", "/").replace("\r", " ").replace("\n", " ")
+
+
+def reference_problems_table(runs):
+    """Every reference passed over or unusable: the file, what is wrong with it and the jobs it
+    concerned (one row per file and problem)."""
+    rows, order = {}, []
+    for r in runs:
+        for p in r.get("reference_problems") or []:
+            key = (str(p.get("file")), str(p.get("problem")))
+            if key not in rows:
+                rows[key] = []
+                order.append(key)
+            rows[key].append(f"{r['scene']} / {r['backend']}" + (f" {r['mode']}" if r.get("mode") else ""))
+    without = [r for r in runs if judged_without_reference(r)]
+    if not order and not without:
+        return ""
+    out = ["", "## Reference problems", ""]
+    if order:
+        out += ["A reference listed here was passed over for the next folder (or, with none left, the render "
+                "was judged without one).", "", "| file | problem | jobs |", "|---|---|---|"]
+        out += [f"| {_cell(f)} | {_cell(p)} | {_cell(', '.join(rows[(f, p)]))} |" for f, p in order]
+    if without:
+        out += ["", "Judged without a reference (no usable one): "
+                + ", ".join(f"{r['scene']} / {r['backend']} ({r['status']})" for r in without) + "."]
+    return "\n".join(out) + "\n"
 
 
 def counts(runs):
@@ -102,11 +133,14 @@ def rgb_comparison(runs):
 def write(out_dir, runs, elapsed_s, sweeps=None, stability=None):
     c = counts(runs)
     head = ", ".join(f"{n} {s}" for s, n in sorted(c.items(), key=lambda kv: ORDER.get(kv[0], 9)))
+    without = sum(1 for r in runs if judged_without_reference(r))
+    if without:
+        head += f" ({without} judged without a usable reference: see Reference problems)"
     text = (f"# Spectral benchmark results\n\n{len(runs)} jobs in {elapsed_s:.1f} s: {head or 'nothing ran'}.\n\n"
             "A render is ok when every check passes: its agreement with the reference within noise (its own and "
             "the reference's; block test, Sidak-corrected) and the analytic probes (ground truth from no renderer). "
             "known: fails exactly as a recorded deviation (known_deviations.toml); unjudged: nothing could judge it. "
             "Images and diffs: `<scene>/results/<backend>/`; all numbers: `metrics.json`.\n\n"
-            + table(runs) + "\n" + rgb_comparison(runs) + sweeps_table(sweeps) + stability_table(stability))
+            + table(runs) + "\n" + reference_problems_table(runs) + rgb_comparison(runs) + sweeps_table(sweeps) + stability_table(stability))
     Path(out_dir, "summary.md").write_text(text)
     return text

@@ -10,13 +10,31 @@ from ..report import previews
 from . import compare, flip_isolated, known, probes, references, status
 
 
-def load_reference(name, scene, directories):
-    """(reference or None, why it cannot judge or None); a broken reference file is a reason."""
+def find_reference(name, scene, directories, shape=None, names=None):
+    """(usable reference or None, why there is none or None, the problems of every candidate
+    passed over: [{"file", "problem"}]). Every folder's candidate is checked for a render of
+    ``shape`` with channels ``names`` (batch/verdict/references.py ``search``); a broken one is
+    a problem of its file and never stops the batch."""
     try:
-        ref = references.load(name, directories, scene=scene)
+        found = references.search(name, directories, scene=scene, shape=shape, names=names)
     except Exception as exc:  # noqa: BLE001 - a bad reference must not stop the batch
-        return None, f"reference unreadable: {exc}"
-    return ref, references.check_usable(ref, scene)
+        return None, f"no usable reference: the search failed: {exc}", []
+    if found.ref is not None:
+        return found.ref, None, found.problems
+    if found.problems:
+        shown = "; ".join(f"{p['file']}: {p['problem']}" for p in found.problems)
+        return None, f"no usable reference ({shown})", found.problems
+    folders = ", ".join(str(d) for d in references.directories(directories))
+    return None, f"no reference for this scene (searched {folders})", []
+
+
+def load_reference(name, scene, directories, shape=None, names=None):
+    """(usable reference or None, why there is none or None): find_reference without the list."""
+    ref, unusable, _problems = find_reference(name, scene, directories, shape, names)
+    return ref, unusable
+
+
+PROBES_ALONE = "judged by probes alone"
 
 
 def render_verdict(entry, scene, rendered, image, res_dir, settings, deviations):
@@ -30,7 +48,9 @@ def render_verdict(entry, scene, rendered, image, res_dir, settings, deviations)
         # negative linear sRGB can be a legitimate out-of-gamut colour; negative S0 never is
         entry["flags"] = [f"{entry['sanity']['negative']} negative values"]
     previews.save_linear(res_dir / "render.png", test_all[..., :3])
-    ref, unusable = load_reference(entry["scene"], scene, settings.get("references"))
+    ref, unusable, problems = find_reference(entry["scene"], scene, settings.get("references"),
+                                             shape=test_all.shape, names=names)
+    entry["reference_problems"] = problems
     ztest = None
     if unusable:
         entry["reference_problem"] = unusable
@@ -42,6 +62,9 @@ def render_verdict(entry, scene, rendered, image, res_dir, settings, deviations)
     if unusable and not any(p["pass"] is not None for p in entry["probes"]):
         entry["unjudged_because"] = unusable + ("" if entry["probes"] else "; no analytic probe applies")
     status.decide(entry, deviations, ztest)
+    if unusable and entry["status"] != "unjudged" and not entry["reason"].startswith(PROBES_ALONE):
+        # judged, but without the reference: the reason says so whatever the status
+        entry["reason"] = f"{PROBES_ALONE}: {unusable}" + (f"; {entry['reason']}" if entry["reason"] else "")
     return entry
 
 
@@ -112,12 +135,15 @@ def sweep_point(job, record):
     """One rung of a sweep: time, error against the reference and the noise test on the rung's
     own noise (two passes)."""
     scene = job["source_scene"]
-    ref, unusable = load_reference(job["scene_name"], scene, job["verdict"].get("references"))
+    names, img, stderr = exr.read_image_and_stderr(record["image_path"])
+    ref, unusable, problems = find_reference(job["scene_name"], scene, job["verdict"].get("references"),
+                                             shape=img.shape, names=names)
     point = {"spp": record["spp"], "time_s": record["time_s"], "wall_s": record["wall_s"]}
+    if problems:
+        point["reference_problems"] = problems
     if unusable:
         point["reason"] = unusable
         return point
-    names, img, stderr = exr.read_image_and_stderr(record["image_path"])
     at = compare.reference_at(ref.mean, ref.stderr, ref.spp, img.shape, ref.provenance.get("passes", 8))
     point.update(compare.metrics(img[..., :3], at.mean[..., :3]))
     point["predicted_rmse"] = float(np.sqrt(np.mean(at.sigma2[..., :3]) / record["spp"] + np.mean(at.var_of_mean[..., :3])))

@@ -9,12 +9,25 @@ spectrum and named conductor replaced by its table and every mesh file by a hash
 stale references are never used for a verdict. The renderer and its version are provenance, not
 fingerprint: a reference exists to judge other versions (and renderers) against; every job shows
 the versions of both. References change only through ``batch/make_references.py`` (an explicit
-request), and are written atomically (temporary files renamed into place, the JSON last).
+request; it replaces an existing reference only with ``--replace``).
+
+Every candidate is checked before it is used (``search``): a readable record, a readable EXR
+with its noise channels, channels and a resolution the render can be judged with, the scene's
+fingerprint and, for records written by ``save`` since it records one, the image's sha256. A
+broken, wrong-sized or stale candidate is passed over for the next folder and reported with its
+file. ``save`` writes unique temporary files, syncs them and renames them into place under the
+scene's lock, the record (with the image's hash) first: a reader between the two renames, or
+after a crash between them, sees a record that does not match its image and passes it over.
+Records written before the hash was recorded (no exr_sha256) are accepted as they are.
 """
 import copy
 import hashlib
 import json
+import os
+import tempfile
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Optional
 
 import numpy as np
 
@@ -79,38 +92,167 @@ def directories(directory=None):
     return [Path(d) for d in directory] or [REFERENCE_DIR]
 
 
-def load(scene_name, directory=None, scene=None):
-    """Reference or None if there is none. With several folders, the first holding a reference
-    usable for ``scene`` wins; if none is usable (or ``scene`` is None) the first found, so that
-    a stale reference is still reported as stale."""
-    first = None
-    for folder in directories(directory):
-        exr_path, meta_path = folder / f"{scene_name}.exr", folder / f"{scene_name}.json"
-        if not exr_path.is_file() or not meta_path.is_file():
-            continue
-        meta = json.loads(meta_path.read_text())
-        if scene is not None and meta.get("fingerprint") != fingerprint(scene):
-            first = first or (exr_path, meta)
-            continue
-        return _read(exr_path, meta)
-    return _read(*first) if first else None
+def problem(path, text):
+    """One reference problem as every report shows it: the file and what is wrong with it."""
+    return {"file": str(path), "problem": text}
 
 
-def _read(exr_path, meta):
-    names, mean, stderr = exr.read_image_and_stderr(exr_path)
+def sha256_of(path):
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _shown(value, limit=60):
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit] + "..."
+
+
+def _positive_int(value):
+    return isinstance(value, int) and not isinstance(value, bool) and value > 0
+
+
+def read_record(meta_path):
+    """(record, None) or (None, what is wrong) for a reference's JSON record."""
+    try:
+        meta = json.loads(Path(meta_path).read_bytes().decode("utf-8"))
+    except (OSError, ValueError) as exc:  # UnicodeDecodeError and JSONDecodeError are ValueErrors
+        return None, f"unreadable record: {exc}"
+    except RecursionError:
+        return None, "unreadable record: nested too deeply"
+    if not isinstance(meta, dict):
+        return None, f"not a reference record: a JSON {type(meta).__name__}, not an object"
+    if not isinstance(meta.get("fingerprint"), str):
+        return None, "not a reference record: no fingerprint"
+    if not _positive_int(meta.get("spp")):
+        return None, f"record field spp is {_shown(meta.get('spp'))}, not a positive integer"
+    if "passes" in meta and not _positive_int(meta["passes"]):
+        return None, f"record field passes is {_shown(meta['passes'])}, not a positive integer"
+    if "exr_sha256" in meta and not isinstance(meta["exr_sha256"], str):
+        return None, f"record field exr_sha256 is {_shown(meta['exr_sha256'])}, not a string"
+    return meta, None
+
+
+def usable_for(ref, shape=None, names=None):
+    """None if the reference's image can judge a render of ``shape`` (H, W, ...) with channels
+    ``names`` (either may be None: not checked), else why not. What batch/verdict/compare.py
+    ``reference_at`` and the noise test can use: colour channels R, G, B shared with the render,
+    and a resolution that is the render's times an integer (the same factor on both axes)."""
+    shared = [n for n in ref.names if names is None or n in names]
+    if shared[:3] != ["R", "G", "B"]:
+        return (f"its channels {ref.names} lack the colour channels R, G, B"
+                + ("" if names is None else f" of the render ({names})"))
+    H, W = ref.mean.shape[:2]
+    if shape is not None:
+        h, w = shape[:2]
+        if h <= 0 or w <= 0 or H % h or W % w or H // h != W // w:
+            return (f"its resolution {W}x{H} cannot judge a {w}x{h} render (the reference must be the "
+                    "render's resolution times an integer)")
+    return None
+
+
+def examine(folder, scene_name, fp=None, shape=None, names=None):
+    """The candidate in one folder: (Reference or None, problem or None). (None, None): no
+    candidate there. A problem names the file; a candidate whose only problem is that it is stale
+    comes back with its problem (so that the caller can still show what is stale)."""
+    folder = Path(folder)
+    exr_path, meta_path = folder / f"{scene_name}.exr", folder / f"{scene_name}.json"
+    has_exr, has_meta = exr_path.exists(), meta_path.exists()
+    if not has_exr and not has_meta:
+        return None, None
+    if not has_meta:
+        return None, problem(exr_path, f"no record {meta_path.name} beside it: not a complete reference")
+    if not has_exr:
+        return None, problem(meta_path, f"no image {exr_path.name} beside it: not a complete reference")
+    meta, bad = read_record(meta_path)
+    if bad:
+        return None, problem(meta_path, bad)
+    try:
+        if meta.get("exr_sha256") is not None and sha256_of(exr_path) != meta["exr_sha256"]:
+            return None, problem(exr_path, (
+                f"the image is not the one its record {meta_path.name} describes (sha256 differs): the "
+                f"pair was not replaced together (an interrupted save?); {_remake(scene_name, exr_path)}"))
+        names_, mean, stderr = exr.read_image_and_stderr(exr_path)
+    except Exception as exc:  # noqa: BLE001 - any unreadable file is a problem of that file
+        return None, problem(exr_path, f"unreadable EXR: {exc}")
     if stderr is None:
-        raise ValueError(f"{exr_path} has no stderr.<channel> noise channels: not a reference")
-    return Reference(names, mean, stderr, meta, exr_path)
+        return None, problem(exr_path, "no stderr.<channel> noise channels: not a reference")
+    if not (np.isfinite(mean).all() and np.isfinite(stderr).all() and (stderr >= 0).all()):
+        return None, problem(exr_path, "non-finite values (NaN or Inf) in its mean or noise channels")
+    res = meta.get("resolution")
+    if res is not None and res != [mean.shape[1], mean.shape[0]]:
+        return None, problem(exr_path, (f"its resolution {mean.shape[1]}x{mean.shape[0]} is not the "
+                                        f"{res} its record {meta_path.name} gives"))
+    ref = Reference(names_, mean, stderr, meta, exr_path)
+    why = usable_for(ref, shape, names)
+    if why:
+        return None, problem(exr_path, why)
+    if fp is not None and meta["fingerprint"] != fp:
+        return ref, problem(exr_path, _stale(ref, scene_name))
+    return ref, None
 
 
-def check_usable(ref, scene):
-    """None if ``ref`` can judge renders of ``scene``, else the reason it cannot."""
+def _remake(scene_name, path):
+    """The command that renders this reference again, into the folder it is in."""
+    folder = Path(path).parent
+    out = "" if folder.resolve() == REFERENCE_DIR else f" --out {folder}"
+    return f"re-render it with batch/make_references.py -s {scene_name}{out} --replace"
+
+
+def _stale(ref, scene_name):
+    return (f"stale: the scene changed since it was rendered ({ref.provenance.get('date')}); "
+            f"{_remake(scene_name, ref.path)}")
+
+
+@dataclass
+class Search:
+    """The outcome of a search: the first usable reference (or None), the problems of every
+    candidate passed over (file and problem, in search order), and the first candidate whose
+    only fault is being stale (for callers that want to show it)."""
+    ref: Optional[Reference] = None
+    problems: list = field(default_factory=list)
+    stale: Optional[Reference] = None
+
+
+def search(scene_name, directory=None, scene=None, shape=None, names=None):
+    """Every folder's candidate in order, checked: a readable record, a readable EXR with its
+    noise channels (and, where the record gives one, the sha256 it records), channels and a
+    resolution usable for a render of ``shape`` with ``names``, and the fingerprint of ``scene``.
+    The first sound one wins; a broken, wrong-sized or stale one is passed over and recorded."""
+    fp = fingerprint(scene) if scene is not None else None
+    out = Search()
+    for folder in directories(directory):
+        ref, bad = examine(folder, scene_name, fp, shape, names)
+        if bad:
+            out.problems.append(bad)
+            if ref is not None and out.stale is None:
+                out.stale = ref
+            continue
+        if ref is not None:
+            out.ref = ref
+            break
+    return out
+
+
+def load(scene_name, directory=None, scene=None, shape=None, names=None):
+    """Reference or None. With several folders, the first usable candidate wins (see search);
+    when none is usable, the first that is only stale (so that check_usable can say it is
+    stale), else None. search() also gives the problems of the candidates passed over."""
+    found = search(scene_name, directory, scene, shape, names)
+    return found.ref or found.stale
+
+
+def check_usable(ref, scene, shape=None, names=None):
+    """None if ``ref`` can judge renders of ``scene`` (of ``shape`` with ``names``, when given),
+    else the reason it cannot."""
     if ref is None:
         return "no reference for this scene"
     if ref.provenance.get("fingerprint") != fingerprint(scene):
-        return (f"reference {ref.path.name} is stale: the scene changed since it was rendered "
-                f"({ref.provenance.get('date')}); re-render it with batch/make_references.py")
-    return None
+        return f"reference {ref.path.name} is {_stale(ref, ref.path.stem)}"
+    why = usable_for(ref, shape, names)
+    return f"reference {ref.path.name}: {why}" if why else None
 
 
 HALF_MAX = 65504.0
@@ -126,15 +268,73 @@ def _noise_channel(stderr):
     return stderr.astype(np.float32)
 
 
+def scene_lock(directory, scene_name):
+    """The lock every writer of ``scene_name``'s reference in ``directory`` holds (a file in
+    ``directory``/.work/, which git and the extension build leave out). One lock object per file
+    in this process (filelock's singletons), re-entrant and not bound to a thread, so that
+    make_references can hold it for a whole scene and save() take it again from an engine's
+    callback. (filelock is imported here: only writers need it, not the extension.)"""
+    import filelock
+    work = Path(directory) / ".work"
+    work.mkdir(parents=True, exist_ok=True)
+    return filelock.FileLock(str(work / f"{scene_name}.lock"), is_singleton=True, thread_local=False)
+
+
+def _fsync_dir(directory):
+    fd = os.open(directory, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def _temp(directory, scene_name, suffix):
+    """A new, uniquely named temporary file in ``directory`` (hidden; never *.exr or *.json)."""
+    fd, path = tempfile.mkstemp(dir=directory, prefix=f".{scene_name}.", suffix=suffix)
+    os.close(fd)
+    return Path(path)
+
+
+def _write_synced(path, data):
+    with open(path, "wb") as f:
+        f.write(data)
+        f.flush()
+        os.fsync(f.fileno())
+
+
+def _replace_pair(meta_tmp, meta_path, exr_tmp, exr_path):
+    """Put a written record and image in place: the record first, then the image, the folder
+    synced after each. The record carries the image's sha256, so until the second rename the pair
+    on disk (new record, old image) does not match and search() passes it over and reports it;
+    a crash between the two can never pair an image with a record that was not written for it."""
+    os.replace(meta_tmp, meta_path)
+    _fsync_dir(meta_path.parent)
+    os.replace(exr_tmp, exr_path)
+    _fsync_dir(exr_path.parent)
+
+
 def save(scene, names, mean, stderr, provenance, directory=None):
+    """Write ``scene``'s reference into ``directory`` (default references/), replacing what is
+    there as one step a reader sees whole or sees as broken: unique temporary files in the same
+    folder, each synced to disk, the record carrying the image's sha256 (exr_sha256), renamed
+    into place record first (_replace_pair), under the scene's lock (two writers of the same
+    scene take turns)."""
     directory = Path(directory or REFERENCE_DIR)
     directory.mkdir(parents=True, exist_ok=True)
+    name = scene["name"]
     extra = {f"stderr.{n}": _noise_channel(stderr[..., i]) for i, n in enumerate(names)}
-    exr_path, meta_path = directory / f"{scene['name']}.exr", directory / f"{scene['name']}.json"
-    exr_tmp, meta_tmp = exr_path.with_suffix(".exr.tmp"), meta_path.with_suffix(".json.tmp")
-    exr.write_image(exr_tmp, names, mean, extra)
-    meta = dict(provenance, scene=scene["name"], fingerprint=fingerprint(scene))
-    meta_tmp.write_text(json.dumps(meta, indent=1, sort_keys=True) + "\n")
-    exr_tmp.replace(exr_path)
-    meta_tmp.replace(meta_path)
+    exr_path, meta_path = directory / f"{name}.exr", directory / f"{name}.json"
+    fp = fingerprint(scene)
+    with scene_lock(directory, name):
+        exr_tmp, meta_tmp = _temp(directory, name, ".exr.tmp"), _temp(directory, name, ".json.tmp")
+        try:
+            exr.write_image(exr_tmp, names, mean, extra)
+            with open(exr_tmp, "rb+") as f:
+                os.fsync(f.fileno())
+            meta = dict(provenance, scene=name, fingerprint=fp, exr_sha256=sha256_of(exr_tmp))
+            _write_synced(meta_tmp, (json.dumps(meta, indent=1, sort_keys=True) + "\n").encode())
+            _replace_pair(meta_tmp, meta_path, exr_tmp, exr_path)
+        finally:
+            for tmp in (exr_tmp, meta_tmp):
+                tmp.unlink(missing_ok=True)
     return exr_path
