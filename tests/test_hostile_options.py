@@ -24,10 +24,10 @@ BAD_OPTIONS = [
     (["--scale", "0"], "--scale"), (["--scale", "inf"], "--scale"), (["--timeout", "0"], "--timeout"),
     (["--timeout", "nan"], "--timeout"), (["--cluster", "local:abc"], "--cluster"), (["--cluster", "local:0"], "--cluster"),
     (["--cluster", "tcp://host:99999"], "--cluster"), (["--cluster", "not an address"], "--cluster"),
-    (["--ladder", "4,0,16"], "--ladder"), (["--ladder", "4,,16"], "--ladder"), (["--ladder", "-4"], "--ladder"),
+    (["--ladder", "4,0,16"], "--ladder"), (["--ladder", "-4"], "--ladder"), (["--min-samples", "-3"], "--min-samples"),
     (["--block", "0"], "--block"), (["--seed", "-1"], "--seed"), (["-e", "=/opt/mitsuba"], "--exec"),
     (["-e", "nosuch=/opt/x"], "--exec"), (["-e", "mitsuba="], "--exec"), (["-r", "nosuch"], "--renderer"),
-    (["--sweep-modes", "a,,b"], "--sweep-modes"), (["--cluster-timeout", "0"], "--cluster-timeout"),
+    (["--sweep-modes", "a,,b"], "--sweep-modes"), (["--timeout", "inf"], "--timeout"),
 ]
 
 
