@@ -397,6 +397,8 @@ def parse(args):
     if "*" in execs and len(expand(opts["renderer"])) != 1:
         raise UsageError(f"-e {execs['*']}: a PATH without BACKEND= needs exactly one backend (-r NAME); "
                          f"write BACKEND=PATH (backends: {', '.join(BACKENDS)})")
+    if opts["resume"] and opts["out"] and Path(opts["out"]).resolve() != Path(opts["resume"]).resolve():
+        raise UsageError(f"--resume {opts['resume']} writes to that folder: -o {opts['out']} cannot go with it")
     if opts["dashboard"] and not (opts["cluster"] or "").startswith("local:"):
         raise UsageError("--dashboard serves the dashboard of a --cluster local:N only")
     opts["exec"] = execs

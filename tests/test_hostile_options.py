@@ -244,3 +244,45 @@ def test_dashboard_only_with_a_local_cluster():
     with pytest.raises(cli.UsageError, match="--dashboard"):
         cli.parse(["--dashboard", "127.0.0.1:8787"])
     assert cli.parse(["--cluster", "local:2", "--dashboard", "127.0.0.1:0"])["dashboard"] == "127.0.0.1:0"
+
+
+def _certificates(folder):
+    """A CA and one certificate signed by it (scheduler, worker and client share it here)."""
+    def openssl(*args):
+        subprocess.run(["openssl", *args], cwd=folder, check=True, capture_output=True)
+    openssl("req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", "ca.key", "-out", "ca.pem", "-days", "1",
+            "-subj", "/CN=spectral-bench-test-ca")
+    openssl("req", "-newkey", "rsa:2048", "-nodes", "-keyout", "node.key", "-out", "node.csr", "-subj", "/CN=127.0.0.1")
+    openssl("x509", "-req", "-in", "node.csr", "-CA", "ca.pem", "-CAkey", "ca.key", "-CAcreateserial", "-out", "node.pem",
+            "-days", "1")
+    return folder / "ca.pem", folder / "node.pem", folder / "node.key"
+
+
+@pytest.mark.slow
+def test_a_tls_scheduler_is_used_through_dasks_own_settings(tmp_path):
+    """The README's TLS recipe: a scheduler that requires TLS, workers with the preload, and
+    batch/run.py pointed at tls://... with Dask's settings in environment variables: the job runs,
+    and without them the run is refused (exit 2), not left waiting."""
+    from distributed import LocalCluster
+    from distributed.security import Security
+    from spectral_bench.batch.jobs import engines
+    ca, cert, key = _certificates(tmp_path)
+    security = Security(tls_ca_file=str(ca), tls_scheduler_cert=str(cert), tls_scheduler_key=str(key),
+                        tls_worker_cert=str(cert), tls_worker_key=str(key), tls_client_cert=str(cert),
+                        tls_client_key=str(key), require_encryption=True)
+    env = {"DASK_DISTRIBUTED__COMM__REQUIRE_ENCRYPTION": "True", "DASK_DISTRIBUTED__COMM__TLS__CA_FILE": str(ca),
+           "DASK_DISTRIBUTED__COMM__TLS__CLIENT__CERT": str(cert), "DASK_DISTRIBUTED__COMM__TLS__CLIENT__KEY": str(key)}
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, protocol="tls://", host="127.0.0.1",
+                      security=security, dashboard_address=None, preload=[engines.PRELOAD]) as cluster:
+        address = cluster.scheduler_address
+        assert address.startswith("tls://127.0.0.1:")
+        without = run_batch("-i", GOOD, "-r", "mitsuba", *TINY, "--cluster", address, "--cluster-timeout", "5",
+                            "-o", tmp_path / "plain", timeout=120)
+        out = tmp_path / "o"
+        proc = subprocess.run([sys.executable, str(ROOT / "batch" / "run.py"), "-i", str(GOOD), "-r", "mitsuba",
+                               *map(str, TINY), "--cluster", address, "-o", str(out)],
+                              capture_output=True, text=True, timeout=600, cwd=ROOT, env=dict(os.environ, **env))
+    assert without.returncode == 2 and "cannot reach the Dask scheduler" in without.stderr, without.stderr[-2000:]
+    assert proc.returncode in (0, 3), proc.stderr[-3000:]
+    assert "runs whatever code" not in proc.stderr
+    assert [r["status"] for r in metrics(out)["runs"]] in (["ok"], ["unjudged"])

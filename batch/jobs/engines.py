@@ -155,9 +155,9 @@ class DaskEngine:
                             "(README, \"Running on a cluster\")", address)
             try:
                 self.client = Client(address, timeout=timeout)
-            except (OSError, TimeoutError) as exc:
+            except Exception as exc:  # noqa: BLE001 - unreachable, refused, TLS not configured: named, exit 2
                 raise ClusterError(f"--cluster {address}: cannot reach the Dask scheduler within {timeout:g} s "
-                                   f"(--cluster-timeout): {exc}") from None
+                                   f"(--cluster-timeout): {type(exc).__name__}: {exc}") from None
         try:
             self.client.wait_for_workers(1, timeout=timeout)
         except (OSError, TimeoutError):
