@@ -259,7 +259,12 @@ class Run:
                               for s in stability.STRIPS if isinstance(s.base, str) and s.base not in golden]
             for backend in made.values():
                 if backend.availability()[0]:
-                    stab_jobs, rows = stability.jobs(backend, golden, self.out, "stability", timeout=self.opts["timeout"])
+                    try:
+                        stab_jobs, rows = stability.jobs(backend, golden, self.out, "stability", timeout=self.opts["timeout"])
+                    except Exception as exc:  # noqa: BLE001 - a base scene the strips cannot use fails the study, not the batch
+                        log.exception("the stability case cannot be planned on %s", backend.name)
+                        stab_jobs, rows = [], [{"sweep": "stability", "backend": backend.name, "mode": None, "problems": [],
+                                                "status": "failed", "reason": f"cannot be planned: {type(exc).__name__}: {exc}"}]
                     job_list += stab_jobs
                     self.stability += rows
         for entry in immediate:
