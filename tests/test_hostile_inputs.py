@@ -159,3 +159,15 @@ def test_a_scene_named_like_the_runs_own_files_cannot_take_them_over(golden, tmp
     assert runs["evil"]["status"] == "failed" and "name" in runs["evil"]["reason"]
     assert runs[GOOD]["status"] in ("ok", "unjudged")
     assert proc.returncode == 1
+
+
+def test_a_blend_file_that_is_no_blend_fails_alone(tmp_path):
+    bad = tmp_path / "broken.blend"
+    bad.write_bytes(b"BLENDER-v500 this is not a blend file")
+    out = tmp_path / "o"
+    proc = run_batch("-i", bad, GOLDEN / f"{GOOD}.json", "--export-only", "--format", "json", "-o", out)
+    assert "Traceback" not in proc.stderr, proc.stderr[-3000:]
+    assert proc.returncode == 1, proc.stderr[-2000:]
+    runs = {r["scene"]: r for r in metrics(out)["runs"]}
+    assert runs[GOOD]["status"] == "ok"
+    assert runs["broken"]["status"] == "failed" and str(bad) in runs["broken"]["reason"], runs["broken"]
