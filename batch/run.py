@@ -34,28 +34,30 @@ def setup_logging(log_file=None):
 def main(argv=None):
     pkg_bootstrap.package()
     from spectral_bench.batch import cli
-    from spectral_bench.batch.jobs import runner
+    from spectral_bench.batch.jobs import engines, runner
     try:
         opts = cli.parse(cli.split_argv(sys.argv if argv is None else argv))
-    except cli.SettingsError as exc:
+    except cli.UsageError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    logger = setup_logging(opts["log"])
+    try:
+        logger = setup_logging(opts["log"])
+    except OSError as exc:
+        print(f"error: --log {opts['log']}: {exc.strerror or exc}", file=sys.stderr)
+        return 2
     if opts["list"]:
         jobs, _ = runner.plan(opts)
         for scene, case, backend in jobs:
             print(f"{scene}\t{case}\t{backend}")
         return 0
     try:
-        code = runner.run(opts)
-    except runner.OutputExists as exc:
+        code = runner.run(opts)  # sets opts["out"] to the folder it used
+    except (runner.UsageError, engines.ClusterError, cli.UsageError) as exc:
         logger.error("error: %s", exc)
         return 2
-    if opts["visualize"]:
+    if opts["visualize"] and opts["out"]:
         import webbrowser
-        out = max(Path(".").glob("outputs-*"), default=None) if not opts["out"] else Path(opts["out"])
-        if out:
-            webbrowser.open((out / "report.html").resolve().as_uri())
+        webbrowser.open((Path(opts["out"]) / "report.html").resolve().as_uri())
     return code
 
 

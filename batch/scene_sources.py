@@ -1,9 +1,19 @@
-"""Where the scenes come from: scenes.blend (through bpy) or scene IR JSON files."""
+"""Where the scenes come from: scenes.blend (through bpy) or scene IR JSON files.
+
+One bad input fails alone: whatever goes wrong with one file (unreadable, not UTF-8, not JSON,
+nested too deeply, not a scene, a name that cannot be an output folder) becomes that input's
+SceneError, naming the file and the field, and the other inputs load.
+"""
 from pathlib import Path
 
 from ..exporters import ir_json, validate
 
 DEFAULT_BLEND = Path(__file__).resolve().parents[1] / "scenes.blend"
+# what a run writes at the top of its output folder (batch/jobs/runner.py, batch/report/):
+# no scene may take one of these names as its folder
+RESERVED = frozenset({"metrics.json", "metrics.json.tmp", "summary.md", "report.html", "sweeps", "stability",
+                      ".lock"})
+MAX_NAME = 128
 
 
 def default_input():
@@ -17,38 +27,71 @@ def default_input():
     return [str(DEFAULT_BLEND)]
 
 
+def name_problem(name):
+    """Why ``name`` cannot be a scene's output folder (OUT/<name>/...), or None. A second line of
+    defence behind the schema's name pattern (exporters/validate.py)."""
+    if not isinstance(name, str):
+        return f"must be a string, got {type(name).__name__}"
+    if not name or len(name) > MAX_NAME:
+        return f"must be 1 to {MAX_NAME} characters long"
+    if any(c in name for c in "/\\") or any(ord(c) < 32 or ord(c) == 127 for c in name):
+        return "must not contain a path separator or a control character"
+    if name.startswith(".") or name.casefold() in RESERVED:
+        return (f"{name!r} is reserved for the run's own files ({', '.join(sorted(RESERVED))}, names "
+                "starting with '.')")
+    return None
+
+
+def _label(name, path, k):
+    """A safe label for an input that failed: its scene name or file stem when either is safe as
+    a name, else input-K (never a raw name that could be a path)."""
+    for candidate in (name, Path(str(path)).stem):
+        if name_problem(candidate) is None:
+            return candidate
+    return f"input-{k}"
+
+
 def load(paths):
     """[(scene name, IR dict or SceneError)] from .blend and .json paths, in order. A scene name
     met twice is an error for the later one (outputs are written per scene name)."""
-    results = _load(paths)
     seen, out = {}, []
-    for (name, result), origin in results:
-        if name in seen and not isinstance(result, Exception):
-            result = validate.SceneError(name, [("scene", "name", f"a scene of this name already comes from {seen[name]}; "
-                                                 f"rename one (outputs are written per scene name), input {origin}")])
-        seen.setdefault(name, origin)
+    for k, ((name, result), origin) in enumerate(_load(paths), 1):
+        if not isinstance(result, Exception):
+            problem = name_problem(name)
+            if problem:
+                label = _label(None, origin, k)
+                result = validate.SceneError(label, [("scene", "name", f"{problem} (input {origin})")])
+                name = label
+            elif name in seen:
+                result = validate.SceneError(name, [("scene", "name", f"a scene of this name already comes from {seen[name]}; "
+                                                     f"rename one (outputs are written per scene name), input {origin}")])
+            else:
+                seen[name] = origin
+        else:
+            name = _label(name, origin, k)
         out.append((name, result))
     return out
 
 
 def _load(paths):
-    """[((scene name, IR dict or SceneError), input path)]."""
+    """[((scene name, IR dict or SceneError), input path)]; never raises for one bad input."""
     results = []
     for p in paths:
         path = Path(p)
-        if path.suffix == ".blend":
-            if not path.is_file():
-                results.append(((path.stem, validate.SceneError(path.stem, [("scene", "(file)", f"no such file: {path}")])),
-                                str(path)))
-                continue
-            from .blend_input import load_blend
-            results += [(r, str(path)) for r in load_blend(path)]
-        else:
-            try:
+        try:
+            if path.suffix == ".blend":
+                if not path.is_file():
+                    raise validate.SceneError(path.stem, [("scene", "(file)", f"no such file: {path}")])
+                from .blend_input import load_blend
+                results += [(r, str(path)) for r in load_blend(path)]
+            else:
                 scene = ir_json.load(path)
                 results.append(((scene["name"], scene), str(path)))
-            except validate.SceneError as exc:
-                results.append(((exc.scene if exc.scene != "?" else path.stem, exc), str(path)))
+        except validate.SceneError as exc:
+            results.append(((exc.scene, exc), str(path)))
+        except Exception as exc:  # noqa: BLE001 - one input that breaks the loader fails alone
+            results.append(((None, validate.SceneError(path.stem, [("scene", "(file)", f"cannot load {path}: "
+                                                                   f"{type(exc).__name__}: {exc}")])), str(path)))
     return results
 
 

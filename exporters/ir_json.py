@@ -27,15 +27,66 @@ def write(scene, path):
     return path
 
 
+MAX_DEPTH = 32  # nesting of a scene file (the deepest canonical scene nests 6 levels)
+
+
+class InputError(validate.SceneError):
+    """A scene file's problems, named by the file (``source``) as well as scene, object and field."""
+
+    def __init__(self, scene, problems, source):
+        super().__init__(scene, problems)
+        self.source = str(source)
+        self.args = (f"{self.source}: {self.args[0]}",)
+
+
+def depth(data, limit=MAX_DEPTH):
+    """Nesting depth of parsed JSON (lists and objects), counted without recursion; stops at limit + 1."""
+    deepest, stack = 0, [(data, 1)]
+    while stack:
+        node, d = stack.pop()
+        if isinstance(node, (dict, list)):
+            deepest = max(deepest, d)
+            if deepest > limit:
+                return deepest
+            stack.extend((v, d + 1) for v in (node.values() if isinstance(node, dict) else node)
+                         if isinstance(v, (dict, list)))
+    return deepest
+
+
 def load(path):
-    """Read and validate one IR JSON file. Relative mesh files resolve against its folder."""
+    """Read and validate one IR JSON file. Relative mesh files resolve against its folder.
+    Every problem, from an unreadable file to a bad field, is an InputError (a SceneError) that
+    names the file; its ``scene`` is the file's stem until the scene's own name is known."""
     path = Path(path)
+    label = path.stem
+
+    def fail(field, message, obj="scene", scene=None):
+        raise InputError(scene or label, [(obj, field, message)], path)
+
     try:
-        data = json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError) as exc:
-        raise validate.SceneError(path.stem, [("scene", "(file)", f"cannot read {path}: {exc}")]) from exc
-    if isinstance(data, dict):
-        data["_base_dir"] = str(path.parent)
-    validate.check(data)
-    data["needs"] = ir.derived_needs(data)
+        raw = path.read_bytes()
+    except OSError as exc:
+        fail("(file)", f"cannot read {path}: {exc.strerror or exc}")
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        fail("(file)", f"not UTF-8 text: byte {raw[exc.start]:#04x} at offset {exc.start}")
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        fail("(file)", f"not valid JSON: {exc}")
+    except RecursionError:
+        fail("(file)", f"nested too deeply (more than {MAX_DEPTH} levels of lists and objects)")
+    if depth(data) > MAX_DEPTH:
+        fail("(file)", f"nested too deeply (more than {MAX_DEPTH} levels of lists and objects)")
+    if not isinstance(data, dict):
+        fail("(root)", f"a scene must be a JSON object, got {type(data).__name__}")
+    data["_base_dir"] = str(path.parent)
+    try:
+        validate.check(data)
+        data["needs"] = ir.derived_needs(data)
+    except validate.SceneError as exc:
+        raise InputError(exc.scene if isinstance(exc.scene, str) else label, exc.problems, path) from exc
+    except Exception as exc:  # noqa: BLE001 - whatever breaks on a hostile file fails that file
+        fail("(file)", f"cannot be checked: {type(exc).__name__}: {exc}")
     return data

@@ -6,9 +6,15 @@
   FLIP in its own process): a render never waits for a verdict.
 - DaskEngine (``--cluster ADDRESS`` or ``--cluster local:N``): the jobs go to a Dask distributed
   scheduler, each job (render and verdict) on one worker; ``local:N`` starts a LocalCluster of N
-  single-threaded worker processes. A worker needs the same repository checkout and Python
+  single-threaded worker processes, listening on 127.0.0.1 only, without a dashboard unless
+  ``--dashboard`` asks for one. A worker needs the same repository checkout and Python
   environment, and this project importable: workers load batch/jobs/dask_preload.py (README,
-  "Running on a cluster").
+  "Running on a cluster"). A Dask scheduler runs whatever its clients send (pickled functions):
+  a scheduler that is not on this machine and not reached over tls:// is warned about. A
+  scheduler that cannot be reached, or that no worker joins, within ``--cluster-timeout`` seconds
+  is a ClusterError (a usage error, exit 2), never a wait without end. TLS settings (CA, client
+  certificate and key) come from Dask's own configuration: ``distributed.comm.tls.*`` in a Dask
+  config file or the DASK_DISTRIBUTED__COMM__TLS__... environment variables.
 
 Failures: a render that crashes is retried once (on another worker where there is one), then
 reported failed with the reason; so is a job whose worker dies. Ctrl-C stops the engine: jobs
@@ -23,6 +29,14 @@ from . import job as jobs
 
 log = logging.getLogger("spectral_bench")
 PRELOAD = str(Path(__file__).resolve().parent / "dask_preload.py")
+
+
+DEFAULT_TIMEOUT = 60.0
+LOCAL_HOSTS = ("localhost", "127.0.0.1", "[::1]")
+
+
+class ClusterError(RuntimeError):
+    """A Dask cluster that cannot be used (unreachable, no workers, workers without this project)."""
 
 
 class Interrupted(KeyboardInterrupt):
@@ -106,24 +120,55 @@ class LocalEngine:
         pass
 
 
+def plaintext_remote(address):
+    """True for a scheduler address that is neither on this machine nor reached over TLS."""
+    from urllib.parse import urlsplit
+    scheme, _, rest = address.rpartition("://")
+    if (scheme or "tcp") != "tcp":
+        return scheme not in ("tls", "wss", "inproc")
+    host = urlsplit("//" + rest).hostname or ""
+    return host not in ("localhost", "127.0.0.1", "::1")
+
+
 class DaskEngine:
-    def __init__(self, address):
+    def __init__(self, address, timeout=None, dashboard=None):
         import dask
         from distributed import Client, LocalCluster
+        timeout = float(timeout or DEFAULT_TIMEOUT)
         # a job whose worker dies is tried once more on another worker, then reported failed
         dask.config.set({"distributed.scheduler.allowed-failures": 1})
-        self.cluster = None
+        self.cluster, self.client = None, None
         if address.startswith("local:"):
-            n = int(address.split(":", 1)[1])
-            self.cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
-                                        preload=[PRELOAD])
-            self.client = Client(self.cluster)
+            try:
+                n = int(address.split(":", 1)[1])
+            except ValueError:
+                n = 0
+            if n < 1:
+                raise ClusterError(f"--cluster {address}: a local cluster needs at least one worker (local:N, N >= 1)")
+            self.cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                        dashboard_address=dashboard, preload=[PRELOAD])
+            self.client = Client(self.cluster, timeout=timeout)
         else:
-            self.client = Client(address)
+            if plaintext_remote(address):
+                log.warning("warning: the Dask scheduler at %s runs whatever code it receives (pickles) and this "
+                            "connection is not encrypted: on a shared network use tls:// with Dask's TLS settings "
+                            "(README, \"Running on a cluster\")", address)
+            try:
+                self.client = Client(address, timeout=timeout)
+            except Exception as exc:  # noqa: BLE001 - unreachable, refused, TLS not configured: named, exit 2
+                raise ClusterError(f"--cluster {address}: cannot reach the Dask scheduler within {timeout:g} s "
+                                   f"(--cluster-timeout): {type(exc).__name__}: {exc}") from None
+        try:
+            self.client.wait_for_workers(1, timeout=timeout)
+        except (OSError, TimeoutError):
+            self.close()
+            raise ClusterError(f"--cluster {address}: no Dask worker joined within {timeout:g} s "
+                               "(--cluster-timeout); start workers with dask worker ... --preload "
+                               f"{PRELOAD}") from None
         missing = [w for w, ok in self.client.run(_has_project).items() if not ok]
         if missing:
             self.close()
-            raise RuntimeError(f"Dask workers {', '.join(missing)} cannot import this project: start them with "
+            raise ClusterError(f"Dask workers {', '.join(missing)} cannot import this project: start them with "
                                f"--preload {PRELOAD} (same checkout and environment as here)")
         self.name = f"dask {address}"
 
@@ -151,7 +196,8 @@ class DaskEngine:
             raise Interrupted() from None
 
     def close(self):
-        self.client.close()
+        if self.client is not None:
+            self.client.close()
         if self.cluster is not None:
             self.cluster.close()
 
@@ -161,6 +207,8 @@ def _has_project():
     return "spectral_bench" in sys.modules
 
 
-def make(cluster=None, deviations=None):
-    """The engine for ``--cluster`` (None: this machine)."""
-    return DaskEngine(cluster) if cluster else LocalEngine(deviations)
+def make(cluster=None, deviations=None, timeout=None, dashboard=None):
+    """The engine for ``--cluster`` (None: this machine); ``timeout``: seconds to reach the
+    scheduler and its first worker; ``dashboard``: where a local cluster serves its dashboard
+    (default: none)."""
+    return DaskEngine(cluster, timeout, dashboard) if cluster else LocalEngine(deviations)

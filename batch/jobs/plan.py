@@ -10,6 +10,8 @@ from ..studies import sweep
 from . import job as jobs
 
 job_id = jobs.job_id
+# options a resumed run takes from this command; every other option comes from the run being resumed
+ENGINE_KEYS = ("resume", "out", "cluster", "cluster_timeout", "dashboard", "log", "visualize", "list", "settings")
 VERDICT_KEYS = ("alpha", "min_samples", "block", "flip", "references", "known")
 
 
@@ -25,38 +27,52 @@ def verdict_settings(opts):
 def for_run(scene, opts):
     """The scene with --spp and --scale applied."""
     sc = copy.deepcopy(scene)
-    if opts["spp"]:
+    if opts.get("spp"):
         sc["render"]["spp"] = int(opts["spp"])
-    if opts["scale"] and opts["scale"] != 1.0:
+    if opts.get("scale") and opts["scale"] != 1.0:
         sc["render"]["width"] = max(1, round(sc["render"]["width"] * opts["scale"]))
         sc["render"]["height"] = max(1, round(sc["render"]["height"] * opts["scale"]))
     return sc
 
 
 def main_jobs(scenes, made, opts, out, settings):
-    """(render jobs, entries decided without rendering) for every scene on every backend."""
+    """(render jobs, entries decided without rendering) for every scene on every backend. Whatever
+    goes wrong while planning one scene on one backend (a mesh that cannot be read, a scene a
+    backend chokes on) is that job's failure, with the reason; the others are planned."""
     job_list, immediate = [], []
     for name, scene in scenes:
         for bname, backend in made.items():
             if isinstance(scene, Exception):
                 immediate.append(_decided(name, None, bname, "failed", str(scene)))
                 continue
-            ok, why = backend.availability()
-            if not ok:
-                immediate.append(_decided(name, scene, bname, "skipped", why))
+            try:
+                job, decided = _main_job(name, scene, bname, backend, opts, out, settings)
+            except Exception as exc:  # noqa: BLE001 - one scene that cannot be planned fails alone
+                immediate.append(_decided(name, scene, bname, "failed", f"cannot be planned: {type(exc).__name__}: {exc}"))
                 continue
-            sc = for_run(scene, opts)
-            mode, why = backend.mode_for(sc)
-            if mode is None:
-                r = sc["render"]
-                immediate.append(_decided(name, sc, bname, "unsupported", why, spp=r["spp"],
-                                          resolution=[r["width"], r["height"]]))
-                continue
-            job_list.append(jobs.make("render", name, sc, bname, mode, sc["render"]["spp"], out,
-                                      Path(name) / "results" / bname, export=Path(name) / backend.formats[0],
-                                      backend_options=backend.options, passes=opts["passes"], seed=opts["seed"],
-                                      timeout=opts["timeout"], source_scene=scene, verdict=settings))
+            if job is not None:
+                job_list.append(job)
+            else:
+                immediate.append(decided)
     return job_list, immediate
+
+
+def _main_job(name, scene, bname, backend, opts, out, settings):
+    """(the render job, None) or (None, the entry decided without rendering)."""
+    ok, why = backend.availability()
+    if not ok:
+        return None, _decided(name, scene, bname, "skipped", why)
+    sc = for_run(scene, opts)
+    mode, why = backend.mode_for(sc)
+    if mode is None:
+        r = sc["render"]
+        return None, _decided(name, sc, bname, "unsupported", why, spp=r["spp"], resolution=[r["width"], r["height"]])
+    job = jobs.make("render", name, sc, bname, mode, sc["render"]["spp"], out,
+                    Path(name) / "results" / bname, export=Path(name) / backend.formats[0],
+                    backend_options=backend.options, passes=opts["passes"], seed=opts["seed"],
+                    timeout=opts["timeout"], source_scene=scene, verdict=settings)
+    job["id"] = job_id(job)  # reads every file the scene names (meshes): a broken one fails here, named
+    return job, None
 
 
 def entry(name, scene, backend, **kw):
@@ -75,29 +91,43 @@ def _decided(name, scene, backend, status, reason, **kw):
 def sweep_jobs(scenes, made, opts, out, settings):
     """(jobs, lines decided without rendering): every rung of the ladder for each backend mode,
     two passes each (the rung's own noise for its noise test)."""
-    from ..verdict import judge
     ladder = opts["ladder"] or list(sweep.DEFAULT_LADDER)
     job_list, lines = [], []
     for name, scene in scenes:
         if isinstance(scene, Exception):
             continue
-        sc = for_run(scene, dict(opts, spp=None))
-        ref, unusable = judge.load_reference(name, scene, settings["references"])
-        for bname, backend in made.items():
-            if not backend.availability()[0]:
-                continue
-            modes, why = sweep.sweep_modes(backend, sc, opts["sweep_modes"])
-            if not modes or unusable:
-                lines.append({"scene": name, "backend": bname, "mode": None, "points": [], "reason": why or unusable})
-                continue
-            for mode in modes:
-                for spp in ladder:
-                    folder = Path(name) / "sweeps" / f"{bname}-{mode}" / f"spp{spp}"
-                    job_list.append(jobs.make("sweep", name, sc, bname, mode, spp, out, folder,
-                                              backend_options=backend.options, passes=2, seed=opts["seed"],
-                                              timeout=opts["timeout"], source_scene=scene, verdict=settings,
-                                              extra={"mode": mode, "rung": spp},
-                                              label=f"{name} sweep {mode} {spp} spp ({bname})"))
+        try:
+            scene_jobs, scene_lines = _sweep_jobs(name, scene, made, opts, out, settings, ladder)
+        except Exception as exc:  # noqa: BLE001 - one scene that cannot be planned fails alone
+            scene_jobs, scene_lines = [], [{"scene": name, "backend": b, "mode": None, "points": [],
+                                            "reason": f"cannot be planned: {type(exc).__name__}: {exc}"} for b in made]
+        job_list += scene_jobs
+        lines += scene_lines
+    return job_list, lines
+
+
+def _sweep_jobs(name, scene, made, opts, out, settings, ladder):
+    """One scene's sweep jobs and the lines decided without rendering."""
+    from ..verdict import judge
+    job_list, lines = [], []
+    sc = for_run(scene, dict(opts, spp=None))
+    ref, unusable = judge.load_reference(name, scene, settings["references"])
+    for bname, backend in made.items():
+        if not backend.availability()[0]:
+            continue
+        modes, why = sweep.sweep_modes(backend, sc, opts["sweep_modes"])
+        if not modes or unusable:
+            lines.append({"scene": name, "backend": bname, "mode": None, "points": [], "reason": why or unusable})
+            continue
+        for mode in modes:
+            for spp in ladder:
+                folder = Path(name) / "sweeps" / f"{bname}-{mode}" / f"spp{spp}"
+                job_list.append(jobs.make("sweep", name, sc, bname, mode, spp, out, folder,
+                                          backend_options=backend.options, passes=2, seed=opts["seed"],
+                                          timeout=opts["timeout"], source_scene=scene, verdict=settings,
+                                          extra={"mode": mode, "rung": spp},
+                                          label=f"{name} sweep {mode} {spp} spp ({bname})"))
+                job_list[-1]["id"] = job_id(job_list[-1])
     return job_list, lines
 
 
@@ -120,15 +150,51 @@ def sweep_lines(results):
     return lines
 
 
-def resumed_options(opts):
-    """The options of the run being resumed (so that the same jobs are planned), with this
-    command's engine, log and resume settings."""
-    data = json.loads((Path(opts["resume"]) / "metrics.json").read_text())
-    previous = dict(data.get("options") or {})
-    keep = {k: opts[k] for k in ("resume", "cluster", "log", "visualize") if k in opts}
+class ResumeError(ValueError):
+    """A run that cannot be resumed (a usage error, exit 2), named."""
+
+
+def read_metrics(out):
+    """The metrics.json of a run being resumed, or ResumeError naming the file."""
+    path = Path(out) / "metrics.json"
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError, RecursionError) as exc:
+        raise ResumeError(f"cannot resume from {path}: {type(exc).__name__}: {exc}") from None
+    if not isinstance(data, dict) or not isinstance(data.get("options", {}), dict) \
+            or not all(isinstance(data.get(k, []), list) for k in ("runs", "jobs")):
+        raise ResumeError(f"cannot resume from {path}: not the metrics.json of a run (an object with options and runs)")
+    return data
+
+
+def _option_name(key):
+    return {"exec": "-e/--exec", "input": "-i/--input", "renderer": "-r/--renderer", "scene": "-s/--scene",
+            "case": "-c/--case", "flip": "--no-flip"}.get(key, "--" + key.replace("_", "-"))
+
+
+def resumed_options(opts, given=None):
+    """The options of the run being resumed (so that the same jobs, with the same ids, are
+    planned), with this command's engine, log and resume settings (ENGINE_KEYS). Every other
+    option comes from the run being resumed, checked through the option's own type; one that this
+    command gives (``given``: its option names; default: those that differ from the defaults) with
+    another value is refused with ResumeError naming it."""
+    from .. import cli
+    data = read_metrics(opts["resume"])
+    previous = data.get("options") or {}
+    if given is None:
+        given = {k for k, v in opts.items() if v != cli.DEFAULTS.get(k) and not (k == "exec" and not v)}
     merged = dict(opts)
-    merged.update({k: v for k, v in previous.items() if k in opts})
-    merged.update(keep)
-    merged["exec"] = opts["exec"]
+    for key, value in previous.items():
+        if key not in cli.DEFAULTS or key in ENGINE_KEYS:
+            continue
+        try:
+            value = cli.check_option(key, value)
+        except cli.UsageError as exc:
+            raise ResumeError(f"cannot resume from {Path(opts['resume']) / 'metrics.json'}: it records {exc}") from None
+        if key in given and opts.get(key) != value:
+            raise ResumeError(f"cannot resume {opts['resume']} with {_option_name(key)} {opts.get(key)!r}: the run "
+                              f"was started with {value!r} (finished jobs would not match); leave the option out "
+                              "or start a new run")
+        merged[key] = value
     merged["out"] = opts["resume"]
     return merged

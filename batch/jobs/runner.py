@@ -25,22 +25,96 @@ from .progress import Progress
 log = logging.getLogger("spectral_bench")
 
 
-class OutputExists(RuntimeError):
+class UsageError(RuntimeError):
+    """A problem with the command, its files or its output folder (exit 2), named."""
+
+
+class OutputExists(UsageError):
     pass
 
 
-def output_dir(opts):
+LOCK_NAME = ".lock"
+
+
+def _lock(out):
+    """Claim ``out`` for this run: an exclusive lock on OUT/.lock, held until released (or the
+    process ends); a second run into the same folder is refused at once."""
+    import filelock
+    lock = filelock.FileLock(str(out / LOCK_NAME), timeout=0)
+    try:
+        lock.acquire()
+    except filelock.Timeout:
+        raise UsageError(f"{out} is in use by another run (it holds {out / LOCK_NAME}); choose another --out, "
+                         "nothing was changed") from None
+    except OSError as exc:
+        raise UsageError(f"cannot write to the output folder {out}: {exc.strerror or exc}") from None
+    return lock
+
+
+def _default_out():
+    """A new folder outputs-YYYYmmdd-HHMMSS (-2, -3, ... when two runs start in the same second)."""
+    base = _dt.datetime.now().strftime("outputs-%Y%m%d-%H%M%S")
+    for k in range(1, 1000):
+        out = Path(base if k == 1 else f"{base}-{k}")
+        try:
+            out.mkdir(parents=True, exist_ok=False)
+            return out
+        except FileExistsError:
+            continue
+        except OSError as exc:
+            raise UsageError(f"cannot create the output folder {out}: {exc.strerror or exc}") from None
+    raise UsageError(f"{base}: too many output folders started in this second")
+
+
+def claim(opts):
+    """(output folder, its lock): the folder of --resume, of -o, or a new default one, claimed
+    exclusively before anything in it is checked or written."""
     if opts.get("resume"):
         out = Path(opts["resume"])
+        if not out.is_dir():
+            raise OutputExists(f"{out} is not a folder: nothing to resume")
+        lock = _lock(out)
         if not (out / "metrics.json").is_file():
+            lock.release()
             raise OutputExists(f"{out} holds no metrics.json: nothing to resume")
-        return out
-    out = Path(opts["out"] or _dt.datetime.now().strftime("outputs-%Y%m%d-%H%M%S"))
+        return out, lock
+    if opts.get("out"):
+        out = Path(opts["out"])
+        try:
+            out.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise UsageError(f"cannot create the output folder {out}: {exc.strerror or exc}") from None
+    else:
+        out = _default_out()
+    lock = _lock(out)
     if (out / "metrics.json").exists():
+        lock.release()
         raise OutputExists(f"{out} already holds results (metrics.json); choose another --out or --resume it, "
                            "nothing was changed")
-    out.mkdir(parents=True, exist_ok=True)
+    return out, lock
+
+
+def output_dir(opts):
+    """The claimed output folder (its lock is held until the process ends)."""
+    out, lock = claim(opts)
+    _HELD.append(lock)
     return out
+
+
+_HELD = []
+
+
+def load_known(path):
+    """The known deviations of --known (default: the repository's file); a file given but missing
+    or broken is a usage error naming it."""
+    if path and not Path(path).is_file():
+        raise UsageError(f"--known {path}: no such file")
+    try:
+        return known.load(path)
+    except known.KnownDeviationsError as exc:
+        raise UsageError(f"known deviations: {exc}") from None
+    except Exception as exc:  # noqa: BLE001 - unreadable, not UTF-8, wrong types: named, not a traceback
+        raise UsageError(f"known deviations {path or known.DEFAULT_FILE}: {type(exc).__name__}: {exc}") from None
 
 
 def select(results, opts):
@@ -80,27 +154,31 @@ def plan(opts):
 
 
 class Run:
-    def __init__(self, opts):
+    def __init__(self, opts, out=None, deviations=None):
+        """``out``: the claimed output folder (default: claim one now); ``deviations``: the known
+        deviations (default: load --known)."""
         self.opts = opts
-        self.out = output_dir(opts)
+        self.out = out if out is not None else output_dir(opts)
         self.runs, self.results, self.sweeps, self.stability = [], [], [], []
         self.started = _dt.datetime.now().isoformat(timespec="seconds")
-        self.deviations = known.load(opts.get("known"))
+        self.deviations = deviations if deviations is not None else load_known(opts.get("known"))
         self.previous = self._previous() if opts.get("resume") else {}
 
     def _previous(self):
         """Finished results of the run being resumed, by job id (interrupted ones run again)."""
-        data = json.loads((self.out / "metrics.json").read_text())
+        data = planning.read_metrics(self.out)
         self.started = data.get("started", self.started)
         done = {}
-        for r in data.get("runs", []) + data.get("jobs", []):
-            if r.get("job") and not r.get("interrupted") and (not r.get("image") or (self.out / r["image"]).is_file()):
+        for r in (data.get("runs") or []) + (data.get("jobs") or []):
+            if not isinstance(r, dict):
+                continue
+            image = r.get("image")
+            if r.get("job") and not r.get("interrupted") and (not image or (isinstance(image, str) and (self.out / image).is_file())):
                 done[r["job"]] = r
         return done
 
     def save(self):
-        data = {"started": self.started, "options": {k: v for k, v in self.opts.items() if k != "exec"},
-                "runs": self.runs}
+        data = {"started": self.started, "options": dict(self.opts), "runs": self.runs}
         if self.results:
             data["jobs"] = self.results
         if self.sweeps:
@@ -130,9 +208,9 @@ class Run:
                 if isinstance(scene, Exception):
                     self.add(planning.entry(name, scene, fmt, mode="export", status="failed", reason=str(scene)))
                 else:
-                    sc = planning.for_run(scene, self.opts)
-                    target = self.out / name / fmt
+                    sc, target = scene, self.out / name / fmt
                     try:
+                        sc = planning.for_run(scene, self.opts)
                         reason = ""
                         if fmt == "json":
                             path = ir_json.write(sc, target / f"{name}.json")
@@ -158,6 +236,14 @@ class Run:
 
     # -- render, judge, study ----------------------------------------------------------------
     def render_all(self, scenes):
+        engine = engines.make(self.opts.get("cluster"), self.deviations, timeout=self.opts.get("cluster_timeout"),
+                              dashboard=self.opts.get("dashboard"))
+        try:
+            self._render_all(scenes, engine)
+        finally:
+            engine.close()
+
+    def _render_all(self, scenes, engine):
         names = backend_names(self.opts)
         made = {n: make_backend(n, self.opts) for n in names}
         if "mitsuba" in made and made["mitsuba"].availability()[0]:
@@ -175,7 +261,12 @@ class Run:
                               for s in stability.STRIPS if isinstance(s.base, str) and s.base not in golden]
             for backend in made.values():
                 if backend.availability()[0]:
-                    stab_jobs, rows = stability.jobs(backend, golden, self.out, "stability", timeout=self.opts["timeout"])
+                    try:
+                        stab_jobs, rows = stability.jobs(backend, golden, self.out, "stability", timeout=self.opts["timeout"])
+                    except Exception as exc:  # noqa: BLE001 - a base scene the strips cannot use fails the study, not the batch
+                        log.exception("the stability case cannot be planned on %s", backend.name)
+                        stab_jobs, rows = [], [{"sweep": "stability", "backend": backend.name, "mode": None, "problems": [],
+                                                "status": "failed", "reason": f"cannot be planned: {type(exc).__name__}: {exc}"}]
                     job_list += stab_jobs
                     self.stability += rows
         for entry in immediate:
@@ -183,7 +274,7 @@ class Run:
         self.done = []
         todo = []
         for j in job_list:
-            previous = self.previous.get(planning.job_id(j))
+            previous = self.previous.get(j.get("id") or planning.job_id(j))
             if previous is not None:
                 self._keep(j, previous)
             else:
@@ -191,11 +282,9 @@ class Run:
         if self.previous:
             log.info("resuming %s: %d jobs kept, %d to run", self.out, len(job_list) - len(todo), len(todo))
         self.progress = Progress(len(todo))
-        engine = engines.make(self.opts.get("cluster"), self.deviations)
         try:
             engine.map(todo, self.record)
         finally:
-            engine.close()
             self.progress.close()
             self.finish_studies()
 
@@ -249,13 +338,30 @@ class Run:
 
 def run(opts):
     """Run the batch; returns the exit status (batch/verdict/status.py: 0 when every judged job
-    is ok, known or fixed and nothing was left unjudged, 3 when something was unjudged, 1 when
-    something failed; 130 when interrupted)."""
+    is ok, known or fixed and nothing was left unjudged, 3 when something was unjudged, 4 when
+    nothing could run (every job skipped or unsupported), 1 when something failed; 130 when
+    interrupted). Raises UsageError (exit 2) for a folder that cannot be claimed, a run that
+    cannot be resumed, a broken --known file, a cluster that cannot be reached. Sets opts["out"]
+    to the folder used."""
     t0 = time.perf_counter()
-    if opts.get("resume"):
-        opts = planning.resumed_options(opts)
+    deviations = None if opts.get("resume") else load_known(opts.get("known"))
+    out, lock = claim(opts)
+    opts["out"] = str(out)
+    try:
+        if opts.get("resume"):
+            try:
+                opts = planning.resumed_options(opts, getattr(opts, "given", None))
+            except planning.ResumeError as exc:
+                raise UsageError(str(exc)) from None
+            deviations = load_known(opts.get("known"))
+        return _run(opts, out, deviations, t0)
+    finally:
+        lock.release()
+
+
+def _run(opts, out, deviations, t0):
     _jobs, scenes = plan(opts)
-    batch = Run(opts)
+    batch = Run(opts, out, deviations)
     log.info("writing to %s", batch.out)
     if not scenes:
         log.error("no scene matches the selection")
@@ -270,7 +376,12 @@ def run(opts):
     except engines.Interrupted:
         log.error("interrupted: finished jobs are in %s/metrics.json; --resume %s finishes the run", batch.out, batch.out)
         code = 130
+    batch.save()
     text = summary.write(batch.out, batch.runs, time.perf_counter() - t0, batch.sweeps, batch.stability)
     report.write(batch.out)
     print(text)
-    return code if code is not None else status.exit_code(batch.runs + batch.stability)
+    if code is None:
+        code = status.exit_code(batch.runs + batch.stability)
+        if code == status.EXIT_NOTHING_RAN:
+            log.error("nothing was rendered: every job was skipped or unsupported (exit %d)", code)
+    return code

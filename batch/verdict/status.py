@@ -8,9 +8,15 @@ analytic probes, finite values) and the known deviations (batch/verdict/known.py
   unjudged  rendered, but no usable reference and no applicable probe: not a pass
   skipped, unsupported: decided before rendering (the backend is missing, or cannot model it)
 
-Exit status of a batch (batch/jobs/runner.py): 0 when every judged job is ok, known or fixed and
-nothing was left unjudged; 3 when nothing failed but something was unjudged; 1 when something
-failed (2 is kept for usage errors).
+Exit status of a batch (batch/jobs/runner.py):
+
+  0  every judged job is ok, known or fixed and nothing was left unjudged
+  1  something failed (a scene that did not load counts: its jobs are failed)
+  2  a usage error: a bad option or settings value, an output folder that is taken or cannot be
+     written, a run that cannot be resumed, a broken --known file, a cluster that cannot be reached
+  3  nothing failed but something was unjudged
+  4  nothing ran: every job was skipped or unsupported (no backend could render anything)
+  130 interrupted (--resume finishes the run)
 """
 from dataclasses import dataclass
 from typing import Callable, Optional
@@ -18,7 +24,8 @@ from typing import Callable, Optional
 from . import known as _known, stats
 
 ORDER = {"failed": 0, "known": 1, "unjudged": 2, "fixed": 3, "ok": 4, "unsupported": 5, "skipped": 6}
-EXIT_FAILED, EXIT_UNJUDGED = 1, 3
+EXIT_FAILED, EXIT_UNJUDGED, EXIT_NOTHING_RAN = 1, 3, 4
+NOT_RUN = ("skipped", "unsupported")
 
 
 @dataclass
@@ -90,10 +97,13 @@ def decide(entry, deviations=(), ztest=None):
 
 
 def exit_code(records):
-    """0, EXIT_UNJUDGED or EXIT_FAILED for a batch's job records (see the module docstring)."""
+    """0, EXIT_UNJUDGED, EXIT_NOTHING_RAN or EXIT_FAILED for a batch's job records (see the
+    module docstring)."""
     statuses = {r.get("status") for r in records}
     if "failed" in statuses:
         return EXIT_FAILED
     if "unjudged" in statuses:
         return EXIT_UNJUDGED
+    if statuses and statuses <= set(NOT_RUN):
+        return EXIT_NOTHING_RAN
     return 0
