@@ -235,3 +235,39 @@ def test_ids_urls_and_reference_problems(tmp_path):
     assert "a&#39;b" in source and "<b>s</b>" not in source and "<i>no</i>" not in source
     assert "reference problem: references/&lt;b&gt;s&lt;/b&gt;.exr: truncated: 12 of 4096 bytes" in source
     assert "judged by probes alone: &lt;i&gt;no&lt;/i&gt; usable reference" in source
+
+
+@pytest.mark.slow
+def test_a_value_of_the_wrong_type_does_not_stop_the_report(run, tmp_path):
+    """Any one value of the first run, sweep and stability row (or of the top level) replaced by
+    another type: the page is still written (what it cannot read is shown as text or left out)."""
+    from spectral_bench.batch.report import html
+    out = tmp_path / "out"
+    shutil.copytree(run, out)
+    data = json.loads((out / "metrics.json").read_text())
+    data.pop("jobs", None)  # not read by the page
+    leaves = []
+
+    def walk(x, path):
+        if path and (path[0] not in ("runs", "sweeps", "stability") or len(path) == 1 or path[1] == 0):
+            leaves.append(path)
+        for k, v in (x.items() if isinstance(x, dict) else enumerate(x) if isinstance(x, list) else ()):
+            walk(v, path + (k,))
+
+    walk(data, ())
+    assert len(leaves) > 100
+    failures = []
+    for path in leaves:
+        holder = data
+        for k in path[:-1]:
+            holder = holder[k]
+        kept = holder[path[-1]]
+        for value in (None, -1.5, True, "text", [], {"a": 1}):
+            holder[path[-1]] = value
+            (out / "metrics.json").write_text(json.dumps(data))
+            try:
+                html.write(out)
+            except Exception as e:  # noqa: BLE001 - collected, all reported at once
+                failures.append((path, value, repr(e)))
+        holder[path[-1]] = kept
+    assert not failures, failures[:10]

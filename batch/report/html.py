@@ -44,6 +44,18 @@ def _fmt(x, f="{:.4g}"):
     return _text(x)  # not a number where one was expected: shown as it is, as text
 
 
+def _dict(x):
+    return x if isinstance(x, dict) else {}
+
+
+def _list(x):
+    return x if isinstance(x, list) else []
+
+
+def _verdict(passed, otherwise):
+    return "pass" if passed is True else "FAIL" if passed is False else otherwise
+
+
 def _css(status):
     return status if isinstance(status, str) and status in ORDER else ""
 
@@ -67,7 +79,7 @@ def _local_url(out, rel):
 
 def _reference_problems(run):
     out = []
-    for p in run.get("reference_problems") or []:
+    for p in _list(run.get("reference_problems")):
         if isinstance(p, dict):
             out.append(f"reference problem: {_text(p.get('file'))}: {_text(p.get('problem'))}")
         else:
@@ -81,7 +93,7 @@ def _summary_rows(runs, anchors):
                                                     _text(runs[i].get("scene")), _text(runs[i].get("backend"))))
     for i in order:
         r = runs[i]
-        m, pr = r.get("metrics") or {}, r.get("probes") or []
+        m, pr = _dict(r.get("metrics")), _list(r.get("probes"))
         probes = f"{sum(isinstance(p, dict) and p.get('pass') is True for p in pr)}/{len(pr)} pass" if pr else ""
         rows.append({"css": _css(r.get("status")), "anchor": anchors.get(i), "scene": _text(r.get("scene")),
                      "backend": _text(r.get("backend")), "mode": _text(r.get("mode")), "status": _text(r.get("status")),
@@ -100,19 +112,19 @@ def _viewer(out, run):
     views = [{"label": label, "src": src} for label, png in VIEWS if (src := _local_url(out, folder / png))]
     if not views:
         return None
-    numbers = [f"{_text(k)}: {_fmt(v)}" for k, v in (run.get("metrics") or {}).items()]
+    numbers = [f"{_text(k)}: {_fmt(v)}" for k, v in _dict(run.get("metrics")).items()]
     test = run.get("test")
     if isinstance(test, dict):
-        verdict = {True: "pass", False: "FAIL"}.get(test.get("pass"), "not judged")
+        verdict = _verdict(test.get("pass"), "not judged")
         if all(isinstance(test.get(k), (int, float)) for k in ("p_min", "threshold")) and test.get("pass") is not None:
             numbers.append(f"noise test: p_min {test['p_min']:.3g} vs {test['threshold']:.3g} ({verdict})")
         else:
             numbers.append(f"noise test: {_text(test.get('reason'))} ({verdict})")
-    for p in run.get("probes") or []:
+    for p in _list(run.get("probes")):
         if not isinstance(p, dict):
             numbers.append(_text(p))
             continue
-        mark = {True: "pass", False: "FAIL"}.get(p.get("pass"), "not measured")
+        mark = _verdict(p.get("pass"), "not measured")
         numbers.append(f"{_text(p.get('name'))}: {_fmt(p.get('error'))} {_text(p.get('unit'))} ({mark})")
     return {"scene": _text(run.get("scene")), "backend": _text(run.get("backend")), "mode": _text(run.get("mode")),
             "status": _text(run.get("status")), "views": views, "numbers": numbers,
@@ -162,8 +174,9 @@ def render(out_dir):
     """The page of an output folder, as a string."""
     out = Path(out_dir)
     data = json.loads((out / "metrics.json").read_text())
-    runs = [r for r in data.get("runs") or [] if isinstance(r, dict)]
-    sweeps = [s for s in data.get("sweeps") or [] if isinstance(s, dict)]
+    data = _dict(data)
+    runs = [r for r in _list(data.get("runs")) if isinstance(r, dict)]
+    sweeps = [s for s in _list(data.get("sweeps")) if isinstance(s, dict)]
     viewers = {}
     for i, r in enumerate(runs):
         v = _viewer(out, r)
@@ -178,12 +191,12 @@ def render(out_dir):
         src = _local_url(out, c)
         if src:
             charts.append({"src": src, "alt": c})
-    stab = data.get("stability") or []
+    stab = _list(data.get("stability"))
     return _env.get_template("report.html").render(
         name=out.name, started=_text(data.get("started", "")), rows=_summary_rows(runs, ids),
         rgb=_section(summary_text, "RGB renderers against the spectral references"), charts=charts,
         sweep_text=_section(summary_text, "Speed against accuracy (sweeps)"),
-        stability=_stability(out, stab if isinstance(stab, list) else []), viewers=list(viewers.values()))
+        stability=_stability(out, stab), viewers=list(viewers.values()))
 
 
 def write(out_dir):
