@@ -9,7 +9,6 @@ element ids are made here from a safe alphabet, and an image's src is only ever 
 percent-encoded path to a file that exists inside the output folder (anything else in an
 image or chart field is not linked)."""
 import json
-import math
 import re
 from pathlib import Path, PurePosixPath, PureWindowsPath
 from urllib.parse import quote
@@ -62,11 +61,11 @@ def _css(status):
 
 def _local_url(out, rel):
     """``rel`` as a relative, percent-encoded URL if it names a file inside ``out``; else None."""
-    if not isinstance(rel, (str, PurePosixPath, Path)) or not str(rel) or "\0" in str(rel):
+    text = str(rel) if isinstance(rel, (str, PurePosixPath, PureWindowsPath)) else ""
+    if not text or "\0" in text or PurePosixPath(text).is_absolute() or PureWindowsPath(text).anchor:
         return None
-    parts = PureWindowsPath(rel).parts if "\\" in str(rel) else PurePosixPath(rel).parts
-    if not parts or PureWindowsPath(rel).is_absolute() or PurePosixPath(rel).is_absolute() or PureWindowsPath(rel).drive \
-            or any(p in ("", ".", "..") for p in parts):
+    parts = PureWindowsPath(text).parts if "\\" in text else PurePosixPath(text).parts
+    if not parts or any(p in ("", ".", "..") for p in parts):
         return None
     try:
         path = (out / Path(*parts)).resolve()
@@ -89,7 +88,7 @@ def _reference_problems(run):
 
 def _summary_rows(runs, anchors):
     rows = []
-    order = sorted(range(len(runs)), key=lambda i: (ORDER.get(runs[i].get("status"), 9) if isinstance(runs[i].get("status"), str) else 9,
+    order = sorted(range(len(runs)), key=lambda i: (ORDER.get(_css(runs[i].get("status")), 9),
                                                     _text(runs[i].get("scene")), _text(runs[i].get("backend"))))
     for i in order:
         r = runs[i]
@@ -145,8 +144,8 @@ def _stability(out, stab):
         rows = [r for r in stab if _text(r.get("sweep")) == name]
         strips = []
         for backend in sorted({_text(r.get("backend")) for r in rows if r.get("backend")}):
-            src = _local_url(out, PurePosixPath("stability", backend, f"{name}.png")) if "/" not in backend + name \
-                and "\\" not in backend + name else None
+            one_name_each = not re.search(r"[/\\]", backend + name)
+            src = _local_url(out, PurePosixPath("stability", backend, f"{name}.png")) if one_name_each else None
             if src:
                 strips.append({"backend": backend, "src": src, "alt": f"{name} {backend}"})
         cells = [{"css": _css(r.get("status")), "value": _text(r.get("value", "")), "backend": _text(r.get("backend", "")),
@@ -173,8 +172,7 @@ def _ids(runs, viewers):
 def render(out_dir):
     """The page of an output folder, as a string."""
     out = Path(out_dir)
-    data = json.loads((out / "metrics.json").read_text())
-    data = _dict(data)
+    data = _dict(json.loads((out / "metrics.json").read_text()))
     runs = [r for r in _list(data.get("runs")) if isinstance(r, dict)]
     sweeps = [s for s in _list(data.get("sweeps")) if isinstance(s, dict)]
     viewers = {}
@@ -185,7 +183,8 @@ def render(out_dir):
     ids = _ids(runs, viewers)
     for i, v in viewers.items():
         v["id"] = ids[i]
-    summary_text = (out / "summary.md").read_text() if (out / "summary.md").exists() else ""
+    summary_md = out / "summary.md"
+    summary_text = summary_md.read_text(encoding="utf-8", errors="replace") if summary_md.is_file() else ""
     charts = []
     for c in sorted({_text(s.get("chart")) for s in sweeps if s.get("chart")}):
         src = _local_url(out, c)
