@@ -47,3 +47,21 @@ def test_switching_views(report):
     shown = [(re.search(r'data-view="([^"]+)"', t).group(1), "display: none" in t) for t in tags]
     visible = [v for v, hidden in shown if not hidden]
     assert visible == ["difference"], shown
+
+
+def test_clicking_a_tab_and_the_sliders(report, tmp_path):
+    """The page's own buttons and sliders act on their viewer (a copy of the page clicks the
+    difference tab of the second viewer and moves its exposure slider once loaded)."""
+    page = (report / "report.html").read_text()
+    click = ("<script>window.addEventListener('load', function(){var box=document.querySelectorAll('.viewer')[1];"
+             "box.querySelector(\".tabs button[data-view='difference']\").click();"
+             "var s=box.querySelector('input[type=range]'); s.value='2'; s.dispatchEvent(new Event('input'));});</script>")
+    copy = report / "clicked.html"
+    copy.write_text(page.replace("</body>", click + "</body>"))
+    dom = dump_dom(copy.as_uri())
+    boxes = re.findall(r'<div class="viewer" id="([^"]+)" data-active="([^"]+)"', dom)
+    assert [a for _, a in boxes] == ["render", "difference"], boxes
+    second = dom[dom.index(f'id="{boxes[1][0]}"'):]
+    tags = re.findall(r'<img class="view"[^>]*>', second)[:5]
+    visible = [re.search(r'data-view="([^"]+)"', t).group(1) for t in tags if "display: none" not in t]
+    assert visible == ["difference"] and all("brightness(4)" in t for t in tags), tags

@@ -1,134 +1,204 @@
 """OUT/report.html: a static page, no server, that shows a run: the summary table (scene x
 backend: status, metrics, probes, time), the speed/accuracy charts, and per scene an image viewer
 (render / reference / difference / FLIP / z-score, with exposure and zoom) beside its numbers.
-Relative links only, so the folder can be moved or zipped."""
-import html
+Relative links only, so the folder can be moved or zipped.
+
+Every value of metrics.json is text to this page, never markup: the page is rendered by Jinja2
+from templates/report.html with autoescaping on, values inside <script> go through |tojson,
+element ids are made here from a safe alphabet, and an image's src is only ever a relative,
+percent-encoded path to a file that exists inside the output folder (anything else in an
+image or chart field is not linked)."""
 import json
-from pathlib import Path
+import re
+from pathlib import Path, PurePosixPath, PureWindowsPath
+from urllib.parse import quote
+
+import jinja2
 
 from ..verdict.status import ORDER
 
 VIEWS = [("render", "render.png"), ("reference", "reference.png"), ("difference", "diff.png"),
          ("FLIP", "flip.png"), ("z-score", "zscore.png")]
+TEMPLATES = Path(__file__).resolve().parent / "templates"
+SAFE_ID = re.compile(r"[A-Za-z0-9_.-]{1,120}")  # ids, #anchors, and the view=ID:VIEW hash of the page
 
-STYLE = """
-body{font-family:system-ui,sans-serif;margin:1.5em;color:#222}
-table{border-collapse:collapse;font-size:13px}td,th{border:1px solid #ccc;padding:3px 6px}
-.failed{background:#fdd}.known{background:#fec}.unjudged{background:#ffd}.ok,.fixed{background:#dfd}.skipped,.unsupported{background:#eee}
-.viewer{display:flex;gap:1.5em;margin:1em 0 2em;flex-wrap:wrap}.frame{overflow:auto;max-width:70vw;max-height:70vh;border:1px solid #999}
-.frame img{image-rendering:pixelated;transform-origin:0 0}.tabs button.active{font-weight:bold;background:#cde}
-"""
+_env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(TEMPLATES)), autoescape=True,
+                          undefined=jinja2.StrictUndefined, trim_blocks=True, lstrip_blocks=True)
 
-SCRIPT = """
-function show(id, view){
-  var box=document.getElementById(id); if(!box) return;
-  box.querySelectorAll('img.view').forEach(function(i){i.style.display = i.dataset.view==view ? '' : 'none';});
-  box.querySelectorAll('.tabs button').forEach(function(b){b.classList.toggle('active', b.dataset.view==view);});
-  box.dataset.active=view;
-}
-function expose(id, ev){var box=document.getElementById(id);
-  box.querySelectorAll('img.view').forEach(function(i){i.style.filter='brightness('+Math.pow(2,ev)+')';});}
-function zoom(id, z){var box=document.getElementById(id);
-  box.querySelectorAll('img.view').forEach(function(i){i.style.transform='scale('+z+')';});}
-window.addEventListener('load', function(){
-  var imgs=[].slice.call(document.images), ok=imgs.filter(function(i){return i.complete && i.naturalWidth>0;});
-  document.body.dataset.images=imgs.length; document.body.dataset.loaded=ok.length;
-  var m=location.hash.match(/view=([^&]+)/);
-  if(m){var p=decodeURIComponent(m[1]).split(':'); show(p[0], p[1]);}
-});
-"""
+
+def _text(x):
+    """A value as plain text (the template escapes it)."""
+    if x is None:
+        return ""
+    if isinstance(x, (list, tuple)):
+        return "; ".join(_text(v) for v in x)
+    return str(x)
 
 
 def _fmt(x, f="{:.4g}"):
-    return "" if x is None else f.format(x)
+    if x is None:
+        return ""
+    if isinstance(x, (int, float)) and not isinstance(x, bool):
+        return f.format(x)
+    return _text(x)  # not a number where one was expected: shown as it is, as text
 
 
-def _summary(runs):
-    rows = ["<table><tr><th>scene</th><th>backend</th><th>mode</th><th>status</th><th>spp</th><th>time (s)</th>"
-            "<th>RMSE</th><th>relMSE</th><th>MAPE</th><th>FLIP</th><th>probes</th><th>reason</th></tr>"]
-    for r in sorted(runs, key=lambda r: (ORDER.get(r["status"], 9), r["scene"], r["backend"])):
-        m, pr = r.get("metrics") or {}, r.get("probes") or []
-        probes = f"{sum(p['pass'] is True for p in pr)}/{len(pr)} pass" if pr else ""
-        anchor = f"<a href='#{_id(r)}'>{html.escape(r['scene'])}</a>" if r.get("image") else html.escape(r["scene"])
-        rows.append(f"<tr class='{r['status']}'><td>{anchor}</td><td>{r['backend']}</td><td>{r.get('mode') or ''}</td>"
-                    f"<td>{r['status']}</td><td>{r.get('spp') or ''}</td><td>{_fmt(r.get('time_s'), '{:.2f}')}</td>"
-                    f"<td>{_fmt(m.get('rmse'))}</td><td>{_fmt(m.get('relmse'))}</td><td>{_fmt(m.get('mape'))}</td>"
-                    f"<td>{_fmt(m.get('flip'))}</td><td>{probes}</td><td>{html.escape(r.get('reason') or '')}</td></tr>")
-    return "\n".join(rows + ["</table>"])
+def _dict(x):
+    return x if isinstance(x, dict) else {}
 
 
-def _id(run):
-    return f"{run['scene']}--{run['backend']}"
+def _list(x):
+    return x if isinstance(x, list) else []
+
+
+def _verdict(passed, otherwise):
+    return "pass" if passed is True else "FAIL" if passed is False else otherwise
+
+
+def _css(status):
+    return status if isinstance(status, str) and status in ORDER else ""
+
+
+def _local_url(out, rel):
+    """``rel`` as a relative, percent-encoded URL if it names a file inside ``out``; else None."""
+    text = str(rel) if isinstance(rel, (str, PurePosixPath, PureWindowsPath)) else ""
+    if not text or "\0" in text or PurePosixPath(text).is_absolute() or PureWindowsPath(text).anchor:
+        return None
+    parts = PureWindowsPath(text).parts if "\\" in text else PurePosixPath(text).parts
+    if not parts or any(p in ("", ".", "..") for p in parts):
+        return None
+    try:
+        path = (out / Path(*parts)).resolve()
+        if not path.is_file() or not path.is_relative_to(out.resolve()):
+            return None
+    except (OSError, ValueError):
+        return None
+    return "/".join(quote(p, safe="") for p in parts)
+
+
+def _reference_problems(run):
+    out = []
+    for p in _list(run.get("reference_problems")):
+        if isinstance(p, dict):
+            out.append(f"reference problem: {_text(p.get('file'))}: {_text(p.get('problem'))}")
+        else:
+            out.append(f"reference problem: {_text(p)}")
+    return out
+
+
+def _summary_rows(runs, anchors):
+    rows = []
+    order = sorted(range(len(runs)), key=lambda i: (ORDER.get(_css(runs[i].get("status")), 9),
+                                                    _text(runs[i].get("scene")), _text(runs[i].get("backend"))))
+    for i in order:
+        r = runs[i]
+        m, pr = _dict(r.get("metrics")), _list(r.get("probes"))
+        probes = f"{sum(isinstance(p, dict) and p.get('pass') is True for p in pr)}/{len(pr)} pass" if pr else ""
+        rows.append({"css": _css(r.get("status")), "anchor": anchors.get(i), "scene": _text(r.get("scene")),
+                     "backend": _text(r.get("backend")), "mode": _text(r.get("mode")), "status": _text(r.get("status")),
+                     "spp": _text(r.get("spp") or ""), "time": _fmt(r.get("time_s"), "{:.2f}"),
+                     "rmse": _fmt(m.get("rmse")), "relmse": _fmt(m.get("relmse")), "mape": _fmt(m.get("mape")),
+                     "flip": _fmt(m.get("flip")), "probes": probes, "reason": _text(r.get("reason")),
+                     "reference_problems": _reference_problems(r)})
+    return rows
 
 
 def _viewer(out, run):
-    folder = Path(run["image"]).parent
-    views = [(label, f"{folder.as_posix()}/{png}") for label, png in VIEWS if (out / folder / png).is_file()]
+    image = run.get("image")
+    if not isinstance(image, str) or not image:
+        return None
+    folder = PureWindowsPath(image).parent if "\\" in image else PurePosixPath(image).parent
+    views = [{"label": label, "src": src} for label, png in VIEWS if (src := _local_url(out, folder / png))]
     if not views:
-        return ""
-    vid = _id(run)
-    tabs = "".join(f"<button data-view='{l}' onclick=\"show('{vid}','{l}')\">{l}</button>" for l, _ in views)
-    imgs = "".join(f"<img class='view' data-view='{l}' src='{html.escape(src)}' alt='{l}'>" for l, src in views)
-    m = run.get("metrics") or {}
-    numbers = [f"<li>{k}: {_fmt(v)}</li>" for k, v in m.items()]
+        return None
+    numbers = [f"{_text(k)}: {_fmt(v)}" for k, v in _dict(run.get("metrics")).items()]
     test = run.get("test")
-    if test and test.get("p_min") is not None and test.get("pass") is not None:
-        numbers.append(f"<li>noise test: p_min {test['p_min']:.3g} vs {test['threshold']:.3g} "
-                       f"({'pass' if test['pass'] else 'FAIL'})</li>")
-    elif test:
-        numbers.append(f"<li>noise test: {html.escape(test.get('reason') or '')} "
-                       f"({ {True: 'pass', False: 'FAIL', None: 'not judged'}[test.get('pass')]})</li>")
-    for p in run.get("probes") or []:
-        mark = {True: "pass", False: "FAIL", None: "not measured"}[p["pass"]]
-        numbers.append(f"<li>{html.escape(p['name'])}: {_fmt(p['error'])} {html.escape(p['unit'] or '')} ({mark})</li>")
-    return (f"<h3 id='{vid}'>{html.escape(run['scene'])} / {run['backend']} {run.get('mode') or ''}: {run['status']}</h3>"
-            f"<div class='viewer' id='{vid}-box' data-active='{views[0][0]}'><div>"
-            f"<div class='tabs'>{tabs}</div>"
-            f"<label>exposure <input type='range' min='-4' max='4' step='0.5' value='0' "
-            f"oninput=\"expose('{vid}-box', this.value)\"></label> "
-            f"<label>zoom <input type='range' min='1' max='8' step='1' value='1' oninput=\"zoom('{vid}-box', this.value)\"></label>"
-            f"<div class='frame'>{imgs}</div></div><ul>{''.join(numbers)}</ul></div>"
-            f"<script>show('{vid}-box','{views[0][0]}')</script>")
+    if isinstance(test, dict):
+        verdict = _verdict(test.get("pass"), "not judged")
+        if all(isinstance(test.get(k), (int, float)) for k in ("p_min", "threshold")) and test.get("pass") is not None:
+            numbers.append(f"noise test: p_min {test['p_min']:.3g} vs {test['threshold']:.3g} ({verdict})")
+        else:
+            numbers.append(f"noise test: {_text(test.get('reason'))} ({verdict})")
+    for p in _list(run.get("probes")):
+        if not isinstance(p, dict):
+            numbers.append(_text(p))
+            continue
+        mark = _verdict(p.get("pass"), "not measured")
+        numbers.append(f"{_text(p.get('name'))}: {_fmt(p.get('error'))} {_text(p.get('unit'))} ({mark})")
+    return {"scene": _text(run.get("scene")), "backend": _text(run.get("backend")), "mode": _text(run.get("mode")),
+            "status": _text(run.get("status")), "views": views, "numbers": numbers,
+            "reference_problems": _reference_problems(run)}
+
+
+def _section(text, heading):
+    """The body of one ``## heading`` section of summary.md (up to the next section), or None."""
+    if f"## {heading}" not in text:
+        return None
+    return text.split(f"## {heading}", 1)[1].split("\n## ")[0].strip()
+
+
+def _stability(out, stab):
+    stab = [r for r in stab if isinstance(r, dict)]
+    sections = []
+    for name in sorted({_text(r.get("sweep")) for r in stab}):
+        rows = [r for r in stab if _text(r.get("sweep")) == name]
+        strips = []
+        for backend in sorted({_text(r.get("backend")) for r in rows if r.get("backend")}):
+            one_name_each = not re.search(r"[/\\]", backend + name)
+            src = _local_url(out, PurePosixPath("stability", backend, f"{name}.png")) if one_name_each else None
+            if src:
+                strips.append({"backend": backend, "src": src, "alt": f"{name} {backend}"})
+        cells = [{"css": _css(r.get("status")), "value": _text(r.get("value", "")), "backend": _text(r.get("backend", "")),
+                  "status": _text(r.get("status")), "mean": _fmt(r.get("mean")),
+                  "problems": _text(r.get("problems")) or _text(r.get("reason", ""))} for r in rows]
+        sections.append({"name": name, "strips": strips, "rows": cells})
+    return sections
+
+
+def _ids(runs, viewers):
+    """A unique, safe element id per viewer: SCENE--BACKEND when that is safe, else run-N."""
+    ids, taken = {}, set()
+    for i in viewers:
+        base = f"{_text(runs[i].get('scene'))}--{_text(runs[i].get('backend'))}"
+        vid = base if SAFE_ID.fullmatch(base) else f"run-{i}"
+        n = 2
+        while vid in taken or f"{vid}-box" in taken:
+            vid, n = f"{base if SAFE_ID.fullmatch(base) else f'run-{i}'}-{n}", n + 1
+        taken |= {vid, f"{vid}-box"}
+        ids[i] = vid
+    return ids
+
+
+def render(out_dir):
+    """The page of an output folder, as a string."""
+    out = Path(out_dir)
+    data = _dict(json.loads((out / "metrics.json").read_text()))
+    runs = [r for r in _list(data.get("runs")) if isinstance(r, dict)]
+    sweeps = [s for s in _list(data.get("sweeps")) if isinstance(s, dict)]
+    viewers = {}
+    for i, r in enumerate(runs):
+        v = _viewer(out, r)
+        if v:
+            viewers[i] = v
+    ids = _ids(runs, viewers)
+    for i, v in viewers.items():
+        v["id"] = ids[i]
+    summary_md = out / "summary.md"
+    summary_text = summary_md.read_text(encoding="utf-8", errors="replace") if summary_md.is_file() else ""
+    charts = []
+    for c in sorted({_text(s.get("chart")) for s in sweeps if s.get("chart")}):
+        src = _local_url(out, c)
+        if src:
+            charts.append({"src": src, "alt": c})
+    stab = _list(data.get("stability"))
+    return _env.get_template("report.html").render(
+        name=out.name, started=_text(data.get("started", "")), rows=_summary_rows(runs, ids),
+        rgb=_section(summary_text, "RGB renderers against the spectral references"), charts=charts,
+        sweep_text=_section(summary_text, "Speed against accuracy (sweeps)"),
+        stability=_stability(out, stab), viewers=list(viewers.values()))
 
 
 def write(out_dir):
-    out = Path(out_dir)
-    data = json.loads((out / "metrics.json").read_text())
-    runs, sweeps = data.get("runs", []), data.get("sweeps", [])
-    parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>Spectral benchmark: {out.name}</title>"
-             f"<style>{STYLE}</style><script>{SCRIPT}</script></head><body>",
-             f"<h1>Spectral benchmark results</h1><p>{html.escape(out.name)}, started {data.get('started', '')}. "
-             "A render passes when it agrees with its reference within the reference's noise and every "
-             "analytic probe holds.</p>", "<h2>Summary</h2>", _summary(runs)]
-    summary_text = (out / "summary.md").read_text() if (out / "summary.md").exists() else ""
-    if "## RGB renderers against the spectral references" in summary_text:
-        rgb = summary_text.split("## RGB renderers against the spectral references")[1].split("\n## ")[0]
-        parts += ["<h2>RGB renderers against the spectral references</h2>", "<pre>" + html.escape(rgb.strip()) + "</pre>"]
-    charts = sorted({l["chart"] for l in sweeps if l.get("chart")})
-    if charts:
-        parts.append("<h2>Speed against accuracy</h2>")
-        parts += [f"<img class='chart' src='{c}' alt='{c}'>" for c in charts]
-        summary_md = (out / "summary.md").read_text() if (out / "summary.md").exists() else ""
-        if "## Speed against accuracy" in summary_md:
-            parts.append("<pre>" + html.escape(summary_md.split("## Speed against accuracy (sweeps)")[1]) + "</pre>")
-    stab = data.get("stability") or []
-    if stab:
-        parts.append("<h2>Stability</h2>")
-        for name in sorted({r["sweep"] for r in stab}):
-            parts.append(f"<h3>{html.escape(name)}</h3>")
-            for backend in sorted({r.get("backend") for r in stab if r["sweep"] == name and r.get("backend")}):
-                if (out / "stability" / backend / f"{name}.png").is_file():
-                    parts.append(f"<p>{html.escape(backend)}</p><img class='strip' src='stability/{backend}/{name}.png' "
-                                 f"alt='{name} {backend}' style='image-rendering:pixelated;width:90%'>")
-            cells = "".join(f"<tr class='{r['status']}'><td>{r.get('value', '')}</td><td>{r.get('backend', '')}</td>"
-                            f"<td>{r['status']}</td><td>{_fmt(r.get('mean'))}</td>"
-                            f"<td>{html.escape('; '.join(r.get('problems') or []) or r.get('reason', ''))}</td></tr>"
-                            for r in stab if r["sweep"] == name)
-            parts.append("<table><tr><th>value</th><th>backend</th><th>status</th><th>mean</th><th>problems</th></tr>"
-                         f"{cells}</table>")
-    parts.append("<h2>Images</h2>")
-    parts += [_viewer(out, r) for r in runs if r.get("image")]
-    parts.append("</body></html>")
-    path = out / "report.html"
-    path.write_text("\n".join(parts))
+    path = Path(out_dir) / "report.html"
+    path.write_text(render(out_dir), encoding="utf-8")
     return path
