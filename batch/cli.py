@@ -16,11 +16,12 @@ import re
 import tomllib
 from pathlib import Path
 
+from ..exporters import validate
 from .backends import BACKENDS, DEFAULT, GROUPS, expand
 
 FORMATS = ("mitsuba", "art", "json", "cycles", "luxcore")
 # Bounds of the options (documented in --help and the README's option table)
-MAX_SPP = 1 << 24          # samples per pixel (Mitsuba counts samples in 32 bits, times passes)
+MAX_SPP = validate.render_limit("spp")[1]  # samples per pixel: the scene IR's own bound
 MAX_SCALE = 4.0            # resolution scale
 MAX_PASSES = 256
 MAX_SEED = (1 << 31) - 1

@@ -6,15 +6,9 @@ SceneError, naming the file and the field, and the other inputs load.
 """
 from pathlib import Path
 
-from ..exporters import ir_json, validate
+from ..exporters import ir_json, names, validate
 
 DEFAULT_BLEND = Path(__file__).resolve().parents[1] / "scenes.blend"
-# what a run writes at the top of its output folder (batch/jobs/runner.py, batch/report/):
-# no scene may take one of these names as its folder
-RESERVED = frozenset({"metrics.json", "metrics.json.tmp", "summary.md", "report.html", "sweeps", "stability",
-                      ".lock"})
-MAX_NAME = 128
-
 
 def default_input():
     """The .blend already open in Blender (blender -b file.blend -P ...), else scenes.blend."""
@@ -28,18 +22,9 @@ def default_input():
 
 
 def name_problem(name):
-    """Why ``name`` cannot be a scene's output folder (OUT/<name>/...), or None. A second line of
-    defence behind the schema's name pattern (exporters/validate.py)."""
-    if not isinstance(name, str):
-        return f"must be a string, got {type(name).__name__}"
-    if not name or len(name) > MAX_NAME:
-        return f"must be 1 to {MAX_NAME} characters long"
-    if any(c in name for c in "/\\") or any(ord(c) < 32 or ord(c) == 127 for c in name):
-        return "must not contain a path separator or a control character"
-    if name.startswith(".") or name.casefold() in RESERVED:
-        return (f"{name!r} is reserved for the run's own files ({', '.join(sorted(RESERVED))}, names "
-                "starting with '.')")
-    return None
+    """Why ``name`` cannot be a scene's output folder (OUT/<name>/...), or None: the IR's own rule
+    (exporters/names.py), applied again to whatever a loader returned."""
+    return names.scene_problem(name)
 
 
 def _label(name, path, k):

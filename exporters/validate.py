@@ -101,11 +101,34 @@ def _name_problems(scene):
             seen[obj["name"].lower()] = i
 
 
-def _value_problems(scene):
-    r = scene["render"]
+def render_limit(field):
+    """(minimum, maximum) of an integer field of ``render`` (the schema's bounds)."""
+    spec = schema()["properties"]["render"]["properties"][field]
+    return spec["minimum"], spec["maximum"]
+
+
+def _render_problems(r, why=""):
+    for field in ("width", "height", "spp", "max_depth"):
+        if field in r:
+            lo, hi = render_limit(field)
+            if not lo <= r[field] <= hi:
+                yield "render", field, f"must be {lo} to {hi}, got {r[field]}{why}"
     if r["width"] * r["height"] > MAX_PIXELS:
         yield "render", "width", (f"{r['width']} x {r['height']} is {r['width'] * r['height']} pixels, more than "
-                                  f"{MAX_PIXELS} (8192 x 8192)")
+                                  f"{MAX_PIXELS} (8192 x 8192){why}")
+
+
+def check_render(scene, why):
+    """Raise SceneError if the scene's render settings, changed by an option (``why`` says which),
+    left the IR's bounds."""
+    problems = list(_render_problems(scene["render"], why))
+    if problems:
+        raise SceneError(scene["name"], problems)
+    return scene
+
+
+def _value_problems(scene):
+    yield from (p for p in _render_problems(scene["render"]) if p[1] == "width")
     cam = scene["camera"]
     cam_name = cam.get("name", "camera")
     if not _finite(cam["fov"]) or not 0 < cam["fov"] < 180:

@@ -219,7 +219,13 @@ def check_luxcore(cfg, rgb):
 
 
 def check(text, root):
-    """Push one IR file's text through load -> validate -> writers inside ``root``."""
+    """Push one IR file's text through load -> validate -> writers inside ``root``; returns
+    "invalid" or "exported"."""
+    return check_detailed(text, root)[0]
+
+
+def check_detailed(text, root):
+    """check(), returning (outcome, the fields refused: [(object, field)] or [])."""
     root = Path(root)
     src = root / "in" / "scene.json"
     src.parent.mkdir(parents=True, exist_ok=True)
@@ -232,9 +238,9 @@ def check(text, root):
         assert err.problems, "a SceneError without problems"
         for problem in err.problems:
             assert len(problem) == 3 and all(isinstance(p, str) and p for p in problem), problem
-        assert str(err).startswith("scene ") or str(err).startswith("\n  scene "), str(err)[:200]
+        assert "scene " in str(err) and str(src) in str(err), str(err)[:200]  # names the file and the scene
         assert snapshot(root) == before, "a scene that failed validation wrote files"
-        return "invalid"
+        return "invalid", [(o, f) for o, f, _ in err.problems]
     name = names.file_stem(scene["name"])
     path = mitsuba_writer.write(scene, out / name / "mitsuba")
     check_mitsuba(path, scene)
@@ -254,7 +260,7 @@ def check(text, root):
     outside = {p for p in changed if not (p == "out" or p.startswith("out" + os.sep))}
     assert not outside, f"written outside OUT: {sorted(outside)[:5]}"
     _tree_inside(out)
-    return "exported"
+    return "exported", []
 
 
 _VOCAB = {}

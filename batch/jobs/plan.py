@@ -6,6 +6,7 @@ import copy
 import json
 from pathlib import Path
 
+from ...exporters import validate
 from ..studies import sweep
 from . import job as jobs
 
@@ -32,7 +33,8 @@ def for_run(scene, opts):
     if opts.get("scale") and opts["scale"] != 1.0:
         sc["render"]["width"] = max(1, round(sc["render"]["width"] * opts["scale"]))
         sc["render"]["height"] = max(1, round(sc["render"]["height"] * opts["scale"]))
-    return sc
+    return validate.check_render(sc, f" (after --spp {opts.get('spp')} --scale {opts.get('scale')})"
+                                 if opts.get("spp") or opts.get("scale", 1.0) != 1.0 else "")
 
 
 def main_jobs(scenes, made, opts, out, settings):
