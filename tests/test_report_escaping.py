@@ -271,3 +271,36 @@ def test_a_value_of_the_wrong_type_does_not_stop_the_report(run, tmp_path):
                 failures.append((path, value, repr(e)))
         holder[path[-1]] = kept
     assert not failures, failures[:10]
+
+
+def test_summary_md_cells_cannot_break_their_table_or_become_markup(tmp_path):
+    """summary.md (also printed on the terminal): every value is one cell of its row, shown as
+    text: a '|' or a newline cannot add cells or rows, '<' and backticks and links are escaped."""
+    from spectral_bench.batch.report import summary
+    payload = "a|b\nc <img src=x onerror=alert(1)> `code` [x](javascript:alert(1))"
+    runs = [{"scene": payload, "case": payload, "backend": payload, "mode": payload, "status": "failed",
+             "reason": payload, "reference_problems": [{"file": payload, "problem": payload}]}]
+    sweeps = [{"scene": payload, "backend": payload, "mode": payload, "points": [], "reason": payload}]
+    stability = [{"sweep": payload, "value": payload, "backend": payload, "mode": payload, "status": payload,
+                  "problems": [payload]}]
+    text = summary.write(tmp_path, runs, 1.0, sweeps, stability)
+    lines = text.splitlines()
+    tables, shown = 0, 0
+    for i, line in enumerate(lines):
+        if not line.startswith("|---"):
+            continue
+        tables += 1
+        cells = line.count("|")
+        for row in lines[i - 1:i] + [r for r in _until_blank(lines[i + 1:])]:
+            assert len(re.findall(r"(?<!\\)\|", row)) == cells, row  # no cell added or split
+            unescaped = re.sub(r"\\.", "", row)
+            assert "<" not in unescaped and "`" not in unescaped and "](" not in row, row
+            shown += payload.split("|")[0] in row
+    assert tables >= 4 and shown >= 4, text  # runs, reference problems, sweeps, stability
+
+
+def _until_blank(lines):
+    for line in lines:
+        if not line.startswith("|"):
+            return
+        yield line

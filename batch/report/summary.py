@@ -21,14 +21,20 @@ def table(runs):
         res = "x".join(map(str, r["resolution"])) if r.get("resolution") else ""
         reason = _cell(r.get("reason") or "")
         shown = f"{r['status']} (without reference)" if judged_without_reference(r) else r["status"]
-        rows.append(f"| {shown} | {r['scene']} | {r['backend']} | {r.get('mode') or ''} | {_num(r.get('spp'), '{}')} "
+        rows.append(f"| {_cell(shown)} | {_cell(r['scene'])} | {_cell(r['backend'])} | {_cell(r.get('mode') or '')} | {_num(r.get('spp'), '{}')} "
                     f"| {res} | {_num(r.get('time_s'), '{:.2f}')} | {_num(m.get('rmse'))} | {_num(m.get('relmse'))} "
                     f"| {_num(m.get('mape'))} | {_num(m.get('flip'))} | {test} | {reason[:300]} |")
     return "\n".join(rows)
 
 
 def _cell(text):
-    return str(text).replace("|", "/").replace("\r", " ").replace("\n", " ")
+    """Any value as one Markdown table cell, shown as text: no line break or unescaped '|' that
+    would end the row or the cell, no '<' that a Markdown viewer would read as HTML, no backtick
+    (code span) or link; names and ordinary reasons read plainly on a terminal too."""
+    text = " ".join(str(text).split())
+    for c in "\\|<`":
+        text = text.replace(c, "\\" + c)
+    return text.replace("](", "]\\(")  # no [text](link)
 
 
 def reference_problems_table(runs):
@@ -52,7 +58,7 @@ def reference_problems_table(runs):
         out += [f"| {_cell(f)} | {_cell(p)} | {_cell(', '.join(rows[(f, p)]))} |" for f, p in order]
     if without:
         out += ["", "Judged without a reference (no usable one): "
-                + ", ".join(f"{r['scene']} / {r['backend']} ({r['status']})" for r in without) + "."]
+                + _cell(", ".join(f"{r['scene']} / {r['backend']} ({r['status']})" for r in without)) + "."]
     return "\n".join(out) + "\n"
 
 
@@ -71,7 +77,7 @@ def sweeps_table(sweeps):
             "|---|---|---|---|---|---|---|---|---|---|"]
     for l in sweeps:
         if not l.get("points"):
-            rows.append(f"| {l['scene']} | {l['backend']} | {l.get('mode') or ''} | | | | | | | {l.get('reason', '')} |")
+            rows.append(f"| {_cell(l['scene'])} | {_cell(l['backend'])} | {_cell(l.get('mode') or '')} | | | | | | | {_cell(l.get('reason', ''))} |")
             continue
         eq = next((r for r in (l.get("equal") or {}).get("rows", []) if r["mode"] == l["mode"]
                    and r["backend"] == l["backend"]), {})
@@ -79,8 +85,9 @@ def sweeps_table(sweeps):
         spps = ", ".join(str(p["spp"]) for p in pts)
         times = ", ".join("{:.2f}".format(p["time_s"]) for p in pts)
         errs = ", ".join("{:.3g}".format(p["rmse"]) for p in pts)
-        rows.append(f"| {l['scene']} | {l['backend']} | {l['mode']} | {spps} | {times} | {errs} "
-                    f"| {_num(l.get('slope'), '{:.2f}')} | {'yes' if l.get('converges') else ('NO: ' if l.get('converges') is False else '') + l.get('flag', l.get('reason', ''))} "
+        verdict = 'yes' if l.get('converges') else ('NO: ' if l.get('converges') is False else '') + str(l.get('flag', l.get('reason', '')))
+        rows.append(f"| {_cell(l['scene'])} | {_cell(l['backend'])} | {_cell(l['mode'])} | {spps} | {times} | {errs} "
+                    f"| {_num(l.get('slope'), '{:.2f}')} | {_cell(verdict)} "
                     f"| {_num(eq.get('rmse_at_equal_time'))} | {_num(eq.get('time_at_equal_error'), '{:.3g}')} |")
     return "\n".join(rows) + "\n"
 
@@ -90,8 +97,9 @@ def stability_table(rows):
         return ""
     out = ["", "## Stability", "", "| sweep | value | backend | mode | status | mean | problems |", "|---|---|---|---|---|---|---|"]
     for r in rows:
-        out.append(f"| {r['sweep']} | {r.get('value', '')} | {r.get('backend', '')} | {r.get('mode') or ''} | {r['status']} "
-                   f"| {_num(r.get('mean'))} | {'; '.join(r.get('problems') or []) or r.get('reason', '')} |")
+        problems = '; '.join(map(str, r.get('problems') or [])) or r.get('reason', '')
+        out.append(f"| {_cell(r['sweep'])} | {_cell(r.get('value', ''))} | {_cell(r.get('backend', ''))} | {_cell(r.get('mode') or '')} "
+                   f"| {_cell(r['status'])} | {_num(r.get('mean'))} | {_cell(problems)} |")
     return "\n".join(out) + "\n"
 
 
@@ -124,9 +132,9 @@ def rgb_comparison(runs):
     rows = ["", "## RGB renderers against the spectral references", "",
             "What reducing spectra to RGB costs (exporters/rgb_reduction.py): each backend's RMSE against the "
             "scene's spectral reference, the mean CIEDE2000 of its Lambertian patch probes, and its status.", "",
-            "| case | scene | " + " | ".join(order) + " |", "|---|---|" + "---|" * len(order)]
+            "| case | scene | " + " | ".join(map(_cell, order)) + " |", "|---|---|" + "---|" * len(order)]
     for case, scene in scenes:
-        rows.append(f"| {case} | {scene} | " + " | ".join(_rgb_cell(by.get((scene, b))) for b in order) + " |")
+        rows.append(f"| {_cell(case)} | {_cell(scene)} | " + " | ".join(_cell(_rgb_cell(by.get((scene, b)))) for b in order) + " |")
     return "\n".join(rows) + "\n"
 
 
