@@ -39,7 +39,9 @@ STATUS_ICONS = {"ok": "CHECKMARK", "failed": "ERROR", "unjudged": "QUESTION", "k
                 "skipped": "CANCEL", "unsupported": "CANCEL"}
 STOKES = ("S0", "S1", "S2", "S3")
 # the batch runner's exit status (batch/verdict/status.py) as the panel says it
-FINISHED_WORDS = {0: "passed", 1: "failed", 3: "finished, some renders unjudged", 130: "interrupted"}
+FINISHED_WORDS = {0: "passed", 1: "failed", 2: "refused (a bad option or a folder in use: see the log)",
+                  3: "finished, some renders unjudged", 4: "nothing ran (every job skipped or unsupported)",
+                  130: "interrupted"}  # batch/verdict/status.py
 
 
 class RunSettings(bpy.types.PropertyGroup):

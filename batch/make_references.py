@@ -74,18 +74,24 @@ def main(argv=None):
     from spectral_bench.batch import backends, scene_sources
     from spectral_bench.batch.verdict import references
 
+    from spectral_bench.batch import cli
+    from spectral_bench.batch.jobs import engines
+    T = cli.TYPES  # the runner's checked option types: a bad value exits 2 naming the option
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("-i", "--input", nargs="+", default=[str(scene_sources.DEFAULT_BLEND)])
-    ap.add_argument("-s", "--scene", action="append")
-    ap.add_argument("--spp", type=int, default=4096, help="reference samples per pixel in all (default 4096)")
-    ap.add_argument("--factor", type=int, help="reference spp = factor x the scene's spp (instead of --spp)")
-    ap.add_argument("--passes", type=int, default=8)
-    ap.add_argument("--seed", type=int, default=1000, help="first seed (distinct from the runner's default 0)")
-    ap.add_argument("--out", default=str(references.REFERENCE_DIR))
-    ap.add_argument("--cluster", metavar="ADDRESS", help="a Dask scheduler, or local:N (default: this machine)")
+    ap.add_argument("-i", "--input", nargs="+", action="extend", type=T["input"],
+                    help="scenes.blend or scene IR JSON files (repeatable; default: scenes.blend)")
+    ap.add_argument("-s", "--scene", action="append", type=T["scene"])
+    ap.add_argument("--spp", type=T["spp"], default=4096, help="reference samples per pixel in all (default 4096)")
+    ap.add_argument("--factor", type=cli.int_in(1, 1 << 16), help="reference spp = factor x the scene's spp (instead of --spp)")
+    ap.add_argument("--passes", type=cli.int_in(2, cli.MAX_PASSES), default=8,
+                    help="independent passes (at least 2: their spread is the reference's noise; default 8)")
+    ap.add_argument("--seed", type=T["seed"], default=1000, help="first seed (distinct from the runner's default 0)")
+    ap.add_argument("--out", type=T["out"], default=str(references.REFERENCE_DIR))
+    ap.add_argument("--cluster", metavar="ADDRESS", type=T["cluster"], help="a Dask scheduler, or local:N (default: this machine)")
     ap.add_argument("--replace", action="store_true",
                     help="render again scenes whose reference is already in the output folder (default: leave them)")
     args = ap.parse_args(argv)
+    args.input = args.input or [str(scene_sources.DEFAULT_BLEND)]
     print(backends.get("mitsuba").llvm_message(), flush=True)
     out = Path(args.out)
     with contextlib.ExitStack() as held:  # the scenes' locks, released however this ends
@@ -168,7 +174,11 @@ def _make(args, argv, out, held):
     for plan in plans:
         if not plan[5]:
             write_reference(plan)  # every pass was already there
-    engine = engines.make(args.cluster)
+    try:
+        engine = engines.make(args.cluster)
+    except engines.ClusterError as exc:
+        print(f"error: --cluster {args.cluster}: {exc}", file=sys.stderr, flush=True)
+        return 2
     try:
         engine.map([j for p in plans for j in p[5]], finished)
     except engines.Interrupted:
