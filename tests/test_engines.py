@@ -83,17 +83,28 @@ def test_a_killed_worker_loses_no_job(golden, tmp_path):
                                       f"{name}/results/mitsuba", passes=2, source_scene=golden[name],
                                       verdict=plan.verdict_settings({"alpha": 0.01, "min_samples": 65536, "flip": False,
                                                                      "block": None, "references": None, "known": None})))
-        results = []
+        results, killed = [], []
         victim = sorted(pids.values())[0]
 
-        def kill_soon():
-            time.sleep(3.0)
-            os.kill(victim, signal.SIGKILL)
+        def kill_in_a_render():
+            # the event, not a delay: the victim has a render child (batch/backends/mitsuba_worker.py)
+            import psutil
+            worker = psutil.Process(victim)
+            while not results or len(results) < 3:
+                try:
+                    if any("mitsuba_worker" in " ".join(c.cmdline()) for c in worker.children()):
+                        os.kill(victim, signal.SIGKILL)
+                        killed.append(victim)
+                        return
+                except psutil.Error:
+                    pass
+                time.sleep(0.02)
         import threading
-        threading.Thread(target=kill_soon, daemon=True).start()
+        threading.Thread(target=kill_in_a_render, daemon=True).start()
         engine.map(job_list, lambda j, r: results.append((j, r)))
     finally:
         engine.close()
+    assert killed, "the victim worker never rendered"
     assert len(results) == 3
     assert all(r["status"] in ("ok", "known", "unjudged") for _, r in results), [(r["scene"], r["reason"]) for _, r in results]
 
