@@ -20,6 +20,7 @@ def _runs(out):
     return {(r["scene"], r["backend"]): r for r in metrics(out)["runs"]}
 
 
+@pytest.mark.slow
 def test_local_cluster_gives_the_default_engines_images_and_verdicts(tmp_path):
     local, dask = tmp_path / "local", tmp_path / "dask"
     p1 = run_batch(*SMALL, "-o", local)
@@ -37,6 +38,7 @@ def test_local_cluster_gives_the_default_engines_images_and_verdicts(tmp_path):
                [(p["name"], p["pass"], p.get("z")) for p in b[key]["probes"]]
 
 
+@pytest.mark.slow
 def test_an_interrupted_run_resumes_with_only_the_missing_jobs(tmp_path):
     """Stop the runner (SIGINT, as Ctrl-C) after its first finished job: metrics.json stays
     consistent and says which jobs were interrupted; --resume keeps what finished (its files are
@@ -67,6 +69,7 @@ def test_an_interrupted_run_resumes_with_only_the_missing_jobs(tmp_path):
             assert (out / r["image"]).stat().st_mtime_ns == stamps[r["scene"]]  # not rendered again
 
 
+@pytest.mark.slow
 def test_a_killed_worker_loses_no_job(golden, tmp_path):
     """SIGKILL a worker in the middle of its render: Dask gives the job to another worker (one
     retry) and every job still finishes."""

@@ -254,6 +254,7 @@ def test_references_folder_preference_persists_and_each_reference_names_its_orig
     assert any(t.startswith("reference (extension): mitsuba") for t in second["labels"] if t)
 
 
+@pytest.mark.slow
 def test_platform_zip_with_wheels_fits_the_platform_and_runs_on_its_wheels_alone(platform_zip, tmp_path):
     """The upload: within the platform's size limit; installed, Blender unpacks its wheels, and the
     installed batch runner judges a scene against a shipped reference in a Python that sees only

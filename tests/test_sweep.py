@@ -34,6 +34,7 @@ def sweep_run(tmp_path_factory):
     return proc, out, metrics(out)
 
 
+@pytest.mark.slow
 def test_sweep_flags_the_biased_mode_and_passes_the_unbiased_one(sweep_run):
     proc, out, data = sweep_run
     lines = {l["mode"]: l for l in data["sweeps"]}
@@ -110,6 +111,7 @@ def test_equal_time_says_no_overlap_when_the_render_times_do_not_meet():
     assert sweep.equal_time_and_error([_line("a", [1], [0.5])]) is None  # one point is no line
 
 
+@pytest.mark.slow
 def test_sweep_writes_charts_and_tables(sweep_run):
     """Structure of a real sweep's tables; whether its lines' measured times overlap depends on
     the machine, so the test checks the table that follows from its own points either way."""
