@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from conftest import ALL_SCENES, ROOT, run_batch, run_bpy
 from spectral_bench.batch import exr
@@ -382,6 +383,7 @@ def test_cancel_stops_the_run_and_keeps_finished_results(tmp_path):
     assert all(st in ("ok", "failed", "unsupported", "skipped", "unjudged", "known", "fixed") for st in out["statuses"])
 
 
+@pytest.mark.slow
 def test_stokes_components_load_into_images(tmp_path):
     out_dir = tmp_path / "o"
     proc = run_batch("-r", "mitsuba", "-s", "polarizing_spheres", "--scale", "0.125", "--no-flip", "-o", out_dir)
@@ -461,6 +463,7 @@ def test_file_export_operators_write_loadable_folders(tmp_path):
     assert ir_json.load(tmp_path / "ir.json")["name"] == "ggx_copper_70"
 
 
+@pytest.mark.slow
 def test_sweep_chart_loads_into_an_image(tmp_path):
     out = tmp_path / "o"
     run_batch("-r", "mitsuba", "-s", "ggx_copper_80", "--scale", "0.0625", "--sweep", "--ladder", "4,16", "--no-flip",

@@ -173,6 +173,7 @@ def batch_run(tmp_path_factory):
     return proc, out, {r["scene"]: r for r in metrics(out)["runs"]}
 
 
+@pytest.mark.slow
 def test_dispersion_scenes_agree_with_their_references_and_the_prism_probes_pass(batch_run):
     proc, out, runs = batch_run
     assert sorted(runs) == DISPERSION, proc.stderr[-2000:]

@@ -259,6 +259,7 @@ def test_references_exist_with_provenance_and_noise():
         assert ref.provenance["passes"] >= 4 and ref.stderr.shape == ref.mean.shape
 
 
+@pytest.mark.slow
 def test_450nm_light_spheres_agree_with_their_references_dark_and_red(golden, mono_run):
     proc, out, runs = mono_run
     assert sorted(runs) == MONO
@@ -408,6 +409,7 @@ def test_art_renders_the_450nm_spheres_dark_and_red(golden, tmp_path):
 
 # ---- Blender ------------------------------------------------------------------------------------------
 
+@pytest.mark.slow
 def test_blender_annotations_reach_the_ir_and_a_bad_matrix_file_is_named(tmp_path):
     from conftest import run_bpy
     good = tmp_path / "donaldson.json"

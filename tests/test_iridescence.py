@@ -214,6 +214,7 @@ def _same_within_noise(a, b, block=4):
     return bool(np.min(p) >= stats.sidak_threshold(stats.ALPHA, z.size)), float(np.abs(z).max())
 
 
+@pytest.mark.slow
 def test_thickness_zero_renders_like_roughconductor(tmp_path):
     """A rough (GGX 0.3) sphere under uniform D65: the plugin with thickness 0 and Mitsuba's
     roughconductor, rendered with independent seeds, agree within their passes' noise; a 100 nm
@@ -232,6 +233,7 @@ def test_thickness_zero_renders_like_roughconductor(tmp_path):
 
 
 # -- the Airy probe ---------------------------------------------------------------------------
+@pytest.mark.slow
 def test_airy_probe_passes_for_the_scene_and_fails_for_a_film_200nm_thinner(golden, tmp_path):
     scene = copy.deepcopy(golden["iridescent_sphere_smooth"])
     scene["render"]["width"] = scene["render"]["height"] = 64
@@ -311,6 +313,7 @@ def test_validation_names_object_and_field(golden):
         validate.check(bad)
 
 
+@pytest.mark.slow
 def test_blender_film_annotations_are_validated_inline():
     from conftest import run_bpy
     out = run_bpy("""
@@ -374,6 +377,7 @@ def test_references_exist_with_provenance(golden):
         assert ref.provenance["passes"] >= 4 and ref.stderr.shape == ref.mean.shape
 
 
+@pytest.mark.slow
 def test_every_iridescence_scene_agrees_with_its_reference(batch_run):
     proc, out, runs = batch_run
     assert sorted(runs) == IRIDESCENCE

@@ -25,6 +25,7 @@ def polarization_run(tmp_path_factory):
     return proc, out, {r["scene"]: r for r in metrics(out)["runs"]}
 
 
+@pytest.mark.slow
 def test_polarization_scenes_pass_probes_and_references(polarization_run):
     """At the default settings every polarisation scene passes its noise test and its probes
     (the Brewster probes may be "known" only through Mitsuba's colour normalisation), and the
@@ -41,6 +42,7 @@ def test_polarization_scenes_pass_probes_and_references(polarization_run):
     assert proc.returncode == 0, proc.stdout[-3000:]
 
 
+@pytest.mark.slow
 def test_crossed_polariser_extinguishes_the_brewster_reflection(polarization_run):
     _, _, runs = polarization_run
     parallel = _brewster(runs["polarizing_plane_0"]["probes"])
@@ -52,6 +54,7 @@ def test_crossed_polariser_extinguishes_the_brewster_reflection(polarization_run
     assert parallel["pass"] and crossed["pass"]
 
 
+@pytest.mark.slow
 def test_stokes_channels_are_named_and_physical(polarization_run):
     _, out, runs = polarization_run
     run = runs["polarizing_spheres"]
@@ -68,6 +71,7 @@ def test_stokes_channels_are_named_and_physical(polarization_run):
     assert next(p for p in found if p["name"].startswith("Stokes"))["pass"] is False
 
 
+@pytest.mark.slow
 def test_malus_law_at_45_degrees(golden, tmp_path):
     sc = copy.deepcopy(golden["polarizing_plane_0"])
     results = {}
@@ -95,6 +99,7 @@ def _turned(scene, degrees):
     return sc
 
 
+@pytest.mark.slow
 def test_polariser_angle_convention_is_counter_clockwise_seen_from_the_camera(golden, tmp_path):
     """With the reflection's s direction turned to +30 degrees, a polariser at +30 passes it and
     one at -30 (60 degrees off) passes cos^2 60 = 1/4 of it: the writer maps the IR's angle

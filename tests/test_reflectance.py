@@ -29,6 +29,7 @@ def test_references_exist_with_provenance_and_noise():
         assert (ref.stderr[lit] > 0).mean() > 0.95, name
 
 
+@pytest.mark.slow
 def test_every_reflectance_scene_agrees_with_its_reference(batch_run):
     proc, out, runs = batch_run
     assert sorted(runs) == REFLECTANCE
@@ -58,6 +59,7 @@ def _set_conductor(metal):
     return change
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["ggx_copper_50", "ggx_copper_80"])
 def test_gold_instead_of_copper_fails(golden, tmp_path, name):
     assert _render_variant(golden, name, tmp_path / "cu", _set_conductor("Cu")).passed
@@ -68,6 +70,7 @@ def test_gold_instead_of_copper_fails(golden, tmp_path, name):
 ISOLATED = [n for n in REFLECTANCE if n.endswith("_isolated") or n == "ggx_copper_grazing"]
 
 
+@pytest.mark.slow
 def test_the_ggx_probe_judges_every_lone_plate(batch_run):
     """Ground truth that comes from no renderer: the plates lit by the light alone are judged by
     quadrature of the microfacet BRDF (batch/verdict/probes/ggx.py), per block and as a whole."""
@@ -98,11 +101,13 @@ def _plate(sc):
     return next(o for o in sc["objects"] if o["name"].startswith("copper_plate"))
 
 
+@pytest.mark.slow
 def test_ggx_probe_passes_the_scene_as_it_is(golden, tmp_path):
     verdict = _probe_variant(golden, "ggx_copper_grazing", tmp_path, lambda sc: None)
     assert verdict["blocks"][1] and verdict["scale"][1], verdict
 
 
+@pytest.mark.slow
 def test_ggx_probe_detects_alpha_0_22_for_0_2(golden, tmp_path):
     def wider(sc):
         _plate(sc)["bsdf"]["roughness"]["alpha"] = 0.22
@@ -110,6 +115,7 @@ def test_ggx_probe_detects_alpha_0_22_for_0_2(golden, tmp_path):
     assert verdict["blocks"] == (False, False), verdict
 
 
+@pytest.mark.slow
 def test_ggx_probe_detects_a_one_percent_brighter_light(golden, tmp_path):
     def brighter(sc):
         next(o for o in sc["objects"] if o.get("emitter"))["emitter"]["radiance"]["scale"] *= 1.01
@@ -117,6 +123,7 @@ def test_ggx_probe_detects_a_one_percent_brighter_light(golden, tmp_path):
     assert verdict["scale"] == (False, False), verdict
 
 
+@pytest.mark.slow
 def test_ggx_probe_tells_separable_from_height_correlated_smith(golden, tmp_path):
     """Mitsuba uses the separable Smith G; judged by a probe that assumes the height-correlated
     form, the grazing scene (both directions 80 degrees from the normal) must fail."""

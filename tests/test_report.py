@@ -28,6 +28,7 @@ def report(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
 def test_report_images_and_charts_load(report):
     dom = dump_dom((report / "report.html").as_uri())
     images = int(re.search(r'data-images="(\d+)"', dom).group(1))
@@ -39,6 +40,7 @@ def test_report_images_and_charts_load(report):
         assert run["scene"] in dom
 
 
+@pytest.mark.slow
 def test_switching_views(report):
     dom = dump_dom((report / "report.html").as_uri() + "#view=ggx_copper_80--mitsuba-box:difference")
     box = re.search(r'<div class="viewer" id="ggx_copper_80--mitsuba-box" data-active="([^"]+)"', dom)

@@ -160,6 +160,7 @@ def units(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
 def test_units_agree_with_the_closed_form_and_with_mitsuba(units):
     sc = _units_scene()
     expected = 0.5 * colorimetry.xyz_to_srgb(colorimetry.spectrum_xyz(sc["environment"]["radiance"]))
@@ -196,6 +197,7 @@ def lamp(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", RGB)
 def test_render_is_judged_on_its_own_noise(lamp, name):
     info, names, img, se = lamp[name]
@@ -248,6 +250,7 @@ def _box_filter_problems(img, se, L, per_pass):
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", RGB)
 def test_pixel_filter_is_a_one_pixel_box_and_the_image_is_upright(tmp_path, name):
     info, _, img, se = render(name, _quadrant_scene(), tmp_path, 64, passes=2)
@@ -276,6 +279,7 @@ def charts(golden, tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", RGB)
 def test_colorchecker_renders_the_rule_exactly_within_noise(charts, name):
     for chart in ("macbeth_chart_D65", "macbeth_chart_D50"):
@@ -286,6 +290,7 @@ def test_colorchecker_renders_the_rule_exactly_within_noise(charts, name):
             assert res["pass"], (chart, patch, res)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", RGB)
 def test_colorchecker_d65_is_within_its_bound_and_d50_shows_the_rgb_error(charts, name):
     measured = {}
@@ -302,6 +307,7 @@ def test_colorchecker_d65_is_within_its_bound_and_d50_shows_the_rgb_error(charts
 
 # -- through the runner ---------------------------------------------------------------------------
 
+@pytest.mark.slow
 def test_runner_records_modes_noise_and_approximations(tmp_path):
     out = tmp_path / "o"
     proc = run_batch("-s", "ggx_copper_50", "-s", "polarizing_plane_0", "-r", "cycles", "-r", "luxcore",
@@ -319,6 +325,7 @@ def test_runner_records_modes_noise_and_approximations(tmp_path):
     assert (out / "ggx_copper_50" / "luxcore" / "render.cfg").is_file()
 
 
+@pytest.mark.slow
 def test_export_only_writes_blend_and_sdl_and_reports_unsupported(tmp_path):
     out = tmp_path / "o"
     proc = run_batch("-s", "ggx_copper_60", "-s", "polarizing_spheres", "--export-only", "--format", "luxcore",

@@ -84,6 +84,7 @@ def chart_run(tmp_path_factory):
     return proc, out, {r["scene"]: r for r in metrics(out)["runs"]}
 
 
+@pytest.mark.slow
 def test_rendered_charts_meet_the_probes_and_their_references(chart_run):
     """At the default settings: every patch and the chart's luminance scale are judged on the
     render's own noise; Mitsuba's film deviates from the CIE 1931 observer (its 5 nm tables and
@@ -119,10 +120,12 @@ def _chart(golden, tmp_path, change_rendered, name="macbeth_chart_D65"):
     return status.decide(entry, known.load())
 
 
+@pytest.mark.slow
 def test_unchanged_chart_is_ok_or_known(golden, tmp_path):
     assert _chart(golden, tmp_path, lambda sc: None)["status"] in ("ok", "known")
 
 
+@pytest.mark.slow
 def test_one_percent_brighter_illuminant_fails(golden, tmp_path):
     def brighter(sc):
         sc["environment"]["radiance"]["scale"] *= 1.01
@@ -132,6 +135,7 @@ def test_one_percent_brighter_illuminant_fails(golden, tmp_path):
     assert scale["pass"] is False and scale["measured"] == pytest.approx(1.011, abs=0.002)
 
 
+@pytest.mark.slow
 def test_a_0_3_de00_shift_of_one_patch_fails(golden, tmp_path):
     """Scale one patch's reflectance until its colour moves by 0.3 dE00 (computed, not guessed):
     that patch's probe must fail, the others must not."""
@@ -157,6 +161,7 @@ def test_a_0_3_de00_shift_of_one_patch_fails(golden, tmp_path):
     assert f"lambert {patch}" in failed and entry["status"] == "failed", (k, entry["reason"])
 
 
+@pytest.mark.slow
 def test_d50_rendered_as_d65_fails(golden, tmp_path):
     """The D65 chart's probes and reference must reject a render lit by D50."""
     def d50(sc):

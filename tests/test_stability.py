@@ -17,6 +17,7 @@ def stability_run(tmp_path_factory):
     return proc, out, metrics(out)
 
 
+@pytest.mark.slow
 def test_every_sweep_value_is_rendered_and_stable(stability_run):
     proc, out, data = stability_run
     rows = data["stability"]

@@ -79,8 +79,10 @@ def sweeps_table(sweeps):
         if not l.get("points"):
             rows.append(f"| {_cell(l['scene'])} | {_cell(l['backend'])} | {_cell(l.get('mode') or '')} | | | | | | | {_cell(l.get('reason', ''))} |")
             continue
-        eq = next((r for r in (l.get("equal") or {}).get("rows", []) if r["mode"] == l["mode"]
-                   and r["backend"] == l["backend"]), {})
+        table = l.get("equal") or {}
+        eq = next((r for r in table.get("rows", []) if r["mode"] == l["mode"] and r["backend"] == l["backend"]), {})
+        gap = {k: "no overlap" for k, ok in (("rmse_at_equal_time", "time_overlap"), ("time_at_equal_error", "error_overlap"))
+               if eq and table.get(ok) is False}  # the lines' ranges do not meet (batch/studies/sweep.py)
         pts = l["points"]
         spps = ", ".join(str(p["spp"]) for p in pts)
         times = ", ".join("{:.2f}".format(p["time_s"]) for p in pts)
@@ -88,7 +90,8 @@ def sweeps_table(sweeps):
         verdict = 'yes' if l.get('converges') else ('NO: ' if l.get('converges') is False else '') + str(l.get('flag', l.get('reason', '')))
         rows.append(f"| {_cell(l['scene'])} | {_cell(l['backend'])} | {_cell(l['mode'])} | {spps} | {times} | {errs} "
                     f"| {_num(l.get('slope'), '{:.2f}')} | {_cell(verdict)} "
-                    f"| {_num(eq.get('rmse_at_equal_time'))} | {_num(eq.get('time_at_equal_error'), '{:.3g}')} |")
+                    f"| {gap.get('rmse_at_equal_time') or _num(eq.get('rmse_at_equal_time'))} "
+                    f"| {gap.get('time_at_equal_error') or _num(eq.get('time_at_equal_error'), '{:.3g}')} |")
     return "\n".join(rows) + "\n"
 
 

@@ -72,30 +72,62 @@ def analyse(points, sigma2=None, var_of_mean=None):
 
 
 def _interp_loglog(xs, ys, x):
-    xs, ys = np.log(np.asarray(xs, float)), np.log(np.asarray(ys, float))
-    order = np.argsort(xs)
-    xs, ys = xs[order], ys[order]
-    if not xs[0] <= math.log(x) <= xs[-1]:
+    """y at x along the points (xs, ys), linear in log-log; None when x lies outside [min xs, max xs]
+    (compared as numbers, so a range's own end is inside it)."""
+    xs, ys = np.asarray(xs, float), np.asarray(ys, float)
+    if not xs.min() <= x <= xs.max():
         return None
-    return float(np.exp(np.interp(math.log(x), xs, ys)))
+    order = np.argsort(xs)
+    lx, ly = np.log(xs[order]), np.log(ys[order])
+    return float(np.exp(np.interp(np.clip(math.log(x), lx[0], lx[-1]), lx, ly)))
+
+
+def _common(ranges):
+    """(low, high) of the interval every (low, high) range covers, or None when they do not overlap."""
+    low, high = max(r[0] for r in ranges), min(r[1] for r in ranges)
+    return (low, high) if low <= high else None
+
+
+def _ranges_text(usable, key, unit):
+    return ", ".join(f"{l['backend']} {l['mode']} {min(p[key] for p in l['points']):.3g}-"
+                     f"{max(p[key] for p in l['points']):.3g}{unit}" for l in usable)
+
+
+NO_OVERLAP = "no overlap"
 
 
 def equal_time_and_error(lines):
     """Equal-time table (error each line reaches at the longest time every line covers) and
-    equal-error table (time each line needs for the smallest error every line reaches)."""
+    equal-error table (time each line needs for the smallest error every line reaches).
+
+    Both are read off each line's own points (log-log interpolation, never extrapolated), so they
+    exist only where the lines' ranges overlap. Render times are measured, so whether the time
+    ranges overlap depends on the machine (a loaded machine slows one line's renders more than
+    the other's): when they do not, ``time_s`` and every ``rmse_at_equal_time`` are None, the
+    table says so (``time_overlap`` False, ``time_note`` naming each line's range) and the
+    summary prints "no overlap". Likewise for errors (``error_overlap``, ``error_note``).
+    None when no line has two points."""
     usable = [l for l in lines if len(l["points"]) > 1]
     if len(usable) < 1:
         return None
-    t_common = min(max(p["time_s"] for p in l["points"]) for l in usable)
-    e_common = max(min(p["rmse"] for p in l["points"]) for l in usable)
+    times = _common([(min(p["time_s"] for p in l["points"]), max(p["time_s"] for p in l["points"])) for l in usable])
+    errors = _common([(min(p["rmse"] for p in l["points"]), max(p["rmse"] for p in l["points"])) for l in usable])
+    t_common = times[1] if times else None
+    e_common = errors[0] if errors else None
     rows = []
     for l in usable:
         ts, es = [p["time_s"] for p in l["points"]], [p["rmse"] for p in l["points"]]
         # error falls with time: interpolate along the line's own (time, error) points
         rows.append({"backend": l["backend"], "mode": l["mode"],
-                     "rmse_at_equal_time": _interp_loglog(ts, es, t_common),
-                     "time_at_equal_error": _interp_loglog(es[::-1], ts[::-1], e_common)})
-    return {"time_s": t_common, "rmse": e_common, "rows": rows}
+                     "rmse_at_equal_time": None if times is None else _interp_loglog(ts, es, t_common),
+                     "time_at_equal_error": None if errors is None else _interp_loglog(es, ts, e_common)})
+    table = {"time_s": t_common, "rmse": e_common, "time_overlap": times is not None,
+             "error_overlap": errors is not None, "rows": rows}
+    if times is None:
+        table["time_note"] = f"{NO_OVERLAP}: the lines' render times do not overlap ({_ranges_text(usable, 'time_s', ' s')})"
+    if errors is None:
+        table["error_note"] = f"{NO_OVERLAP}: the lines' errors do not overlap ({_ranges_text(usable, 'rmse', '')})"
+    return table
 
 
 def chart(path_stem, scene, lines, floor=None):
