@@ -81,6 +81,8 @@ def main():
             fields.update(f)
             failures += fails
             cpu[kind] += seconds
+            for f_ in fails:
+                print("FAILURE", f_, flush=True)
             done = sum(sum(c.values()) for c in totals.values())
             print(f"{done} scenes, {len(failures)} failures, {time.perf_counter() - t0:.0f} s", flush=True)
     wall = time.perf_counter() - t0

@@ -87,8 +87,8 @@ def mutated_scenes(draw):
     texts = _golden_texts()
     scene = json.loads(texts[draw(st.sampled_from(sorted(texts)))])
     for _ in range(draw(st.integers(1, 3))):
-        name_paths = NAME_PATHS + [("objects", i, "name") for i in range(len(scene.get("objects", [])))
-                                   if isinstance(scene.get("objects"), list)]
+        objects = scene.get("objects") if isinstance(scene.get("objects"), list) else []
+        name_paths = NAME_PATHS + [("objects", i, "name") for i in range(len(objects))]
         if draw(st.booleans()):
             path = draw(st.sampled_from(name_paths))
             value = draw(st.one_of(st.sampled_from(HOSTILE_TEXT), st.text(max_size=70), VALID_NAMES))
