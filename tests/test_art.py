@@ -87,7 +87,7 @@ def test_missing_artist_gives_skipped_jobs_never_passed(golden, tmp_path):
                      "-e", f"art={tmp_path / 'no_artist'}", "-o", out)
     runs = metrics(out)["runs"]
     assert [r["status"] for r in runs] == ["skipped"] and "not found" in runs[0]["reason"]
-    assert proc.returncode == 0  # nothing that ran failed; the summary lists the skip
+    assert proc.returncode == 4  # nothing ran: every job skipped (exit 4, batch/verdict/status.py); the summary lists it
     assert "skipped" in (out / "summary.md").read_text()
 
 
