@@ -26,8 +26,14 @@ class SceneError(ValueError):
 
 
 @lru_cache(maxsize=1)
+def _schema_text():
+    return SCHEMA_PATH.read_text()
+
+
 def schema():
-    return json.loads(SCHEMA_PATH.read_text())
+    """The IR's JSON Schema, a fresh copy on every call: a caller that changes it (as
+    hypothesis-jsonschema canonicalises a schema in place) cannot change validation."""
+    return json.loads(_schema_text())
 
 
 def _finite(x):
