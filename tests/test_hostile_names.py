@@ -176,3 +176,19 @@ def test_blender_names_become_safe_ids_with_their_label(tmp_path):
     assert ["copper_plate_50", None] in out["objects"]
     for name, _label in out["objects"] + [out["scene"]]:
         assert names.problem(name) is None
+
+
+def test_a_results_folder_from_elsewhere_cannot_point_the_panel_outside_it(tmp_path):
+    """The Results panel reads any outputs folder: a metrics.json naming its scene '../..' gets no
+    image path (nothing outside the folder is read, or written beside it as an RGB copy)."""
+    from spectral_bench.batch.report import results
+    outside = tmp_path / "secret" / "results" / "mitsuba"
+    outside.mkdir(parents=True)
+    (outside / "render.exr").write_bytes(b"not ours")
+    out = tmp_path / "run"
+    (out / "ok" / "results" / "mitsuba").mkdir(parents=True)
+    (out / "ok" / "results" / "mitsuba" / "render.exr").write_bytes(b"ours")
+    assert results.image_path(out, "../secret", "mitsuba", "render") is None
+    assert results.image_path(out, "ok", "../../secret/results/mitsuba", "render") is None
+    assert results.chart_path(out, "../secret") is None
+    assert results.image_path(out, "ok", "mitsuba", "render") == out / "ok" / "results" / "mitsuba" / "render.exr"

@@ -3,6 +3,8 @@ Blender panel and anything else that inspects results, whoever started the run."
 import json
 from pathlib import Path
 
+from ...exporters import names
+
 IMAGE_KINDS = {"render": "render.exr", "reference": "reference.exr", "diff_abs": "diff_abs.exr",
                "diff_rel": "diff_rel.exr", "flip": "flip.exr", "zscore": "zscore.exr"}
 
@@ -33,14 +35,24 @@ def last_status(out_dir):
     return status
 
 
+def _safe(*parts):
+    """The parts of a path inside an output folder, from a metrics.json that may come from anyone:
+    only names the IR admits (exporters/names.py), so none can leave the folder."""
+    return all(names.problem(p) is None for p in parts)
+
+
 def image_path(out_dir, scene, backend, kind):
-    """Path of one result image, or None if that run did not write it."""
+    """Path of one result image, or None if that run did not write it (or names no safe path)."""
+    if not _safe(scene, backend):
+        return None
     path = Path(out_dir) / scene / "results" / backend / IMAGE_KINDS[kind]
     return path if path.is_file() else None
 
 
 def chart_path(out_dir, scene):
     """The error-against-time chart of a sweep over ``scene``, or None."""
+    if not _safe(scene):
+        return None
     path = Path(out_dir) / "sweeps" / f"{scene}.png"
     return path if path.is_file() else None
 
