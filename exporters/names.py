@@ -46,10 +46,11 @@ def problem(name, kind="name"):
         return f"a {kind} is at most {MAX_LENGTH} characters, got {len(name)}"
     if _NAME.fullmatch(name) is None:
         bad = sorted({c for c in name if not (c.isascii() and (c.isalnum() or c in "_.-"))})
-        what = (f"characters {', '.join(map(repr, bad))} are not allowed" if bad
+        what = (f"the character {bad[0]!r} is not allowed" if len(bad) == 1
+                else f"the characters {', '.join(map(repr, bad))} are not allowed" if bad
                 else "it must not start with '.' or '-'")
         return (f"{what}: a {kind} names files, so it is letters, digits, '_', '.' and '-', "
-                f"starting with a letter, digit or '_' ({PATTERN})")
+                f"starting with a letter, digit or '_', at most {MAX_LENGTH} characters")
     if name.lower().split(".")[0] in _DEVICES:
         return f"{name!r} is a reserved device name on Windows"
     return None

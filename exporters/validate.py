@@ -74,7 +74,10 @@ def _schema_problems(data):
             path = path[1:]
         field = ".".join(str(p) for p in path) or "(root)"
         msg = err.message
-        if err.validator == "oneOf":
+        if err.validator in ("pattern", "maxLength") and err.schema.get("pattern") == names.PATTERN:
+            # a name: say what a name may be, and show the value with its escapes (a newline as \n)
+            msg = f"{names.problem(err.instance, 'name') or 'is not a name'}; got {err.instance!r}"
+        elif err.validator == "oneOf":
             msg = "does not match any allowed form: " + "; ".join(sorted({c.message for c in err.context})[:4])
         yield obj, field, msg
 
