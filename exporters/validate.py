@@ -9,6 +9,7 @@ from functools import lru_cache
 from pathlib import Path
 
 import jsonschema
+import numpy as np
 
 from . import dispersion, fluorescence, ir, mesh_io, names, spectra
 
@@ -142,10 +143,7 @@ def _value_problems(scene):
     cam_name = cam.get("name", "camera")
     if not _finite(cam["fov"]) or not 0 < cam["fov"] < 180:
         yield cam_name, "fov", f"must be in (0, 180) degrees, got {cam['fov']!r}"
-    for i, row in enumerate(cam["to_world"]):
-        for j, v in enumerate(row):
-            if not _finite(v):
-                yield cam_name, f"to_world[{i}][{j}]", f"must be finite, got {v!r}"
+    yield from ((cam_name, f, m) for f, m in _transform_problems(cam["to_world"], "to_world"))
     pol = cam.get("polarizer")
     if pol is not None and not _finite(pol["angle"]):
         yield cam_name, "polarizer.angle", f"must be a finite angle in degrees, got {pol['angle']!r}"
@@ -169,12 +167,28 @@ def _value_problems(scene):
             yield name, "bsdf", "object has neither a BSDF nor an emitter annotation"
 
 
+MAX_CONDITION = 1e8  # of a transform's 3x3 part: beyond it the frame is degenerate in float32
+
+
+def _transform_problems(m, field):
+    """A to_world is an affine map that can be inverted: finite, last row 0 0 0 1, and a 3x3 part
+    that is not (nearly) singular (writers and probes invert it: a flattened rectangle or camera
+    has no normal or view direction)."""
+    bad = [(i, j, v) for i, row in enumerate(m) for j, v in enumerate(row) if not _finite(v)]
+    for i, j, v in bad:
+        yield f"{field}[{i}][{j}]", f"must be finite, got {v!r}"
+    if bad:
+        return
+    a = np.asarray(m, dtype=np.float64)
+    if not np.array_equal(a[3], [0.0, 0.0, 0.0, 1.0]):
+        yield f"{field}[3]", f"must be [0, 0, 0, 1] (an affine transform), got {m[3]!r}"
+    elif not np.linalg.cond(a[:3, :3]) <= MAX_CONDITION:  # nan for an all-zero part
+        yield field, "is singular or nearly so (its 3x3 part flattens space): an object or camera needs a frame"
+
+
 def _shape_problems(shape, base_dir):
-    for key in ("to_world",):
-        for i, row in enumerate(shape.get(key, [])):
-            for j, v in enumerate(row):
-                if not _finite(v):
-                    yield f"shape.{key}[{i}][{j}]", f"must be finite, got {v!r}"
+    if "to_world" in shape:
+        yield from _transform_problems(shape["to_world"], "shape.to_world")
     if shape["type"] == "sphere":
         if not _finite(shape["radius"]) or shape["radius"] <= 0:
             yield "shape.radius", f"must be > 0, got {shape['radius']!r}"

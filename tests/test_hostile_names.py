@@ -192,3 +192,21 @@ def test_a_results_folder_from_elsewhere_cannot_point_the_panel_outside_it(tmp_p
     assert results.image_path(out, "ok", "../../secret/results/mitsuba", "render") is None
     assert results.chart_path(out, "../secret") is None
     assert results.image_path(out, "ok", "mitsuba", "render") == out / "ok" / "results" / "mitsuba" / "render.exr"
+
+
+@pytest.mark.parametrize("where", ["rectangle", "camera", "affine"])
+def test_a_degenerate_transform_is_refused_at_validation(golden, tmp_path, where):
+    """Found by the long fuzzing run: a rectangle whose to_world flattens it passed validation and
+    crashed the RGB export (numpy: singular matrix)."""
+    sc = copy.deepcopy(golden["ggx_copper_50"])
+    if where == "rectangle":
+        _obj(sc, "floor")["shape"]["to_world"][2] = [0.0, 0.0, 0.0, -1.0]
+        expected = ("floor", "shape.to_world")
+    elif where == "camera":
+        sc["camera"]["to_world"] = [[0.0] * 4, [0.0] * 4, [0.0] * 4, [0.0, 0.0, 0.0, 1.0]]
+        expected = (sc["camera"]["name"], "to_world")
+    else:
+        _obj(sc, "light")["shape"]["to_world"][3] = [0.0, 0.0, 1.0, 1.0]
+        expected = ("light", "shape.to_world[3]")
+    found, _ = _problems(sc, tmp_path)
+    assert expected in found, found
