@@ -43,10 +43,11 @@ ROOT = Path(__file__).resolve().parents[1]
 # requirements.txt): what the batch runner imports in Blender's Python (jsonschema: IR validation;
 # mitsuba, drjit: the Mitsuba backend; OpenEXR; flip-evaluator; Pillow: previews; scipy: verdict
 # statistics; colour-science (+ imageio): CIELAB/CIEDE2000 of the probes). matplotlib (sweep charts)
-# is not bundled: the panel does not run sweeps. Jinja2 (+ MarkupSafe): the panel writes report.html.
+# is not bundled: the panel does not run sweeps. Jinja2 (+ MarkupSafe): the panel writes report.html;
+# filelock: a run claims its output folder.
 WHEELS = ["jsonschema", "jsonschema-specifications", "referencing", "rpds-py", "attrs", "typing-extensions",
           "mitsuba", "drjit", "OpenEXR", "flip-evaluator", "Pillow", "scipy", "colour-science", "imageio", "plyfile",
-          "Jinja2", "MarkupSafe"]
+          "Jinja2", "MarkupSafe", "filelock"]
 PLATFORMS = {"linux-x64": ["manylinux_2_17_x86_64", "manylinux_2_28_x86_64", "manylinux2014_x86_64"],
              "windows-x64": ["win_amd64"], "macos-arm64": ["macosx_11_0_arm64", "macosx_12_0_arm64",
                                                            "macosx_14_0_arm64"]}

@@ -348,8 +348,9 @@ def test_platform_zip_with_wheels_fits_the_platform_and_runs_on_its_wheels_alone
                               env=dict(env, PYTHONPATH=str(numpy_only)))
     assert isolated.returncode != 0 and "scipy" in isolated.stderr  # the isolation is real: only the wheels serve
     where = subprocess.run(python + ["-c", "import json, scipy, colour, mitsuba, drjit, OpenEXR, PIL, jsonschema, "
-                                     "flip_evaluator; print(json.dumps({m.__name__: m.__file__ for m in (scipy, colour, "
-                                     "mitsuba, drjit, OpenEXR, PIL, jsonschema, flip_evaluator)}))"],
+                                     "flip_evaluator, jinja2, filelock; print(json.dumps({m.__name__: m.__file__ for m in "
+                                     "(scipy, colour, mitsuba, drjit, OpenEXR, PIL, jsonschema, flip_evaluator, jinja2, "
+                                     "filelock)}))"],
                            capture_output=True, text=True, env=env, timeout=300)
     assert where.returncode == 0, where.stderr[-2000:]
     assert all(path.startswith(str(site)) for path in json.loads(where.stdout.strip().splitlines()[-1]).values())
