@@ -83,6 +83,7 @@ def _schema_problems(data):
         yield obj, field, msg
 
 
+FOV_RANGE = (1e-3, 179.0)  # degrees; the writers take 1 / tan(fov / 2), which a denormal fov makes infinite
 MAX_PIXELS = 1 << 26  # 8192 x 8192: a render and its reference are held in memory as float32
 
 
@@ -141,8 +142,8 @@ def _value_problems(scene):
     yield from (p for p in _render_problems(scene["render"]) if p[1] == "width")
     cam = scene["camera"]
     cam_name = cam.get("name", "camera")
-    if not _finite(cam["fov"]) or not 0 < cam["fov"] < 180:
-        yield cam_name, "fov", f"must be in (0, 180) degrees, got {cam['fov']!r}"
+    if not _finite(cam["fov"]) or not FOV_RANGE[0] <= cam["fov"] <= FOV_RANGE[1]:
+        yield cam_name, "fov", f"must be in [{FOV_RANGE[0]:g}, {FOV_RANGE[1]:g}] degrees, got {cam['fov']!r}"
     yield from ((cam_name, f, m) for f, m in _transform_problems(cam["to_world"], "to_world"))
     pol = cam.get("polarizer")
     if pol is not None and not _finite(pol["angle"]):
@@ -167,6 +168,10 @@ def _value_problems(scene):
             yield name, "bsdf", "object has neither a BSDF nor an emitter annotation"
 
 
+# Scene units: the canonical scenes span a few tens of units; beyond these bounds single-precision
+# renderers lose the geometry and the writers' products overflow to inf
+MAX_COORDINATE = 1e6
+MIN_RADIUS = 1e-6
 MAX_CONDITION = 1e8  # of a transform's 3x3 part: beyond it the frame is degenerate in float32
 
 
@@ -174,9 +179,9 @@ def _transform_problems(m, field):
     """A to_world is an affine map that can be inverted: finite, last row 0 0 0 1, and a 3x3 part
     that is not (nearly) singular (writers and probes invert it: a flattened rectangle or camera
     has no normal or view direction)."""
-    bad = [(i, j, v) for i, row in enumerate(m) for j, v in enumerate(row) if not _finite(v)]
+    bad = [(i, j, v) for i, row in enumerate(m) for j, v in enumerate(row) if not _finite(v) or abs(v) > MAX_COORDINATE]
     for i, j, v in bad:
-        yield f"{field}[{i}][{j}]", f"must be finite, got {v!r}"
+        yield f"{field}[{i}][{j}]", f"must be a finite number within +-{MAX_COORDINATE:g}, got {v!r}"
     if bad:
         return
     a = np.asarray(m, dtype=np.float64)
@@ -190,10 +195,10 @@ def _shape_problems(shape, base_dir):
     if "to_world" in shape:
         yield from _transform_problems(shape["to_world"], "shape.to_world")
     if shape["type"] == "sphere":
-        if not _finite(shape["radius"]) or shape["radius"] <= 0:
-            yield "shape.radius", f"must be > 0, got {shape['radius']!r}"
-        if not all(_finite(c) for c in shape["center"]):
-            yield "shape.center", f"must be finite, got {shape['center']!r}"
+        if not _finite(shape["radius"]) or not MIN_RADIUS <= shape["radius"] <= MAX_COORDINATE:
+            yield "shape.radius", f"must be in [{MIN_RADIUS:g}, {MAX_COORDINATE:g}], got {shape['radius']!r}"
+        if not all(_finite(c) and abs(c) <= MAX_COORDINATE for c in shape["center"]):
+            yield "shape.center", f"must be finite and within +-{MAX_COORDINATE:g}, got {shape['center']!r}"
     if shape["type"] == "mesh":
         if "file" in shape:
             yield from _mesh_file_problems(shape, base_dir)
@@ -214,9 +219,9 @@ def _mesh_data_problems(vertices, faces, file=None):
     if any(i < 0 or i >= n for f in faces for i in f):
         f, what = field("faces")
         yield f, what + f"face index out of range (mesh has {n} vertices)"
-    if not all(_finite(c) for v in vertices for c in v):
+    if not all(_finite(c) and abs(c) <= MAX_COORDINATE for v in vertices for c in v):
         f, what = field("vertices")
-        yield f, what + "vertices must be finite"
+        yield f, what + f"vertices must be finite and within +-{MAX_COORDINATE:g}"
 
 
 def _mesh_file_problems(shape, base_dir):

@@ -210,3 +210,22 @@ def test_a_degenerate_transform_is_refused_at_validation(golden, tmp_path, where
         expected = ("light", "shape.to_world[3]")
     found, _ = _problems(sc, tmp_path)
     assert expected in found, found
+
+
+@pytest.mark.parametrize("where, value, expected", [
+    ("fov", 1e-320, ("glass_camera", "fov")),              # found by the long fuzzing run: ART's zoom became inf
+    ("radius", 1e300, ("glass_sphere", "shape.radius")),
+    ("center", 1e300, ("glass_sphere", "shape.center")),
+    ("to_world", 1e300, ("glass_light", "shape.to_world[0][3]"))])
+def test_numbers_that_overflow_a_writer_are_refused(golden, tmp_path, where, value, expected):
+    sc = copy.deepcopy(golden["ggx_glass"])
+    if where == "fov":
+        sc["camera"]["fov"] = value
+    elif where == "radius":
+        _obj(sc, "glass_sphere")["shape"]["radius"] = value
+    elif where == "center":
+        _obj(sc, "glass_sphere")["shape"]["center"][0] = value
+    else:
+        _obj(sc, "glass_light")["shape"]["to_world"][0][3] = value
+    found, _ = _problems(sc, tmp_path)
+    assert expected in found, found
