@@ -171,3 +171,18 @@ def test_a_blend_file_that_is_no_blend_fails_alone(tmp_path):
     runs = {r["scene"]: r for r in metrics(out)["runs"]}
     assert runs[GOOD]["status"] == "ok"
     assert runs["broken"]["status"] == "failed" and str(bad) in runs["broken"]["reason"], runs["broken"]
+
+
+def test_a_scene_folder_that_cannot_be_written_fails_that_scene_naming_the_path(tmp_path):
+    """OUT/<scene> taken by a file (as an unwritable scene folder would be): that scene's job fails
+    naming the path, the other scene is judged."""
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / "ggx_copper_50_isolated").write_text("a file where the scene's folder goes")
+    proc = run_batch("-i", GOLDEN / "ggx_copper_50_isolated.json", GOLDEN / "ggx_copper_60_isolated.json",
+                     "-r", "mitsuba", "--scale", "0.0625", "--spp", "4", "-o", out)
+    assert proc.returncode == 1, proc.stderr[-2000:]
+    runs = {r["scene"]: r for r in metrics(out)["runs"]}
+    assert runs["ggx_copper_60_isolated"]["status"] == "ok"
+    bad = runs["ggx_copper_50_isolated"]
+    assert bad["status"] == "failed" and str(out / "ggx_copper_50_isolated") in bad["reason"], bad["reason"]

@@ -98,7 +98,7 @@ class LocalEngine:
             try:
                 record, error = fut.result()
             except Exception as exc:  # noqa: BLE001 - an export that raises is one failed job
-                record, error = None, f"internal error: {exc!r}"
+                record, error = None, jobs.describe(exc)
             vf = verdicts.submit(self._judge, job, record, error)
             vf.add_done_callback(lambda f: done.put((job, f)))
 
@@ -114,7 +114,7 @@ class LocalEngine:
                 try:
                     result = fut.result()
                 except Exception as exc:  # noqa: BLE001
-                    result = jobs.failure(job, f"internal error: {exc!r}")
+                    result = jobs.failure(job, jobs.describe(exc))
                 on_result(job, result)
                 _test_stop_after(len(job_list) - len(remaining))
         except KeyboardInterrupt:

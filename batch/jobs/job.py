@@ -130,6 +130,17 @@ def new_entry(job, **kw):
     return e
 
 
+def describe(exc):
+    """One line for an unexpected exception in a job, naming the file where it is a file's
+    problem (an output folder that cannot be written, a path taken by a file)."""
+    if isinstance(exc, OSError) and exc.filename:
+        what = f"{exc.strerror or type(exc).__name__}: {exc.filename}"
+        if exc.filename2:
+            what += f" -> {exc.filename2}"
+        return f"cannot write or read a file: {what}"
+    return f"internal error: {exc!r}"
+
+
 def failure(job, reason, record=None):
     """The result of a job that could not finish (crash after its retry, killed worker, interrupt)."""
     if job["kind"] == "render":
