@@ -37,7 +37,10 @@ def make(kind, scene_name, scene, backend, mode, spp, out, folder, *, backend_op
 
 
 def job_id(job):
-    """What determines the job's image and its verdict, hashed."""
+    """What determines the job's image and its verdict, hashed; computed once when the job is
+    planned (batch/jobs/plan.py stores it as job["id"]: the scene's fingerprint reads its meshes)."""
+    if "id" in job:
+        return job["id"]
     from ..verdict import references
     key = {k: job[k] for k in ("kind", "backend", "backend_options", "mode", "spp", "passes", "seed", "extra")}
     key["scene"] = references.fingerprint(job["scene"])

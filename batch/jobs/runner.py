@@ -274,7 +274,7 @@ class Run:
         self.done = []
         todo = []
         for j in job_list:
-            previous = self.previous.get(j.get("id") or planning.job_id(j))
+            previous = self.previous.get(planning.job_id(j))
             if previous is not None:
                 self._keep(j, previous)
             else:
