@@ -16,8 +16,8 @@ import re
 import tomllib
 from pathlib import Path
 
-from ..exporters import validate
-from .backends import BACKENDS, DEFAULT, GROUPS, expand
+from ..exporters import names as scene_names, validate
+from .backends import BACKENDS, DEFAULT, GROUPS, command, expand, known_names
 
 FORMATS = ("mitsuba", "art", "json", "cycles", "luxcore")
 # Bounds of the options (documented in --help and the README's option table)
@@ -33,7 +33,7 @@ DEFAULTS = {
     "out": None, "export_only": False, "format": None, "log": None, "visualize": False, "settings": None,
     "variant": None, "alpha": 0.01, "block": None, "min_samples": 65536, "timeout": 1800, "passes": 2, "seed": 0, "flip": True,
     "references": None, "known": None, "list": False, "art_ggx": False, "sweep": False, "ladder": None, "sweep_modes": None, "stability": False,
-    "approximate": False, "cluster": None, "cluster_timeout": DEFAULT_CLUSTER_TIMEOUT, "dashboard": None, "resume": None,
+    "approximate": False, "renderers": None, "cluster": None, "cluster_timeout": DEFAULT_CLUSTER_TIMEOUT, "dashboard": None, "resume": None,
 }
 
 
@@ -142,8 +142,11 @@ def _nonempty(v):
 
 
 def _renderer(v):
-    if v not in BACKENDS and v not in GROUPS:
-        raise ValueError(f"unknown backend or group (known: {', '.join([*BACKENDS, *GROUPS])})")
+    """A backend, group or declared renderer's name (declared ones are known only once every
+    --renderers file is read: ``parse`` checks the name against them)."""
+    if v not in BACKENDS and v not in GROUPS and scene_names.problem(v):
+        raise ValueError(f"unknown backend or group (known: {', '.join([*BACKENDS, *GROUPS])}, or a renderer "
+                         "declared with --renderers FILE)")
     return v
 
 
@@ -153,10 +156,15 @@ def _format(v):
     return v
 
 
+def _exec_name(name):
+    """Whether the text before '=' in -e is meant as a renderer's name (not part of a path)."""
+    return "/" not in name and "\\" not in name
+
+
 def split_exec(item):
     """(backend or '*', path) from an ``-e [BACKEND=]PATH`` value."""
     name, sep, path = item.partition("=")
-    if sep and name in BACKENDS:
+    if sep and _exec_name(name):
         return name, path
     return "*", item
 
@@ -164,12 +172,12 @@ def split_exec(item):
 def _exec(v):
     _nonempty(v)
     name, sep, path = v.partition("=")
-    if sep and name in BACKENDS:
+    if sep and _exec_name(name):
+        if name not in BACKENDS and scene_names.problem(name):
+            raise ValueError(f"unknown backend {name!r} before '=' (form: [BACKEND=]PATH; backends: "
+                             f"{', '.join(BACKENDS)} or a declared renderer)")
         if not path.strip():
             raise ValueError(f"no executable after {name}= (form: [BACKEND=]PATH)")
-        return v
-    if sep and ("/" not in name and "\\" not in name):  # NAME=PATH with a NAME that is no backend
-        raise ValueError(f"unknown backend {name!r} before '=' (form: [BACKEND=]PATH; backends: {', '.join(BACKENDS)})")
     return v
 
 
@@ -235,6 +243,7 @@ TYPES = {
     "ladder": _comma_list(SPP, "N,N,..."), "sweep_modes": _comma_list(_MODE, "MODE,..."),
     "cluster": text_kind(_cluster, "address"), "cluster_timeout": number(0, 3600, lo_open=True),
     "dashboard": text_kind(_dashboard, "[HOST]:PORT"), "resume": text_kind(_nonempty, "path"),
+    "renderers": text_kind(_nonempty, "path"),
 }
 
 
@@ -266,6 +275,9 @@ def parser():
     ap.add_argument("-v", "--visualize", action="store_true", help="open the results when done")
     ap.add_argument("--settings", action="extend", nargs="+", type=T["settings"], metavar="FILE",
                     help="settings file (TOML or JSON; repeatable, later files win)")
+    ap.add_argument("--renderers", action="append", type=T["renderers"], metavar="FILE",
+                    help="declare renderers that run as a command ([renderers.NAME] tables in a TOML file; repeatable; "
+                         "README: Add your renderer); select them with -r NAME")
     ap.add_argument("--variant", type=T["variant"], help="force a Mitsuba variant (default: cheapest that models the scene)")
     ap.add_argument("--alpha", type=T["alpha"], help="significance level of the noise test, 0 < ALPHA < 1 (default 0.01)")
     ap.add_argument("--block", type=T["block"], help="block side in pixels of the noise test, >= 1 (default: from --min-samples)")
@@ -345,10 +357,38 @@ def load_settings(path):
     actions = {a.dest: a for a in parser()._actions}
     out = {}
     for key, value in data.items():
+        if key == "renderers":  # declarations ([renderers.NAME] tables) or renderers files, relative to this file
+            out[key] = _settings_renderers(value, path)
+            continue
         try:
             out[key] = _settings_value(actions[key], value)
         except ValueError as exc:
             raise SettingsError(f"settings file {path}: {key} = {value!r}: {exc}") from None
+    return out
+
+
+def _settings_renderers(value, path):
+    """{name: declaration} from a settings file's ``renderers``: tables, or files to read."""
+    try:
+        if isinstance(value, dict):
+            return command.tables(value, path)
+        files = [value] if isinstance(value, str) else value
+        if not isinstance(files, list) or not all(isinstance(f, str) and f.strip() for f in files):
+            raise command.DeclarationError(f"settings file {path}: renderers must be [renderers.NAME] tables or "
+                                           f"renderers files, got {value!r}")
+        return merge_declarations([(Path(path).parent / f, command.load_file(Path(path).parent / f)) for f in files])
+    except command.DeclarationError as exc:
+        raise SettingsError(str(exc)) from None
+
+
+def merge_declarations(sources):
+    """One {name: declaration} from [(where, {name: declaration})]: a name declared twice is refused."""
+    out, origin = {}, {}
+    for where, decls in sources:
+        for name, decl in decls.items():
+            if name in out and out[name] != decl:
+                raise command.DeclarationError(f"renderer {name!r} is declared twice: in {origin[name]} and in {where}")
+            out[name], origin[name] = decl, where
     return out
 
 
@@ -362,9 +402,12 @@ def check_option(key, value):
             if not isinstance(value, dict):
                 raise ValueError(f"must be a table of BACKEND = PATH, got {value!r}")
             for name, path in value.items():
-                if name != "*" and name not in BACKENDS or not isinstance(path, str) or not path.strip():
+                if name != "*" and name not in BACKENDS and scene_names.problem(name) \
+                        or not isinstance(path, str) or not path.strip():
                     raise ValueError(f"bad entry {name!r} = {path!r}")
             return dict(value)
+        if key == "renderers":
+            return command.recheck(value)
         actions = {a.dest: a for a in parser()._actions}
         if key not in actions:
             raise ValueError("unknown option")
@@ -385,17 +428,31 @@ def parse(args):
     cli = vars(parser().parse_args(args))
     opts = Options(DEFAULTS)
     given = set(cli)
+    declared = []
     for path in cli.get("settings") or []:
         settings = load_settings(path)
         given |= set(settings)
+        if "renderers" in settings:
+            declared.append((path, settings.pop("renderers")))
         opts.update(settings)
+    try:
+        declared += [(f, command.load_file(f)) for f in cli.pop("renderers", None) or []]
+        opts["renderers"] = merge_declarations(declared) or None
+    except command.DeclarationError as exc:
+        raise UsageError(str(exc)) from None
     opts.update(cli)
     opts.given = frozenset(given)
+    known = known_names(opts["renderers"])
+    for name in opts["renderer"] or []:
+        if name not in known:
+            raise UsageError(f"-r {name}: unknown backend, group or declared renderer (known: {', '.join(known)})")
     execs = {}
     for item in opts["exec"] or []:
         name, path = split_exec(item)
+        if name != "*" and name not in known:
+            raise UsageError(f"-e {item}: {name!r} is no backend or declared renderer (known: {', '.join(known)})")
         execs[name] = path
-    if "*" in execs and len(expand(opts["renderer"])) != 1:
+    if "*" in execs and len(expand(opts["renderer"], opts["renderers"])) != 1:
         raise UsageError(f"-e {execs['*']}: a PATH without BACKEND= needs exactly one backend (-r NAME); "
                          f"write BACKEND=PATH (backends: {', '.join(BACKENDS)})")
     if opts["resume"] and opts["out"] and Path(opts["out"]).resolve() != Path(opts["resume"]).resolve():

@@ -20,6 +20,20 @@ def write(path, rgb, extra=None, header=None):
     return path
 
 
+NO_COMPRESSION = OpenEXR.NO_COMPRESSION
+
+
+def write_channels(path, channels, compression=OpenEXR.ZIP_COMPRESSION):
+    """Write {channel name: HxW array} as they are (float32 unless float16), e.g. a renderer's raw
+    film channels or a pass that is read back at once (``NO_COMPRESSION``)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    data = {n: np.ascontiguousarray(a if a.dtype == np.float16 else a.astype(np.float32)) for n, a in channels.items()}
+    with OpenEXR.File({"compression": compression, "type": OpenEXR.scanlineimage}, data) as f:
+        f.write(str(path))
+    return path
+
+
 def read(path):
     """{channel name: HxW float32 array}; an RGB(A) group is split into R, G, B(, A)."""
     out = {}

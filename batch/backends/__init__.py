@@ -16,13 +16,18 @@ The interface every backend implements (plain objects; no base class needed):
         pass-to-pass spread; info holds variant/mode, spp, passes, seed, time_s (render only),
         wall_s, resolution, channels, versions (an RGB backend adds ``approximated``: what an
         ``rgb-approx`` mode rendered differently). Raises BackendFailure.
+Rendering goes through one pass loop (batch/backends/passes.py): a backend's ``session(path, mode,
+log)`` renders one pass at a time (``render`` above is that loop). Renderers declared in TOML
+(batch/backends/command.py) are backends like these, built from their declaration.
 Constructors take ``executable`` (and: Mitsuba ``force_variant``, ART ``ggx``, Cycles and LuxCore
 ``approximate``, from --approximate).
 """
 from .art_backend import ArtBackend
+from .command import CommandBackend
 from .cycles_backend import CyclesBackend
 from .luxcore_backend import LuxCoreBackend
-from .mitsuba_backend import BackendFailure, MitsubaBackend  # noqa: F401 - BackendFailure is part of the interface
+from .mitsuba_backend import MitsubaBackend
+from .passes import BackendFailure  # noqa: F401 - BackendFailure is part of the interface
 
 # spectral backends first; the RGB ones (Cycles, LuxCore) measure what reducing spectra to RGB costs
 BACKENDS = {"mitsuba": MitsubaBackend, "art": ArtBackend, "cycles": CyclesBackend, "luxcore": LuxCoreBackend}
@@ -33,17 +38,39 @@ GROUPS = {"spectral": ["mitsuba", "art"], "rgb": ["cycles", "luxcore"], "all": l
 DEFAULT = GROUPS["spectral"]
 
 
-def expand(names):
+def groups(declared=None):
+    """The groups of -r: the built-in ones, each declared renderer's ``groups``, and ``declared``
+    (every declared renderer)."""
+    out = {g: list(m) for g, m in GROUPS.items()}
+    for name, decl in (declared or {}).items():
+        for g in ["declared", *decl.get("groups", [])]:
+            out.setdefault(g, [])
+            if name not in out[g]:
+                out[g].append(name)
+    return out
+
+
+def known_names(declared=None):
+    """Every name -r accepts: backends, declared renderers and groups."""
+    return [*BACKENDS, *(declared or {}), *groups(declared)]
+
+
+def expand(names, declared=None):
     """Backend names from -r values (names or groups), in order, without repeats."""
+    table = groups(declared)
     out = []
-    for n in names or DEFAULT:
-        for b in GROUPS.get(n, [n]):
+    for n in names or table["spectral"]:
+        for b in table.get(n, [n]):
             if b not in out:
                 out.append(b)
     return out
 
 
 def get(name, **options):
+    """The backend ``name`` rebuilt from its options (plain data: a job carries them); a declared
+    renderer's options hold its declaration (batch/backends/command.py)."""
+    if "declaration" in options:
+        return CommandBackend(name, **options)
     if name not in BACKENDS:
         raise KeyError(f"unknown backend {name!r} (known: {', '.join(BACKENDS)})")
     return BACKENDS[name](**options)

@@ -11,12 +11,10 @@ labels are their centres), integrated here with the CIE 1931 CMFs to linear sRGB
 IR defines colour (exporters/colorimetry.py): R, G, B and, for Stokes output, S0.R ... S3.B.
 ART's own sRGB EXR is not used: it maps out-of-gamut colours into the gamut.
 """
-import math
 import os
 import re
 import shutil
 import subprocess
-import time
 from functools import lru_cache
 from pathlib import Path
 
@@ -24,8 +22,8 @@ import numpy as np
 
 from ...exporters import art_writer, colorimetry, spectra
 from .. import exr
-from . import child
-from .mitsuba_backend import BackendFailure
+from . import passes as passes_mod
+from .passes import BackendFailure
 
 NATIVE = {"spectral", "polarization", "dispersion", "fluorescence"}  # dispersion: CONST_SELLMEIER_DISPERSION_6;
 # fluorescence: CONST_FLUORESCENT_COLOUR (art_writer)
@@ -116,45 +114,28 @@ class ArtBackend:
     def export(self, scene, out_dir):
         return art_writer.write(scene, out_dir, ggx=self.ggx)[0]
 
-    def _render_once(self, arm, mode, spp, seed, timeout, log):
-        run_dir = arm.parent.parent / f"run_seed{seed}"
+    def render(self, arm_path, mode, spp, out_exr, passes=1, seed=0, timeout=1800, log_path=None):
+        """Render in independent passes (batch/backends/passes.py); returns the render record."""
+        return passes_mod.render(self, arm_path, mode, spp, out_exr, passes, seed, timeout, log_path)
+
+    def session(self, arm_path, mode, log):
+        """One artist run per pass, each on its own copy of the exported folder."""
+        versions = {"art": art_version(self.artist), "artist": str(self.artist)}
+        return passes_mod.OneProcessPerPass(
+            lambda spp, seed, out, timeout, log: self._pass(Path(arm_path), mode, spp, seed, out, timeout, log),
+            log, {"versions": versions})
+
+    def _pass(self, arm, mode, spp, seed, out, timeout, log):
+        run_dir = Path(out).parent / f"art_seed{seed}"
         shutil.rmtree(run_dir, ignore_errors=True)
         shutil.copytree(arm.parent, run_dir)
         cmd = [str(self.artist), "scene.arm", "-b", "-j", str(os.cpu_count() or 1), f"-DSAMPLES={spp}",
                "-wp", "d65", "-s46e", "-seed", str(seed + 1), "-f"]
         if mode.endswith("polarized"):
             cmd.append("-p")
-        t0 = time.perf_counter()
-        try:
-            proc = subprocess.run(cmd, cwd=run_dir, capture_output=True, text=True, timeout=timeout, **child.popen_kwargs(),
-                                  env=artist_env(self.artist))
-        except subprocess.TimeoutExpired as exc:
-            raise BackendFailure(f"artist timed out after {timeout} s") from exc
-        wall = time.perf_counter() - t0
-        log.write(f"$ (cd {run_dir}; {' '.join(cmd)})\n{proc.stdout}\n{proc.stderr}\n")
-        if proc.returncode != 0 or not (run_dir / "scene.exr").is_file():
-            tail = [l for l in proc.stderr.splitlines() if "Error" in l or "Reason" in l or "error:" in l][-3:]
-            raise BackendFailure(f"artist exited with {proc.returncode}: {' | '.join(tail)[-600:]}")
+        wall = passes_mod.run_command(cmd, timeout, log, "artist", env=artist_env(self.artist), cwd=run_dir)
+        if not (run_dir / "scene.exr").is_file():
+            raise BackendFailure(f"artist wrote no scene.exr in {run_dir}")
         names, img = stokes_to_rgb(exr.read(run_dir / "scene.exr"))  # always the spectral EXR (art_writer)
         shutil.rmtree(run_dir, ignore_errors=True)
-        return names, img.astype(np.float64), wall
-
-    def render(self, arm_path, mode, spp, out_exr, passes=1, seed=0, timeout=1800, log_path=None):
-        arm = Path(arm_path)
-        per_pass = math.ceil(spp / passes)
-        images, total = [], 0.0
-        with open(log_path or os.devnull, "w") as log:
-            for k in range(passes):
-                names, img, wall = self._render_once(arm, mode, per_pass, seed + k, timeout, log)
-                images.append(img)
-                total += wall
-        stack = np.stack(images)
-        extra = {}
-        if passes > 1:
-            stderr = stack.std(axis=0, ddof=1) / math.sqrt(passes)
-            extra = {f"stderr.{n}": stderr[..., i].astype(np.float32) for i, n in enumerate(names)}
-        exr.write_image(out_exr, names, stack.mean(axis=0), extra)
-        versions = {"art": art_version(self.artist), "artist": str(self.artist)}
-        return {"variant": mode, "spp": per_pass * passes, "passes": passes, "seed": seed, "time_s": total,
-                "wall_s": total, "resolution": [int(stack.shape[2]), int(stack.shape[1])], "channels": names,
-                "versions": versions}
+        return {"names": names, "image": img.astype(np.float64), "time_s": wall}

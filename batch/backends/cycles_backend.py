@@ -12,6 +12,8 @@ import sys
 from pathlib import Path
 
 from ...exporters import rgb_scene
+from .. import exr
+from . import passes as passes_mod
 from .rgb_common import RgbBackend, reduction_of, run_child
 
 WORKER = Path(__file__).resolve().parent / "cycles_worker.py"
@@ -40,10 +42,21 @@ class CyclesBackend(RgbBackend):
         return blend
 
     def render(self, blend, mode, spp, out_exr, passes=1, seed=0, timeout=1800, log_path=None):
-        result = Path(out_exr).with_suffix(".result.json")
+        """Render in independent passes (batch/backends/passes.py); returns the render record."""
+        return passes_mod.render(self, blend, mode, spp, out_exr, passes, seed, timeout, log_path)
+
+    def session(self, blend, mode, log):
+        """One child bpy process per pass (it opens the .blend and renders one seed)."""
+        return passes_mod.OneProcessPerPass(
+            lambda spp, seed, out, timeout, log: self._pass(blend, mode, spp, seed, out, timeout, log),
+            log, {"approximated": reduction_of(blend).get("approximated", [])})
+
+    def _pass(self, blend, mode, spp, seed, out, timeout, log):
+        result = Path(out).with_suffix(".result.json")
         cmd = [sys.executable, str(WORKER), "render", "--blend", str(blend), "--mode", mode, "--spp", str(spp),
-               "--passes", str(passes), "--seed", str(seed), "--out", str(out_exr), "--result", str(result)]
-        run_child(cmd, timeout, log_path, "Cycles render")
+               "--passes", "1", "--seed", str(seed), "--out", str(out), "--result", str(result)]
+        passes_mod.run_command(cmd, timeout, log, "Cycles render")
         info = json.loads(result.read_text())
-        info.setdefault("approximated", reduction_of(blend).get("approximated", []))
-        return info
+        names, img = exr.read_image(out)
+        return {"names": names, "image": img, "time_s": info["time_s"],
+                "info": {k: info[k] for k in ("settings", "versions") if k in info}}

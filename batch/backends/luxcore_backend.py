@@ -11,13 +11,13 @@ approximation.
 import importlib.util
 import json
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 
 from ...exporters import luxcore_writer
-from .rgb_common import RgbBackend, reduction_of, run_child, write_passes
+from . import passes as passes_mod
+from .rgb_common import RgbBackend, expand, reduction_of
 
 WORKER = Path(__file__).resolve().parent / "luxcore_worker.py"
 GRACE_S = 30  # the worker stops itself at the time limit; it is killed this much later
@@ -39,17 +39,31 @@ class LuxCoreBackend(RgbBackend):
         return luxcore_writer.write(rgb, out)
 
     def render(self, cfg, mode, spp, out_exr, passes=1, seed=0, timeout=1800, log_path=None):
-        result = Path(out_exr).with_suffix(".result.json")
-        stack = Path(out_exr).with_suffix(".passes.npy")
-        cmd = [sys.executable, str(WORKER), "--cfg", str(cfg), "--mode", mode, "--spp", str(spp),
-               "--passes", str(passes), "--seed", str(seed), "--timeout", str(timeout),
-               "--out", str(stack), "--result", str(result)]
-        t0 = time.perf_counter()
-        run_child(cmd, timeout + GRACE_S, log_path, "LuxCore render")
-        info = json.loads(result.read_text())
+        """Render in independent passes (batch/backends/passes.py); returns the render record."""
+        return passes_mod.render(self, cfg, mode, spp, out_exr, passes, seed, timeout, log_path)
+
+    def session(self, cfg, mode, log):
+        """One pyluxcore child process per pass."""
         meta = reduction_of(cfg)
-        info["channels"] = write_passes(out_exr, list(np.load(stack)), meta.get("film_scale", 1.0), meta.get("stokes", False))
+        return passes_mod.OneProcessPerPass(
+            lambda spp, seed, out, timeout, log: self._pass(cfg, mode, spp, seed, out, timeout, log, meta),
+            log, {"approximated": meta.get("approximated", [])})
+
+    def _pass(self, cfg, mode, spp, seed, out, timeout, log, meta):
+        result = Path(out).with_suffix(".result.json")
+        stack = Path(out).with_suffix(".npy")
+        cmd = [sys.executable, str(WORKER), "--cfg", str(cfg), "--mode", mode, "--spp", str(spp),
+               "--passes", "1", "--seed", str(seed), "--timeout", str(timeout),
+               "--out", str(stack), "--result", str(result)]
+        try:
+            passes_mod.run_command(cmd, timeout + GRACE_S, log, "LuxCore render")
+        except passes_mod.BackendFailure as exc:
+            if "exited with 3" in str(exc):  # the worker's own time limit (luxcore_worker.TIMEOUT_EXIT)
+                raise passes_mod.PassTimeout(f"LuxCore render timed out after {timeout} s") from exc
+            raise
+        info = json.loads(result.read_text())
+        names, img = expand(np.load(stack)[0], meta.get("film_scale", 1.0), meta.get("stokes", False))
         stack.unlink()
-        info["approximated"] = meta.get("approximated", [])
-        info["wall_s"] = time.perf_counter() - t0
-        return info
+        # LuxCore stops between polls: the samples actually taken are the pass's spp (luxcore_worker)
+        return {"names": names, "image": img, "time_s": info["time_s"], "spp": info["spp"],
+                "info": {"versions": info.get("versions", {})}}

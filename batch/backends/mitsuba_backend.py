@@ -1,21 +1,29 @@
 """Mitsuba 3 backend: renders the exported scene.xml in a child process.
 
-Default route: batch/backends/mitsuba_worker.py with the mitsuba Python package (independent passes,
-render time measured inside). With ``-e mitsuba=PATH`` the user's ``mitsuba`` executable
-renders instead (``mitsuba -m VARIANT -Dspp=N -Dseed=S -o out.exr scene.xml``).
+Default route: batch/backends/mitsuba_worker.py with the mitsuba Python package, one warm process
+per render that loads the scene once and renders one pass per request (render time measured
+inside). With ``-e mitsuba=PATH`` the user's ``mitsuba`` executable renders each pass instead
+(``mitsuba -m VARIANT -Dspp=N -Dseed=S -o pass.exr scene.xml``). Both routes go through the one
+pass loop (batch/backends/passes.py) and the same conversion of the film's channels
+(``film_to_ir``: monochrome variants, the camera polariser); the executable's version is read from
+its banner, so the known deviations of that Mitsuba version apply to it. Scenes that need this
+project's Python plugins are unsupported on the executable route, with the reason.
 """
 import importlib.util
 import json
 import subprocess
 import sys
 import time
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 
-from ...exporters import mitsuba_writer
+from ...exporters import camera_filter, colorimetry, mitsuba_writer
 from .. import exr
 from . import child, llvm
+from . import passes as passes_mod
+from .passes import BackendFailure
 
 WORKER = Path(__file__).resolve().parent / "mitsuba_worker.py"
 NATIVE = {"spectral", "polarization"}
@@ -24,10 +32,6 @@ NATIVE = {"spectral", "polarization"}
 PLUGIN_NEEDS = {"thin_film", "dispersion", "fluorescence"}  # sb_thin_film_conductor; sb_dispersive_dielectric
 # (unpolarised); sb_fluorescent_diffuse + sb_fluorescent_path (unpolarised spectral variants)
 INTEGRATORS = ("path", "ptracer")  # the IR's render.integrator values Mitsuba renders
-
-
-class BackendFailure(RuntimeError):
-    pass
 
 
 def scalar_twin(variant):
@@ -99,36 +103,151 @@ class MitsubaBackend:
         return mitsuba_writer.write(scene, out_dir)
 
     def render(self, xml_path, variant, spp, out_exr, passes=1, seed=0, timeout=1800, log_path=None):
-        """Render; returns a dict with time_s, wall_s, spp, variant, versions. Raises BackendFailure."""
+        """Render in independent passes (batch/backends/passes.py); returns the render record."""
+        return passes_mod.render(self, xml_path, variant, spp, out_exr, passes, seed, timeout, log_path)
+
+    def session(self, xml_path, variant, log):
+        """Passes of one scene: a warm worker process (Python route) or one run of the mitsuba
+        executable per pass."""
         if self.executable:
-            return self._render_cli(xml_path, variant, spp, out_exr, seed, timeout, log_path)
-        result_path = Path(out_exr).with_suffix(".result.json")
-        cmd = [sys.executable, str(WORKER), "--xml", str(xml_path), "--variant", variant, "--spp", str(spp),
-               "--passes", str(passes), "--seed", str(seed), "--out", str(out_exr), "--result", str(result_path)]
-        self._run(cmd, timeout, log_path)
-        return json.loads(result_path.read_text())
+            return passes_mod.OneProcessPerPass(
+                lambda spp, seed, out, timeout, log: self._pass_cli(xml_path, variant, spp, seed, out, timeout, log),
+                log, {"versions": {"mitsuba": executable_version(self.executable), "route": "executable"}})
+        return WarmWorker(xml_path, variant, log)
 
-    def _run(self, cmd, timeout, log_path):
+    def _pass_cli(self, xml_path, variant, spp, seed, out, timeout, log):
+        cmd = [self.executable, "-m", variant, f"-Dspp={spp}", f"-Dseed={seed}", "-o", str(out), str(xml_path)]
+        wall = passes_mod.run_command(cmd, timeout, log, "mitsuba", env=llvm.env())
+        if not Path(out).is_file():
+            raise BackendFailure(f"mitsuba wrote no image {out}")
+        ch = exr.read(out)
+        names = [n for n in _film_order(ch) if n not in ("A", "W")]
+        names, img = film_to_ir(names, np.stack([ch[n] for n in names], axis=-1), Path(xml_path).parent)
+        return {"names": names, "image": img, "time_s": wall}
+
+
+def _film_order(channels):
+    """Mitsuba's film channels in their order: R, G, B (or Y) first, then the Stokes ones."""
+    return exr._order(list(channels))
+
+
+def film_to_ir(names, img, export_dir):
+    """A Mitsuba film's channels as the IR's linear sRGB: a monochrome variant's Y (chosen only
+    when every spectrum is constant, so each pixel is a flat spectrum times its luminance) becomes
+    Y times the RGB of the flat spectrum of Y = 1 (equal-energy white is not D65 white), Stokes
+    channels alike; then the IR's ideal camera polariser (exporters/camera_filter.py), applied to
+    every pass so that the noise is the filtered image's."""
+    img = np.asarray(img, dtype=np.float64)
+    if names and names[0] == "Y":
+        tint = _flat_spectrum_rgb()
+        img = np.concatenate([img[..., :1] * tint, img[..., 1:]], axis=-1)
+        names = ["R", "G", "B"] + list(names[1:])
+        for i, n in enumerate(names):
+            if "." in n and n[-1] in "RGB":
+                img[..., i] *= tint["RGB".index(n[-1])]
+    camera = camera_filter.read(Path(export_dir))
+    if camera:
+        names, img = camera_filter.apply(camera, names, img[None])
+        img = img[0]
+    return list(names), img
+
+
+@lru_cache(maxsize=1)
+def _flat_spectrum_rgb():
+    """Linear sRGB of the flat spectrum whose luminance is 1."""
+    xyz = colorimetry.spectrum_xyz({"type": "constant", "value": 1.0})
+    return colorimetry.xyz_to_srgb(xyz) / xyz[1]
+
+
+@lru_cache(maxsize=None)
+def executable_version(executable):
+    """The version a mitsuba executable states in its banner ("Mitsuba version 3.9.1 (...)"), or
+    "unknown" (recorded, so that the known deviations of that version apply to its renders)."""
+    import re
+    try:
+        proc = subprocess.run([str(executable), "-h"], capture_output=True, text=True, timeout=60, env=llvm.env(),
+                              stdin=subprocess.DEVNULL)
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+    m = re.search(r"Mitsuba version ([0-9][0-9A-Za-z.+-]*)", proc.stdout + proc.stderr)
+    return m.group(1) if m else "unknown"
+
+
+class WarmWorker:
+    """The Python route's session: batch/backends/mitsuba_worker.py started once per render,
+    loading the scene once; each pass is one request answered within the pass's time limit (a
+    worker that dies or overruns is killed, and a retried pass starts a fresh one)."""
+
+    def __init__(self, xml_path, variant, log):
+        self.xml, self.variant, self.log = str(xml_path), variant, log
+        self.proc, self.info = None, {}
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.stop()
+        return False
+
+    def start(self, timeout):
+        cmd = [sys.executable, str(WORKER), "--xml", self.xml, "--variant", self.variant]
+        self.log.write(f"$ {' '.join(cmd)}\n")
+        self.log.flush()
+        self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self.log,
+                                     env=llvm.env(), **child.popen_kwargs())
+        ready = self._reply(timeout, "loading the scene")
+        self.info = {"versions": ready.get("versions", {})}
+
+    def stop(self):
+        if self.proc is not None:
+            try:
+                self.proc.stdin.close()
+                self.proc.wait(timeout=30)
+            except (OSError, subprocess.TimeoutExpired):
+                self.proc.kill()
+                self.proc.wait()
+            self.proc = None
+
+    def _reply(self, timeout, what):
+        """The worker's next JSON line within ``timeout`` seconds."""
+        import selectors
+        sel = selectors.DefaultSelector()
+        sel.register(self.proc.stdout, selectors.EVENT_READ)
+        ready = sel.select(timeout)
+        sel.close()
+        if not ready:
+            self.proc.kill()
+            self.proc.wait()
+            self.proc = None
+            raise passes_mod.PassTimeout(f"mitsuba worker: {what} took longer than {timeout} s")
+        line = self.proc.stdout.readline()
+        if not line:
+            code = self.proc.wait()
+            self.proc = None
+            self.log.flush()
+            raise BackendFailure(f"mitsuba worker exited with {code} while {what}: {_log_tail(self.log)}")
+        return json.loads(line)
+
+    def render_pass(self, spp, seed, out, timeout):
         t0 = time.perf_counter()
+        if self.proc is None:
+            self.start(timeout)
+        left = max(1.0, timeout - (time.perf_counter() - t0))
         try:
-            proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, env=llvm.env(),
-                                  **child.popen_kwargs())
-        except subprocess.TimeoutExpired as exc:
-            raise BackendFailure(f"render timed out after {timeout} s") from exc
-        if log_path:
-            Path(log_path).write_text(f"$ {' '.join(cmd)}\n{proc.stdout}\n{proc.stderr}")
-        if proc.returncode != 0:
-            tail = (proc.stderr.strip() or proc.stdout.strip()).splitlines()[-3:]
-            raise BackendFailure(f"mitsuba exited with {proc.returncode}: {' | '.join(tail)[-600:]}")
-        return time.perf_counter() - t0
+            self.proc.stdin.write((json.dumps({"spp": spp, "seed": seed, "out": str(out)}) + "\n").encode())
+            self.proc.stdin.flush()
+        except OSError as exc:
+            self.stop()
+            raise BackendFailure(f"mitsuba worker stopped: {exc}") from exc
+        done = self._reply(left, f"rendering {spp} spp with seed {seed}")
+        ch = exr.read(out)
+        names, img = film_to_ir(done["names"], np.stack([ch[n] for n in done["names"]], axis=-1), Path(self.xml).parent)
+        info = dict(self.info, chunks_per_pass=done.get("chunks", 1))
+        return {"names": names, "image": img, "time_s": done["time_s"], "info": info}
 
-    def _render_cli(self, xml_path, variant, spp, out_exr, seed, timeout, log_path):
-        cmd = [self.executable, "-m", variant, f"-Dspp={spp}", f"-Dseed={seed}", "-o", str(out_exr), str(xml_path)]
-        wall = self._run(cmd, timeout, log_path)
-        names, img = exr.read_image(out_exr)  # normalise the channel layout
-        if names and names[0] == "Y":
-            img = np.concatenate([np.repeat(img[..., :1], 3, axis=-1), img[..., 1:]], axis=-1)
-            names = ["R", "G", "B"] + names[1:]
-        exr.write_image(out_exr, names, img)
-        return {"variant": variant, "spp": spp, "passes": 1, "seed": seed, "time_s": wall, "wall_s": wall,
-                "resolution": [img.shape[1], img.shape[0]], "versions": {"mitsuba": "executable " + self.executable}}
+
+def _log_tail(log):
+    try:
+        return passes_mod.tail(Path(log.name).read_text(errors="replace"))
+    except (OSError, AttributeError, TypeError):
+        return "(see the render log)"

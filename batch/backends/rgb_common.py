@@ -19,7 +19,7 @@ import numpy as np
 from ...exporters import rgb_scene
 from .. import exr
 from . import child
-from .mitsuba_backend import BackendFailure
+from .passes import BackendFailure
 
 MODE = "rgb"
 APPROX_MODE = "rgb-approx"
@@ -83,17 +83,25 @@ def run_child(cmd, timeout, log_path, what, env=None, cwd=None):
     return time.perf_counter() - t0
 
 
-def write_passes(out_exr, images, film_scale=1.0, stokes=False):
-    """Write the mean of independent pass images (each H x W x 3, linear sRGB) and, with two or
-    more, the standard error of that mean per pixel (stderr.<channel>, from the pass-to-pass
-    spread). ``film_scale`` multiplies every pass (an approximated polariser); ``stokes`` adds
-    S0 = RGB and S1 = S2 = S3 = 0 (an approximated Stokes output). Returns the channel names."""
-    stack = np.stack([np.asarray(i, dtype=np.float64)[..., :3] for i in images]) * film_scale
+def expand(image, film_scale=1.0, stokes=False):
+    """(names, H x W x C) of one pass's H x W x 3 linear sRGB image: ``film_scale`` multiplies it
+    (an approximated polariser); ``stokes`` adds S0 = RGB and S1 = S2 = S3 = 0 (an approximated
+    Stokes output)."""
+    img = np.asarray(image, dtype=np.float64)[..., :3] * film_scale
     names = ["R", "G", "B"]
     if stokes:
-        zeros = np.zeros_like(stack)
-        stack = np.concatenate([stack, stack, zeros, zeros, zeros], axis=-1)
+        zeros = np.zeros_like(img)
+        img = np.concatenate([img, img, zeros, zeros, zeros], axis=-1)
         names += [f"S{k}.{c}" for k in range(4) for c in "RGB"]
+    return names, img
+
+
+def write_passes(out_exr, images, film_scale=1.0, stokes=False):
+    """Write the mean of pass images (each H x W x 3, linear sRGB, through ``expand``) and, with
+    two or more, the standard error of that mean per pixel. Returns the channel names."""
+    expanded = [expand(i, film_scale, stokes) for i in images]
+    names = expanded[0][0]
+    stack = np.stack([img for _, img in expanded])
     extra = {}
     if len(images) > 1:
         stderr = stack.std(axis=0, ddof=1) / math.sqrt(len(images))

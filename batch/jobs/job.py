@@ -55,8 +55,9 @@ def backend_of(job):
 
 
 def execute(job):
-    """Export and render; returns the render record. Raises RenderCrashed for a render that died;
-    a timeout or a refusal is a failed record (retrying would not help)."""
+    """Export and render; returns the render record. A render whose pass failed twice or timed out
+    (the pass loop retries a failed pass once: batch/backends/passes.py) is a failed record with
+    the renderer's error; RenderCrashed is left for what dies outside the pass loop."""
     from .. import backends
     from ...exporters import ir_json
     out = Path(job["out"])
@@ -73,16 +74,15 @@ def execute(job):
     try:
         info = backend.render(path, job["mode"], job["spp"], image, passes=job["passes"], seed=job["seed"],
                               timeout=job["timeout"], log_path=folder / "render.log")
-    except backends.BackendFailure as exc:
-        if "timed out" in str(exc):
-            record.update(status="failed", reason=f"render failed: {exc}")
-            return record
-        raise RenderCrashed(f"render failed: {exc}") from exc
+    except backends.BackendFailure as exc:  # a pass that failed twice or timed out (batch/backends/passes.py)
+        record.update(status="failed", reason=f"render failed: {exc}")
+        return record
     record.update(time_s=info["time_s"], wall_s=info["wall_s"], spp=info["spp"], passes=info.get("passes", 1),
-                  versions=info.get("versions"), image_path=str(image), image=str(image.relative_to(out)),
+                  versions=info.get("versions"), pass_times=info.get("pass_times"), image_path=str(image), image=str(image.relative_to(out)),
                   job_wall_s=time.perf_counter() - t0)
-    if info.get("approximated"):  # an RGB backend's approximations (--approximate)
-        record["approximated"] = info["approximated"]
+    for key in ("approximated", "retried"):  # an RGB backend's approximations (--approximate); passes retried
+        if info.get(key):
+            record[key] = info[key]
     return record
 
 
@@ -95,7 +95,8 @@ def judge(job, record, deviations=None):
         if record["status"] != "rendered":
             entry.update(status="failed", reason=record["reason"])
             return entry
-        entry.update({k: record[k] for k in ("time_s", "wall_s", "spp", "passes", "image", "versions", "approximated")
+        entry.update({k: record[k] for k in ("time_s", "wall_s", "spp", "passes", "pass_times", "image", "versions",
+                                             "approximated", "retried")
                       if k in record})
         if deviations is None:
             deviations = known.load(job["verdict"].get("known"))

@@ -130,12 +130,16 @@ def select(results, opts):
 
 
 def backend_names(opts):
-    return backends.expand(opts["renderer"])
+    return backends.expand(opts["renderer"], opts.get("renderers"))
 
 
 def make_backend(name, opts):
+    """The backend ``name`` (built-in or declared with --renderers) with this run's options."""
     execs = opts["exec"]
     kwargs = {"executable": execs.get(name) or (execs.get("*") if len(backend_names(opts)) == 1 else None)}
+    declared = opts.get("renderers") or {}
+    if name in declared:
+        return backends.get(name, declaration=declared[name], **kwargs)
     if name == "mitsuba":
         kwargs["force_variant"] = opts["variant"]
     if name == "art":
