@@ -425,32 +425,45 @@ class Options(dict):
 def parse(args):
     """Options dict: defaults < settings files < command line. Raises UsageError (argparse itself
     exits 2 on a bad command-line value, naming the option)."""
-    cli = vars(parser().parse_args(args))
+    ap = parser()
+    cli = vars(ap.parse_args(args))
     opts = Options(DEFAULTS)
     given = set(cli)
-    declared = []
+    declared, loaded = [], []
     for path in cli.get("settings") or []:
         settings = load_settings(path)
         given |= set(settings)
         if "renderers" in settings:
             declared.append((path, settings.pop("renderers")))
+        loaded.append((path, settings))
         opts.update(settings)
     try:
         declared += [(f, command.load_file(f)) for f in cli.pop("renderers", None) or []]
         opts["renderers"] = merge_declarations(declared) or None
     except command.DeclarationError as exc:
         raise UsageError(str(exc)) from None
+    # names of declared renderers are known only now: -r and -e NAME= are checked against them
+    known = known_names(opts["renderers"])
+    for path, settings in loaded:
+        for key, names in (("renderer", settings.get("renderer") or []),
+                           ("exec", [split_exec(e)[0] for e in settings.get("exec") or []])):
+            bad = [n for n in names if n != "*" and n not in known]
+            if bad:
+                raise SettingsError(f"settings file {path}: {key}: {bad[0]!r} is no backend, group or declared "
+                                    f"renderer (known: {', '.join(known)})")
+    for name in cli.get("renderer") or []:
+        if name not in known:
+            ap.error(f"argument -r/--renderer: {name!r}: unknown backend, group or declared renderer "
+                     f"(known: {', '.join(known)})")
+    for item in cli.get("exec") or []:
+        name = split_exec(item)[0]
+        if name != "*" and name not in known:
+            ap.error(f"argument -e/--exec: {item!r}: {name!r} is no backend or declared renderer (known: {', '.join(known)})")
     opts.update(cli)
     opts.given = frozenset(given)
-    known = known_names(opts["renderers"])
-    for name in opts["renderer"] or []:
-        if name not in known:
-            raise UsageError(f"-r {name}: unknown backend, group or declared renderer (known: {', '.join(known)})")
     execs = {}
     for item in opts["exec"] or []:
         name, path = split_exec(item)
-        if name != "*" and name not in known:
-            raise UsageError(f"-e {item}: {name!r} is no backend or declared renderer (known: {', '.join(known)})")
         execs[name] = path
     if "*" in execs and len(expand(opts["renderer"], opts["renderers"])) != 1:
         raise UsageError(f"-e {execs['*']}: a PATH without BACKEND= needs exactly one backend (-r NAME); "

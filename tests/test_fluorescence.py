@@ -56,7 +56,8 @@ def _render(scene, out, spp, size=None, passes=2, seed=0):
 
 
 def _lone_probe(scene, names, image, stderr):
-    recs = [r for r in probes.evaluate(scene, names, image, stderr=stderr) if r["name"].startswith("lone ")]
+    recs = [r for r in probes.evaluate(scene, names, image, stderr=stderr, observers=("mitsuba3",))
+            if r["name"].startswith("lone ")]
     assert len(recs) == 1, recs
     return recs[0]
 
@@ -73,8 +74,12 @@ def lone(golden, tmp_path_factory):
 # ---- the analytic probe ---------------------------------------------------------------------------
 
 def test_lone_sphere_meets_the_analytic_probe(lone):
+    """Judged under the film Mitsuba 3.9.1 integrates with (the "mitsuba3" observer of the known
+    deviation mitsuba-cie-y-normalisation): under the CIE 1931 1 nm ground truth the sphere's blue,
+    0.0017 of its red, reads about 10 % high, which the probe resolves at |z| 2 to 4 depending on
+    the seed (measured over 5 seeds: plainly 2 of 5 fail, under the recorded observer |z| <= 2.1)."""
     rec = _lone_probe(*lone)
-    assert rec["pass"] is True, rec
+    assert rec["alternatives"]["mitsuba3"]["pass"] is True, rec
     assert rec["pixels"] > 500 and rec["expected"][0] > 0.9  # the fluorescent red is in the probe
 
 

@@ -64,13 +64,13 @@ def test_batch_exec_option_uses_the_mitsuba_executable(golden, tmp_path):
     proc = run_batch("-r", "mitsuba", "-i", write_scene(tmp_path, golden["ggx_copper_80"]), "-e", f"mitsuba={exe}",
                      "--scale", 0.0625, "--spp", 4, "--no-flip", "--variant", "scalar_spectral", "-o", out)
     run = metrics(out)["runs"][0]
-    assert run["versions"]["mitsuba"].startswith("executable"), run
+    # the version from the executable's banner, so that known deviations of that version apply
+    assert run["versions"] == {"mitsuba": "3.9.1", "route": "executable"}, run
     assert run["image"] and (out / run["image"]).is_file()
     assert "render.log" in os.listdir(out / "ggx_copper_80" / "results" / "mitsuba")
-    # the executable renders one pass in a variant other than the reference's: it has no noise of
-    # its own and the reference's is not borrowed, and no probe applies: unjudged, exit status 3
-    assert run["status"] == "unjudged" and run["test"]["pass"] is None and "passes" in run["test"]["reason"], run
-    assert proc.returncode == 3
+    # --passes (default 2) honoured: two runs of the executable, the render's own noise from their spread
+    assert run["passes"] == 2 and len(run["pass_times"]) == 2, run
+    assert run["test"]["pass"] is not None, run["test"]
 
 
 def test_emitter_radiance_is_one_at_560nm_times_scale(tmp_path):
