@@ -7,11 +7,12 @@ The extension is registered in a child Python with bpy (tests/conftest.py run_bp
 preferences are made to exist as Blender does when it enables an add-on (``addons.new()``), so the
 tests use the real, saved property. Panels are drawn through tests/layout_recorder.py."""
 import json
-import sys
 
 import pytest
 
+import test_extension as ext
 from conftest import ROOT, run_bpy
+from test_extension import extension_zip  # noqa: F401 - the fixture: the extension built without wheels
 
 TESTS = str(ROOT / "tests")
 TOY = ROOT / "examples" / "your_renderer" / "toy.toml"
@@ -50,7 +51,8 @@ def _ghost(tmp_path):
     path.write_text('[renderers.ghost]\n'
                     'description = "line one\\nline two\\u0007 end"\n'
                     'command = ["/nonexistent/ghost_renderer", "{scene}", "{output}", "{spp}", "{seed}"]\n'
-                    'reads = "json"\nwrites = "spectral"\nmodels = ["spectral", "polarization"]\n')
+                    'reads = "json"\nwrites = "spectral"\nmodels = ["spectral", "polarization"]\n'
+                    'groups = ["spectral"]\n')
     return path
 
 
@@ -60,9 +62,12 @@ def test_panel_lists_declared_renderers_with_what_they_do_and_their_availability
     before = panel()
     add({str(TOY)!r}, {str(ghost)!r})
     after = panel()
+    declared = benchmark.declared_renderers(preferences.renderers_files())["renderers"]
+    on = {{n: on for n, _ok, _why, on, _decl in benchmark.declared_states(s, declared)}}
     r = bpy.ops.spectral_bench.toggle_backend(backend="toy")
     chosen = panel()["toggles"]
-    print(json.dumps({{"before": before, "after": after, "r": list(r), "chosen": chosen, "toggled": s.declared_toggled}}))
+    print(json.dumps({{"before": before, "after": after, "r": list(r), "chosen": chosen, "toggled": s.declared_toggled,
+                      "on": on}}))
     """)
     assert not [k for k in out["before"]["toggles"] if k.startswith(("toy", "ghost"))]
     assert ["Declared Renderers: none", None] in out["before"]["labels"]
@@ -80,7 +85,8 @@ def test_panel_lists_declared_renderers_with_what_they_do_and_their_availability
     assert icon == "CHECKBOX_DEHLT" and len(after["disabled"]) == len(out["before"]["disabled"]) + 1
     assert "line one line two  end (reads json, writes spectral, models polarization, spectral)" in labels
     assert all("\n" not in t and "\x07" not in t for t in labels if t)
-    # chosen like a built-in backend
+    # chosen like a built-in backend; by default as the command line's default -r (the group spectral)
+    assert out["on"] == {"toy": False, "toy_spectral": False, "ghost": True}
     assert out["r"] == ["FINISHED"] and out["toggled"] == "toy"
     assert out["chosen"]["toy"] == ["toy", "CHECKBOX_HLT"] and out["chosen"]["toy_spectral"][1] == "CHECKBOX_DEHLT"
 
@@ -205,3 +211,30 @@ def test_declared_renderer_chosen_in_the_panel_renders_and_is_judged(tmp_path):
     assert [(r["scene"], r["backend"]) for r in runs] == [("ggx_copper_80", "toy")]
     assert runs[0]["status"] == "ok", runs[0].get("reason")
     assert out["status"].startswith("passed: 1/1 jobs"), out["status"]
+
+
+@pytest.mark.slow
+def test_installed_extension_keeps_renderers_files_with_blenders_preferences(extension_zip, tmp_path):
+    """Installed as a user installs it: a renderers file added with the operator is saved with
+    Blender's preferences, read back in a new process, and its renderers are in the panel."""
+    zip_path = extension_zip
+    user = tmp_path / "user"
+    first = ext.run_bpy(ext.script(ext.install(zip_path), f"""
+        r = bpy.ops.spectral_bench.add_renderers_file(filepath={str(TOY)!r})
+        saved = bpy.ops.wm.save_userpref()
+        print(json.dumps({{"r": list(r), "saved": list(saved)}}))
+    """), user)
+    assert first == {"r": ["FINISHED"], "saved": ["FINISHED"]}
+    second = ext.run_bpy(f"""
+        import json, sys, bpy
+        sys.path.insert(0, {TESTS!r})
+        import layout_recorder as lr
+        bpy.ops.wm.read_userpref()
+        from {ext.MODULE}.addon import preferences
+        calls = lr.draw(bpy.types.SPECTRAL_BENCH_PT_benchmark, lr.Context())
+        print(json.dumps({{"files": [str(p) for p in preferences.renderers_files()],
+                          "toggles": [c[2]["properties"]["backend"] for c in calls if c[1] == "operator"
+                                      and c[2]["operator"] == "spectral_bench.toggle_backend"]}}))
+    """, user)
+    assert second["files"] == [str(TOY)]
+    assert {"toy", "toy_spectral", "mitsuba"} <= set(second["toggles"])
