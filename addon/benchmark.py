@@ -1,8 +1,9 @@
 """The benchmark panel's logic, kept out of draw code so that headless tests can call it:
 choose scenes (the canonical ones shipped with the extension, or the open file's annotated
 ones), backends (every one in batch/backends.BACKENDS, and every renderer declared in the
-preferences' renderers files, each with its availability), samples, scale and passes; run the batch runner in the background, follow and cancel it; read its results and
-load their images into Blender.
+preferences' renderers files, each with its availability), samples, scale and passes; run the
+batch runner in the background, follow and cancel it; read its results and load their images
+into Blender.
 
 A run exports the chosen scenes to IR JSON in-process (Blender's own Python has no bpy module in
 a child process), then starts batch/run.py on those files as a child process with the same
@@ -284,6 +285,7 @@ def start_run(context):
     args += [a for _origin, folder in search for a in ("--references", str(folder))]
     job = background_job.BackgroundRun(inputs, out, total_jobs=len(inputs) * len(names), extra_args=args)
     job.export_problems = problems
+    job.renderers_problems = [f["problem"] for f in found["files"] if f["problem"]]  # files left out
     _ACTIVE["job"] = job.start()
     s.output_dir = str(out)
     s.status = f"running: 0/{job.total} jobs" + (f" ({len(problems)} scenes not exported)" if problems else "")

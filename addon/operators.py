@@ -1,7 +1,8 @@
 """Operators: File > Export entries for the generic JSON, Mitsuba 3 and ART (scriptable as
 bpy.ops.spectral_bench.export_json / export_mitsuba / export_art), the canonical scenes (open,
-append), the benchmark run (start, cancel, backends, renderers files) and its results (images, report). Logic lives
-in exporters/, batch/ and addon/benchmark.py; these stay thin and report through self.report.
+append), the benchmark run (start, cancel, backends, renderers files) and its results (images,
+report). Logic lives in exporters/, batch/ and addon/benchmark.py; these stay thin and report
+through self.report.
 Operators that change the file's data are undoable (bl_options UNDO)."""
 import webbrowser
 from pathlib import Path
@@ -163,6 +164,8 @@ class SPECTRAL_BENCH_OT_run_benchmark(bpy.types.Operator):
             return {"CANCELLED"}
         for problem in job.export_problems:
             self.report({"WARNING"}, f"not exported: {problem}")
+        for problem in job.renderers_problems:
+            self.report({"WARNING"}, f"renderers file left out: {problem}")
         self.report({"INFO"}, f"started {job.total} jobs -> {job.out_dir}")
         if self.wait:
             job.wait()

@@ -155,7 +155,7 @@ def test_run_command_line_holds_every_renderers_file_and_the_chosen_renderer(tmp
     job = benchmark.active_job()
     cmd = list(job.cmd)
     benchmark.cancel_run(bpy.context)
-    print(json.dumps({{"r": list(r), "cmd": cmd, "total": job.total}}))
+    print(json.dumps({{"r": list(r), "cmd": cmd, "total": job.total, "left_out": job.renderers_problems}}))
     """)
     cmd = out["cmd"]
     assert out["r"] == ["FINISHED"] and out["total"] == 1
@@ -165,6 +165,7 @@ def test_run_command_line_holds_every_renderers_file_and_the_chosen_renderer(tmp
         return any(cmd[i:i + len(seq)] == seq for i in range(len(cmd)))
     assert has(["--renderers", str(TOY), "--renderers", str(mine), "-r", "toy"]), cmd
     assert str(broken) not in cmd and cmd.count("-r") == 1
+    assert len(out["left_out"]) == 1 and str(broken) in out["left_out"][0]  # reported as a warning
     assert not (tmp_path / "pwned").exists() and not (folder / "pwned").exists()
     # the runner reads the same command line (its parser, its declarations)
     from spectral_bench.batch import cli
