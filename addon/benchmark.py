@@ -1,8 +1,9 @@
 """The benchmark panel's logic, kept out of draw code so that headless tests can call it:
 choose scenes (the canonical ones shipped with the extension, or the open file's annotated
-ones), backends (every one in batch/backends.BACKENDS, with its availability), samples, scale
-and passes; run the batch runner in the background, follow and cancel it; read its results and
-load their images into Blender.
+ones), backends (every one in batch/backends.BACKENDS, and every renderer declared in the
+preferences' renderers files, each with its availability), samples, scale and passes; run the
+batch runner in the background, follow and cancel it; read its results and load their images
+into Blender.
 
 A run exports the chosen scenes to IR JSON in-process (Blender's own Python has no bpy module in
 a child process), then starts batch/run.py on those files as a child process with the same
@@ -19,6 +20,7 @@ import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
 from ..batch import backends, exr
+from ..batch.backends import command
 from ..batch.jobs import background as background_job
 from ..batch.report import html as report_html
 from ..batch.report import results
@@ -52,6 +54,10 @@ class RunSettings(bpy.types.PropertyGroup):
     backends_off: StringProperty(name="Backends Off", options={"HIDDEN"},
                                  default=",".join(n for n in backends.BACKENDS if n not in backends.DEFAULT),
                                  description="Comma-separated backends switched off (all others run)")
+    # declared renderers (names checked by command.parse: never a comma) whose choice differs from
+    # the command line's default (on when the declaration joins the group "spectral", else off)
+    declared_toggled: StringProperty(name="Declared Renderers Toggled", options={"HIDDEN"}, default="",
+                                     description="Comma-separated declared renderers chosen against their default")
     spp: IntProperty(name="Samples", default=0, min=0, description="Samples per pixel (0: each scene's own)")
     scale: FloatProperty(name="Resolution Scale", default=0.25, min=0.01, max=4.0,
                          description="Resolution scale; an integer fraction of the reference's (1/2, 1/4, 1/8) "
@@ -107,16 +113,128 @@ def backend_states(s=None):
     return out
 
 
-def chosen_backends(s):
-    return [name for name, ok, _why, on in backend_states(s) if ok and on]
+# -- declared renderers (batch/backends/command.py) -----------------------------------------------
+_FILES = {}  # path: ((mtime_ns, size), {name: declaration} or None, problem or None)
+_DECLARED_AVAILABILITY = {}  # (name, program's declaration): (time checked, available, reason)
+TEXT_LIMIT = 200  # characters of file-given text on one panel line
 
 
-def toggle_backend(s, name):
-    if name not in backends.BACKENDS:
-        raise KeyError(f"unknown backend {name!r}")
-    off = set(filter(None, s.backends_off.split(",")))
-    off ^= {name}
-    s.backends_off = ",".join(sorted(off))
+def one_line(text, limit=TEXT_LIMIT):
+    """Text from a renderers file (a description, an error quoting a value) as one panel line:
+    control characters as spaces, at most ``limit`` characters."""
+    flat = "".join(" " if not c.isprintable() else c for c in str(text))
+    return flat if len(flat) <= limit else flat[:limit - 3] + "..."
+
+
+def read_renderers_file(path):
+    """({name: declaration}, None), or (None, the DeclarationError's message naming the file and
+    the problem): read by batch/backends/command.py, again only when the file changes."""
+    path = Path(path)
+    try:
+        st = path.stat()
+        stamp = (st.st_mtime_ns, st.st_size)
+    except OSError:
+        stamp = None
+    cached = _FILES.get(path)
+    if cached is not None and stamp is not None and cached[0] == stamp:
+        return cached[1], cached[2]
+    try:
+        found, problem = command.load_file(path), None
+    except command.DeclarationError as exc:
+        found, problem = None, str(exc)
+    _FILES[path] = (stamp, found, problem)
+    return found, problem
+
+
+def declared_renderers(paths):
+    """What the renderers files declare, as plain data: {"renderers": {name: declaration},
+    "files": [{"path", "names", "problem"}]}. A file that cannot be read, or that declares a
+    name an earlier file declared differently (the runner refuses that), has a problem naming
+    it and adds no renderer; it is not passed to a run, and the other files still are."""
+    renderers, origin, files = {}, {}, []
+    for path in paths:
+        found, problem = read_renderers_file(path)
+        if found is not None:
+            twice = [n for n in found if n in renderers and renderers[n] != found[n]]
+            if twice:
+                found, problem = None, (f"renderer {twice[0]!r} is declared twice: in {origin[twice[0]]} and in "
+                                        f"{path} (this file is left out)")
+        if found is not None:
+            for name, decl in found.items():
+                renderers[name], origin[name] = decl, path
+        files.append({"path": Path(path), "names": sorted(found or ()), "problem": problem})
+    return {"renderers": renderers, "files": files}
+
+
+def declared_availability(name, decl):
+    """(available, reason) of a declared renderer (CommandBackend.availability), checked again
+    after AVAILABILITY_TTL_S."""
+    key = (name, tuple(decl["command"][:1]), decl["here"])
+    now = time.monotonic()
+    checked = _DECLARED_AVAILABILITY.get(key)
+    if checked is None or now - checked[0] > AVAILABILITY_TTL_S:
+        checked = (now, *backends.CommandBackend(name, decl).availability())
+        _DECLARED_AVAILABILITY[key] = checked
+    return checked[1], checked[2]
+
+
+def declared_default(declared):
+    """The declared renderers a run chooses unless told otherwise: those the command line's
+    default (-r spectral) includes, i.e. those joining the group "spectral"."""
+    return set(backends.expand([], declared)) & set(declared)
+
+
+def describe_declaration(decl):
+    """One line of what a declaration says it does: reads, writes, models (and its description)."""
+    text = f"reads {decl['reads']}, writes {decl['writes']}, models {', '.join(decl['models']) or 'nothing'}"
+    if decl.get("description"):
+        text = f"{decl['description']} ({text})"
+    return one_line(text)
+
+
+def declared_states(s=None, declared=None):
+    """[(name, available, reason, selected, declaration)] for every declared renderer, in the
+    order the files declare them."""
+    declared = declared or {}
+    toggled = set(filter(None, (s.declared_toggled if s is not None else "").split(",")))
+    default = declared_default(declared)
+    out = []
+    for name, decl in declared.items():
+        ok, why = declared_availability(name, decl)
+        out.append((name, ok, one_line(why), (name in default) != (name in toggled), decl))
+    return out
+
+
+def chosen_backends(s, declared=None):
+    """The available backends and declared renderers chosen for the next run, built-ins first."""
+    return ([name for name, ok, _why, on in backend_states(s) if ok and on]
+            + [name for name, ok, _why, on, _decl in declared_states(s, declared) if ok and on])
+
+
+def toggle_backend(s, name, declared=None):
+    if name in backends.BACKENDS:
+        off = set(filter(None, s.backends_off.split(",")))
+        off ^= {name}
+        s.backends_off = ",".join(sorted(off))
+    elif name in (declared or {}):
+        toggled = set(filter(None, s.declared_toggled.split(",")))
+        toggled ^= {name}
+        s.declared_toggled = ",".join(sorted(toggled))
+    else:
+        raise KeyError(f"unknown backend {name!r} (known: {', '.join([*backends.BACKENDS, *(declared or {})])})")
+
+
+def run_arguments(s, files, names):
+    """The runner's arguments for the backends ``names`` (one argv item each: no shell, no
+    quoting): every readable renderers file as --renderers FILE (absolute), each name as -r NAME
+    (a built-in or a name command.parse accepted: never starting with '-'), then the settings."""
+    args = [a for path in files for a in ("--renderers", str(Path(path).resolve()))]
+    args += [a for n in names for a in ("-r", n)] + ["--scale", str(s.scale), "--passes", str(s.passes)]
+    if s.spp:
+        args += ["--spp", str(s.spp)]
+    if not s.use_flip:
+        args.append("--no-flip")
+    return args
 
 
 # -- scenes ---------------------------------------------------------------------------------------
@@ -144,7 +262,8 @@ def start_run(context):
     s = settings(context)
     if _ACTIVE.get("job") and _ACTIVE["job"].running():
         raise RuntimeError("a benchmark run is already in progress")
-    names = chosen_backends(s)
+    found = declared_renderers(preferences.renderers_files(context))
+    names = chosen_backends(s, found["renderers"])
     if not names:
         raise RuntimeError("no available backend is selected")
     search = preferences.reference_folders(context)
@@ -161,14 +280,12 @@ def start_run(context):
         inputs.append(ir_json.write(data, out.parent / f"{out.name}.inputs" / f"{ir_names.file_stem(data['name'])}.json"))
     if not inputs:
         raise RuntimeError("no scene could be exported: " + "; ".join(problems))
-    args = [a for n in names for a in ("-r", n)] + ["--scale", str(s.scale), "--passes", str(s.passes)]
+    readable = [f["path"] for f in found["files"] if f["problem"] is None]
+    args = run_arguments(s, readable, names)
     args += [a for _origin, folder in search for a in ("--references", str(folder))]
-    if s.spp:
-        args += ["--spp", str(s.spp)]
-    if not s.use_flip:
-        args.append("--no-flip")
     job = background_job.BackgroundRun(inputs, out, total_jobs=len(inputs) * len(names), extra_args=args)
     job.export_problems = problems
+    job.renderers_problems = [f["problem"] for f in found["files"] if f["problem"]]  # files left out
     _ACTIVE["job"] = job.start()
     s.output_dir = str(out)
     s.status = f"running: 0/{job.total} jobs" + (f" ({len(problems)} scenes not exported)" if problems else "")

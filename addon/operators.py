@@ -1,19 +1,20 @@
 """Operators: File > Export entries for the generic JSON, Mitsuba 3 and ART (scriptable as
 bpy.ops.spectral_bench.export_json / export_mitsuba / export_art), the canonical scenes (open,
-append), the benchmark run (start, cancel, backends) and its results (images, report). Logic lives
-in exporters/, batch/ and addon/benchmark.py; these stay thin and report through self.report.
+append), the benchmark run (start, cancel, backends, renderers files) and its results (images,
+report). Logic lives in exporters/, batch/ and addon/benchmark.py; these stay thin and report
+through self.report.
 Operators that change the file's data are undoable (bl_options UNDO)."""
 import webbrowser
 from pathlib import Path
 
 import bpy
-from bpy.props import BoolProperty, EnumProperty, StringProperty
+from bpy.props import BoolProperty, EnumProperty, IntProperty, StringProperty
 from bpy_extras.io_utils import ExportHelper, ImportHelper
 
 from ..batch import blend_input
 from ..batch.report import results
 from ..exporters import art_writer, extract_blender, ir_json, mitsuba_writer, validate
-from . import benchmark, canonical
+from . import benchmark, canonical, preferences
 
 
 def export_scene(scene, fmt, path):
@@ -163,6 +164,8 @@ class SPECTRAL_BENCH_OT_run_benchmark(bpy.types.Operator):
             return {"CANCELLED"}
         for problem in job.export_problems:
             self.report({"WARNING"}, f"not exported: {problem}")
+        for problem in job.renderers_problems:
+            self.report({"WARNING"}, f"renderers file left out: {problem}")
         self.report({"INFO"}, f"started {job.total} jobs -> {job.out_dir}")
         if self.wait:
             job.wait()
@@ -224,11 +227,66 @@ class SPECTRAL_BENCH_OT_toggle_backend(bpy.types.Operator):
     backend: StringProperty()
 
     def execute(self, context):
+        declared = benchmark.declared_renderers(preferences.renderers_files(context))["renderers"]
         try:
-            benchmark.toggle_backend(benchmark.settings(context), self.backend)
+            benchmark.toggle_backend(benchmark.settings(context), self.backend, declared)
         except KeyError as exc:
             self.report({"ERROR"}, exc.args[0])
             return {"CANCELLED"}
+        return {"FINISHED"}
+
+
+def _installed_preferences(op, context):
+    """The extension's saved preferences, or None (reported) where it is not installed as one."""
+    prefs = preferences.settings(context)
+    if isinstance(prefs, preferences.Defaults):
+        op.report({"ERROR"}, "renderers files are kept in the extension's preferences: install and enable the "
+                             "extension (or run batch/run.py --renderers FILE)")
+        return None
+    return prefs
+
+
+class SPECTRAL_BENCH_OT_add_renderers_file(bpy.types.Operator, ImportHelper):
+    """Add a TOML file declaring renderers ([renderers.NAME] tables): they are listed with the
+    backends and passed to every run as --renderers FILE"""
+    bl_idname = "spectral_bench.add_renderers_file"
+    bl_label = "Add Renderers File"
+    filename_ext = ".toml"
+    filter_glob: StringProperty(default="*.toml", options={"HIDDEN"})
+
+    def execute(self, context):
+        prefs = _installed_preferences(self, context)
+        if prefs is None:
+            return {"CANCELLED"}
+        path = str(Path(bpy.path.abspath(self.filepath)).resolve())
+        if any(str(Path(bpy.path.abspath(f.path)).resolve()) == path for f in prefs.renderers_files if f.path):
+            self.report({"INFO"}, f"{path} is listed already")
+            return {"FINISHED"}
+        prefs.renderers_files.add().path = path
+        context.preferences.is_dirty = True
+        found = benchmark.declared_renderers([path])["files"][0]
+        if found["problem"]:
+            self.report({"WARNING"}, found["problem"])
+        else:
+            self.report({"INFO"}, f"{path}: {', '.join(found['names'])}")
+        return {"FINISHED"}
+
+
+class SPECTRAL_BENCH_OT_remove_renderers_file(bpy.types.Operator):
+    """Remove this renderers file from the list (the file itself stays)"""
+    bl_idname = "spectral_bench.remove_renderers_file"
+    bl_label = "Remove Renderers File"
+    index: IntProperty(default=-1, options={"HIDDEN"})
+
+    def execute(self, context):
+        prefs = _installed_preferences(self, context)
+        if prefs is None:
+            return {"CANCELLED"}
+        if not 0 <= self.index < len(prefs.renderers_files):
+            self.report({"ERROR"}, f"no renderers file at position {self.index}")
+            return {"CANCELLED"}
+        prefs.renderers_files.remove(self.index)
+        context.preferences.is_dirty = True
         return {"FINISHED"}
 
 
@@ -364,7 +422,8 @@ def _menu(self, context):
 CLASSES = (SPECTRAL_BENCH_OT_export_json, SPECTRAL_BENCH_OT_export_mitsuba, SPECTRAL_BENCH_OT_export_art,
            SPECTRAL_BENCH_OT_load_spectrum,
            SPECTRAL_BENCH_OT_spectrum_sample, SPECTRAL_BENCH_OT_run_benchmark, SPECTRAL_BENCH_OT_cancel_benchmark,
-           SPECTRAL_BENCH_OT_toggle_backend, SPECTRAL_BENCH_OT_open_canonical_scenes,
+           SPECTRAL_BENCH_OT_toggle_backend, SPECTRAL_BENCH_OT_add_renderers_file,
+           SPECTRAL_BENCH_OT_remove_renderers_file, SPECTRAL_BENCH_OT_open_canonical_scenes,
            SPECTRAL_BENCH_OT_append_canonical_scene, SPECTRAL_BENCH_OT_open_report,
            SPECTRAL_BENCH_OT_load_result, SPECTRAL_BENCH_OT_load_chart)
 

@@ -164,9 +164,32 @@ class SPECTRAL_BENCH_PT_object(_Base, bpy.types.Panel):
         self.layout.prop(context.object.spectral_bench, "shape")
 
 
+def _draw_declared(layout, context, s):
+    """The renderers the preferences' renderers files declare, chosen like the built-in backends:
+    each with what it reads, writes and models and, unavailable, the reason; a file that cannot be
+    used is one error line naming it and the problem (benchmark.declared_renderers)."""
+    found = benchmark.declared_renderers(preferences.renderers_files(context))
+    col = layout.column(align=True)
+    col.label(text="Declared Renderers" if found["renderers"] else "Declared Renderers: none")
+    for f in found["files"]:
+        if f["problem"]:
+            col.label(text=benchmark.one_line(f["problem"]), icon="ERROR")
+        else:
+            col.label(text=benchmark.one_line(f"{f['path']}: {', '.join(f['names'])}"), icon="FILE")
+    for name, ok, why, on, decl in benchmark.declared_states(s, found["renderers"]):
+        row = col.row(align=True)
+        row.enabled = ok
+        text = name if ok else (why if why.startswith(f"{name}: ") else f"{name}: {why}")
+        op = row.operator("spectral_bench.toggle_backend", text=text,
+                          icon="CHECKBOX_HLT" if (on and ok) else "CHECKBOX_DEHLT", emboss=False)
+        op.backend = name
+        col.label(text=benchmark.describe_declaration(decl), icon="BLANK1")
+    col.operator("spectral_bench.add_renderers_file", text="Add Renderers File", icon="ADD")
+
+
 class SPECTRAL_BENCH_PT_benchmark(_Base, bpy.types.Panel):
-    """Scenes, backends (every one batch/backends knows, unavailable ones with the reason), samples,
-    scale, passes; run and cancel with progress."""
+    """Scenes, backends (every one batch/backends knows and every declared renderer, unavailable
+    ones with the reason), samples, scale, passes; run and cancel with progress."""
     bl_label = "Spectral Benchmark"
     bl_context = "scene"
 
@@ -188,6 +211,7 @@ class SPECTRAL_BENCH_PT_benchmark(_Base, bpy.types.Panel):
             op = row.operator("spectral_bench.toggle_backend", text=name if ok else f"{name}: {why}",
                               icon="CHECKBOX_HLT" if (on and ok) else "CHECKBOX_DEHLT", emboss=False)
             op.backend = name
+        _draw_declared(layout, context, s)
         col = layout.column(align=True)
         col.prop(s, "spp")
         col.prop(s, "scale")

@@ -1,5 +1,6 @@
 """The extension's preferences (Edit > Preferences > Add-ons > Spectral Render Benchmark), saved
-with Blender's own preferences: where references come from.
+with Blender's own preferences: where references come from, and the renderers files that declare
+the user's own renderers (README, "Add your renderer"; batch/backends/command.py reads them).
 
 References ship inside the extension (references/ beside scenes.blend). A folder of the user's
 own (a checkout's references/, a re-rendered set, references for the user's own scenes) can be
@@ -9,7 +10,7 @@ and every result names the reference it was judged against.
 from pathlib import Path
 
 import bpy
-from bpy.props import EnumProperty, StringProperty
+from bpy.props import CollectionProperty, EnumProperty, StringProperty
 
 from . import reference_sources
 
@@ -24,6 +25,13 @@ SOURCES = [
 ]
 
 
+class RenderersFile(bpy.types.PropertyGroup):
+    """One renderers file: a TOML file of [renderers.NAME] tables, passed to a run as --renderers."""
+    path: StringProperty(name="Renderers File", subtype="FILE_PATH", default="",
+                         description="A TOML file declaring renderers that run as a command "
+                                     "([renderers.NAME] tables; README, Add your renderer)")
+
+
 class SpectralBenchPreferences(bpy.types.AddonPreferences):
     bl_idname = ROOT_PACKAGE
 
@@ -33,9 +41,11 @@ class SpectralBenchPreferences(bpy.types.AddonPreferences):
                     "or references rendered with batch/make_references.py --out FOLDER)")
     reference_source: EnumProperty(name="Use", items=SOURCES, default="BOTH",
                                    description="Which references judge a render")
+    renderers_files: CollectionProperty(type=RenderersFile, name="Renderers Files")
 
     def draw(self, context):
         layout = self.layout
+        draw_renderers_files(layout, self)
         layout.prop(self, "references_dir")
         layout.prop(self, "reference_source")
         search = reference_folders(context, self)
@@ -46,11 +56,23 @@ class SpectralBenchPreferences(bpy.types.AddonPreferences):
             layout.label(text=text, icon="CHECKMARK" if count else "ERROR")
 
 
+def draw_renderers_files(layout, prefs):
+    """The renderers files, each with its remove button, and the button that adds one."""
+    col = layout.column(align=True)
+    col.label(text="Renderers Files (your own renderers, declared in TOML)")
+    for i, item in enumerate(prefs.renderers_files):
+        row = col.row(align=True)
+        row.prop(item, "path", text="")
+        row.operator("spectral_bench.remove_renderers_file", text="", icon="REMOVE").index = i
+    col.operator("spectral_bench.add_renderers_file", text="Add Renderers File", icon="ADD")
+
+
 class Defaults:
     """The preferences' values where the extension is not enabled as an extension (tests, scripts
-    that import the repository): the shipped references only."""
+    that import the repository): the shipped references only, no renderers files."""
     references_dir = ""
     reference_source = "BOTH"
+    renderers_files = ()
 
 
 def settings(context=None):
@@ -67,7 +89,20 @@ def reference_folders(context=None, prefs=None):
     return reference_sources.folders(prefs.reference_source, user)
 
 
-CLASSES = (SpectralBenchPreferences,)
+def renderers_files(context=None, prefs=None):
+    """[Path] of the renderers files, absolute (a run passes each as --renderers), in the order
+    given, without blanks or repeats."""
+    prefs = prefs or settings(context)
+    out = []
+    for item in prefs.renderers_files:
+        if item.path.strip():
+            path = Path(bpy.path.abspath(item.path)).resolve()
+            if path not in out:
+                out.append(path)
+    return out
+
+
+CLASSES = (RenderersFile, SpectralBenchPreferences)
 
 
 register, unregister = bpy.utils.register_classes_factory(CLASSES)

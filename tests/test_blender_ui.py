@@ -167,6 +167,7 @@ def test_every_panel_draws_with_real_data(tmp_path):
             draw_all(scene=world_scene)
         # the preferences (the extension is not installed here: the class with default values)
         prefs = types.SimpleNamespace(bl_rna=preferences.SpectralBenchPreferences.bl_rna, references_dir="",
+                                      renderers_files=[],
                                       reference_source="BOTH")
         pref_calls = lr.draw(preferences.SpectralBenchPreferences, lr.Context(), instance=prefs)
         menu_calls = lr.draw_function(operators._menu, lr.Context(), "TOPBAR_MT_file_export")
