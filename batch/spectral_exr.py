@@ -44,13 +44,21 @@ LAYOUT_MAJOR = 1  # spectralLayoutVersion 1.x (Fichet et al. 2021)
 LAYOUT_VERSION = "1.0"
 EMISSIVE_UNITS = "W.m^-2.sr^-1"
 SPEED_OF_LIGHT = 299792458.0  # m/s, exact (SI)
-# SI prefixes the layout allows (reference implementation, Util::strToNanometers); µ and μ: the
-# micro sign and the Greek mu, which some writers use for u
-PREFIXES = {"Y": 1e24, "Z": 1e21, "E": 1e18, "P": 1e15, "T": 1e12, "G": 1e9, "M": 1e6, "k": 1e3, "h": 1e2,
-            "da": 1e1, "": 1.0, "d": 1e-1, "c": 1e-2, "m": 1e-3, "u": 1e-6, "\u00b5": 1e-6, "\u03bc": 1e-6,
-            "n": 1e-9, "p": 1e-12}
-# a quantity in metres or hertz, in nm
-UNITS = {"m": lambda v: v * 1e9, "Hz": lambda v: SPEED_OF_LIGHT / v * 1e9}
+# SI prefixes the layout allows (reference implementation, Util::strToNanometers), as powers of
+# ten; µ and μ: the micro sign and the Greek mu, which some writers use for u
+PREFIXES = {"Y": 24, "Z": 21, "E": 18, "P": 15, "T": 12, "G": 9, "M": 6, "k": 3, "h": 2, "da": 1, "": 0,
+            "d": -1, "c": -2, "m": -3, "u": -6, "\u00b5": -6, "\u03bc": -6, "n": -9, "p": -12}
+
+
+def _times_ten_to(value, power):
+    """value * 10**power with an exact power of ten (10.0**k is exact for 0 <= k <= 22), so that
+    '555,5nm' and '0,5555um' read as the same float."""
+    return value * 10.0 ** power if power >= 0 else value / 10.0 ** -power
+
+
+# a quantity (value, power of ten of its prefix) in metres or hertz, in nm
+UNITS = {"m": lambda v, p: _times_ten_to(v, p + 9),
+         "Hz": lambda v, p: _times_ten_to(SPEED_OF_LIGHT / v, 9 - p)}
 _PREFIX = "da|[YZEPTGMkhdcmun\u00b5\u03bcp]"
 _QUANTITY = rf"([0-9]*(?:,[0-9]*)?(?:[eE][+-]?[0-9]+)?)({_PREFIX})?(m|Hz)"
 EMISSIVE = re.compile(rf"S([0-3])\.{_QUANTITY}")
@@ -90,10 +98,10 @@ def quantity_nm(number, prefix, unit):
     """nm of a channel name's quantity: number (comma decimal separator), SI prefix, m or Hz."""
     if not re.search("[0-9]", number):
         raise ValueError("no number")
-    value = float(number.replace(",", ".")) * PREFIXES[prefix or ""]
+    value = float(number.replace(",", "."))
     if not (math.isfinite(value) and value > 0):
         raise ValueError(f"{number}{prefix or ''}{unit} is not a positive quantity")
-    nm = UNITS[unit](value)
+    nm = UNITS[unit](value, PREFIXES[prefix or ""])
     if not (math.isfinite(nm) and nm > 0):
         raise ValueError(f"{number}{prefix or ''}{unit} is not a finite wavelength")
     return nm
