@@ -250,7 +250,9 @@ def rgb_weights(wavelengths_nm, observer="cie1931"):
         raise ValueError(f"unknown observer {observer!r} (known: {', '.join(OBSERVERS)})")
     wl, xb, yb, zb, norm = OBSERVERS[observer]()
     xyz = colorimetry.hat_weights(np.array(wavelengths_nm), wl, np.stack([xb, yb, zb]), norm)  # N x 3
-    return colorimetry.xyz_to_srgb(xyz)
+    weights = colorimetry.xyz_to_srgb(xyz)
+    weights.setflags(write=False)  # shared by every caller through the cache
+    return weights
 
 
 def to_rgb(image, observer="cie1931"):
