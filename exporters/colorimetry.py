@@ -18,8 +18,8 @@ from . import spectra
 GROUND_TRUTH = "cie1931"
 OBSERVERS = ("cie1931", "mitsuba3", "art46")
 # ART 2.1.2's film (-s46e): 46 bands of 10 nm from 320 nm, each the box average of the radiance
-# over its band (ArSpectrum46.c; measured band by band), read by the ART backend with the CMFs at
-# the band centres (batch/backends/art_backend.py)
+# over its band (ArSpectrum46.c; measured band by band), labelled by the band centres and read by
+# the ART backend as a spectral EXR (batch/spectral_exr.py: hat functions between the centres)
 ART_BANDS_NM = (320.0, 10.0, 46)
 
 
@@ -50,23 +50,39 @@ def observer(name=GROUND_TRUTH):
 
 
 def _band_stairs(wl, cmf):
-    """A CMF as ART's band film sees it, on the 1 nm grid: constant over each 10 nm band at the
-    band centre's value, so that integrating it against a radiance (trapezoid rule) gives the
-    band average times the centre's CMF times the width; a band edge takes the mean of its two
-    neighbours (half a band's value at the film's ends), zero outside the film."""
+    """A CMF as ART's band film is read, on the 1 nm grid. ART's film holds the box average of the
+    radiance over each 10 nm band; the reader (batch/spectral_exr.py) weights band k by the
+    integral of its hat function times the CMF (hat_weights). So the film sees the radiance
+    through a stair: constant over band k at that weight over the band width; a band edge takes
+    the mean of its two neighbours (half a band's value at the film's ends), zero outside the film,
+    so that the trapezoid rule on the 1 nm grid integrates the stair as the step function it is."""
     start, width, count = ART_BANDS_NM
     centres = start + width * (np.arange(count) + 0.5)
-    at_centre = np.interp(centres, wl, cmf, left=0.0, right=0.0)
+    norm = 1.0  # hat_weights divides by the normalisation; the stair carries the bare integral
+    per_band = hat_weights(centres, wl, np.asarray(cmf)[None, :], norm)[:, 0] / width
     pos = (wl - start) / width
     inside = (pos >= 0) & (pos <= count)
     band = np.clip(np.floor(pos).astype(int), 0, count - 1)
-    out = np.where(inside, at_centre[band], 0.0)
+    out = np.where(inside, per_band[band], 0.0)
     edge = inside & (pos == np.round(pos))
     k = np.round(pos[edge]).astype(int)
-    below = np.where(k >= 1, at_centre[np.clip(k - 1, 0, count - 1)], 0.0)
-    above = np.where(k < count, at_centre[np.clip(k, 0, count - 1)], 0.0)
+    below = np.where(k >= 1, per_band[np.clip(k - 1, 0, count - 1)], 0.0)
+    above = np.where(k < count, per_band[np.clip(k, 0, count - 1)], 0.0)
     out[edge] = 0.5 * (below + above)
     return out
+
+
+def hat_weights(band_wl, wl, cmfs, norm):
+    """Weights W (N x K) that integrate a spectrum known at the N wavelengths ``band_wl``
+    (ascending, nm) against K colour-matching functions ``cmfs`` (K x M, tabulated at ``wl``):
+    the spectrum is the piecewise-linear interpolation of its samples, zero outside
+    [band_wl[0], band_wl[-1]], i.e. the sum of sample k times its hat function h_k (1 at
+    band_wl[k], 0 at the neighbouring wavelengths); W[k] = trapz(h_k * cmf, wl) / norm. So the
+    XYZ of samples s is s @ W, exactly what xyz() gives for the interpolated spectrum evaluated on
+    the CMFs' grid (the trapezoid rule on that grid, normalised as xyz() is)."""
+    band_wl = np.asarray(band_wl, dtype=np.float64)
+    hats = np.array([np.interp(wl, band_wl, row, left=0.0, right=0.0) for row in np.eye(band_wl.size)])
+    return np.trapz(hats[:, None, :] * np.asarray(cmfs, dtype=np.float64)[None, :, :], wl, axis=-1) / norm
 
 
 def xyz(values_at_cmf_wavelengths, obs=GROUND_TRUTH):

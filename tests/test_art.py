@@ -91,11 +91,13 @@ def test_missing_artist_gives_skipped_jobs_never_passed(golden, tmp_path):
     assert "skipped" in (out / "summary.md").read_text()
 
 
-def test_art46_observer_is_the_backends_band_film():
+def test_art46_observer_is_the_backends_band_film(tmp_path):
     """The art46 observer (exporters/colorimetry.py) must be exactly what the backend computes
-    from ART's band film: each 10 nm band's box average times the CMFs at the band centre. And
+    from ART's band film: each 10 nm band's box average, read from a spectral EXR named as ART
+    names its channels, weighted by its hat function times the CMFs (batch/spectral_exr.py). And
     it must differ from the CIE observer where the deviation says it does (a saturated colour)."""
     import numpy as np
+    import OpenEXR
     from spectral_bench.batch.backends.art_backend import stokes_to_rgb
     from spectral_bench.exporters import colorimetry, spectra
     start, width, count = colorimetry.ART_BANDS_NM
@@ -108,11 +110,14 @@ def test_art46_observer_is_the_backends_band_film():
             lo, hi = start + width * b, start + width * (b + 1)
             inside = fine[(fine >= lo) & (fine <= hi)]
             channels[f"S0.{lo + width / 2:.0f},000000nm"] = np.full((1, 1), np.trapz(radiance(inside), inside) / width)
-        names, img = stokes_to_rgb(channels)
+        path = tmp_path / f"art_{centre:.0f}.exr"
+        with OpenEXR.File({"type": OpenEXR.scanlineimage}, {n: a.astype(np.float32) for n, a in channels.items()}) as f:
+            f.write(str(path))
+        names, img = stokes_to_rgb(path)
         assert names == ["R", "G", "B"]
         model = colorimetry.xyz_to_srgb(colorimetry.xyz(radiance(wl), "art46"))
         truth = colorimetry.xyz_to_srgb(colorimetry.xyz(radiance(wl)))
-        np.testing.assert_allclose(img[0, 0], model, rtol=2e-4, atol=2e-4 * np.abs(model).max())
+        np.testing.assert_allclose(img[0, 0], model, rtol=2e-4, atol=2e-4 * np.abs(model).max())  # float32 bands
         if sigma < 20:  # saturated: the band film is measurably not the CIE integral
             assert (np.abs(model - truth) / np.abs(truth)).max() > 0.01, (centre, model, truth)
 

@@ -7,8 +7,9 @@ executable's install prefix (<prefix>/bin/artist, <prefix>/lib). Options used:
 ``-b`` (no viewer), ``-wp d65``, ``-s46e`` (46 spectral bands of 10 nm, 320-780 nm, instead of
 the default 8), ``-seed`` (reproducible passes), ``-p`` when the scene needs polarisation. Every
 scene is written out as ART's spectral EXR (S0, or S0..S3 with signs kept, per band; the band
-labels are their centres), integrated here with the CIE 1931 CMFs to linear sRGB exactly as the
-IR defines colour (exporters/colorimetry.py): R, G, B and, for Stokes output, S0.R ... S3.B.
+labels are their centres: the Fichet 2021 layout), read and integrated with the CIE 1931 CMFs to
+linear sRGB by batch/spectral_exr.py as the IR defines colour (exporters/colorimetry.py): R, G, B
+and, for Stokes output, S0.R ... S3.B.
 ART's own sRGB EXR is not used: it maps out-of-gamut colours into the gamut.
 """
 import os
@@ -20,8 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ...exporters import art_writer, colorimetry, spectra
-from .. import exr
+from ...exporters import art_writer
+from .. import spectral_exr
 from . import passes as passes_mod
 from .passes import BackendFailure
 
@@ -57,33 +58,14 @@ def art_version(artist):
     return m.group(1) if m else "unknown"
 
 
-def stokes_to_rgb(channels):
-    """R, G, B and S0.R ... S3.B from ART's spectral EXR channels 'S<k>.<nm>,<frac>nm' (R, G, B
-    alone when only S0 is there: an unpolarised render)."""
-    bands = {}
-    for name, arr in channels.items():
-        m = re.match(r"S([0-3])\.(\d+)[,.](\d+)nm$", name)
-        if m:
-            bands.setdefault(int(m.group(1)), {})[float(f"{m.group(2)}.{m.group(3)}")] = arr
-    if sorted(bands) not in ([0, 1, 2, 3], [0]):
-        raise BackendFailure(f"ART's spectral EXR has no S0..S3 bands (channels: {sorted(channels)[:8]}...)")
-    wls = np.array(sorted(bands[0]))
-    cmf_wl, x_bar, y_bar, z_bar = spectra.cie_1931_cmfs()
-    xb, yb, zb = (np.interp(wls, cmf_wl, c, 0, 0) for c in (x_bar, y_bar, z_bar))
-    step = np.gradient(wls) if len(wls) > 1 else np.ones(1)
-    norm = np.trapz(y_bar, cmf_wl)  # Y of a flat spectrum 1 is 1, as in colorimetry.xyz
-    out_names, planes = [], []
-    for k in sorted(bands):
-        stack = np.stack([bands[k][w] for w in wls], axis=-1).astype(np.float64)  # H x W x bands
-        xyz = np.stack([stack @ (xb * step), stack @ (yb * step), stack @ (zb * step)], axis=-1) / norm
-        rgb = colorimetry.xyz_to_srgb(xyz)
-        planes += [rgb[..., i] for i in range(3)]
-        out_names += [f"S{k}.{c}" for c in "RGB"]
-    if sorted(bands) == [0]:  # an unpolarised render's spectral EXR: radiance only
-        return ["R", "G", "B"], np.stack(planes, axis=-1)
-    names = ["R", "G", "B"] + out_names
-    img = np.stack(planes[:3] + planes, axis=-1)
-    return names, img
+def stokes_to_rgb(path):
+    """R, G, B and, for a polarised render, S0.R ... S3.B from ART's spectral EXR: the Fichet 2021
+    layout (channels 'S<k>.<nm>,<frac>nm', the band centres) read and integrated with the CIE 1931
+    CMFs by batch/spectral_exr.py (R, G, B alone when only S0 is there: an unpolarised render)."""
+    try:
+        return spectral_exr.to_rgb(spectral_exr.read(path))
+    except spectral_exr.SpectralEXRError as exc:
+        raise BackendFailure(f"ART's spectral EXR: {exc}") from exc
 
 
 class ArtBackend:
@@ -136,6 +118,6 @@ class ArtBackend:
         wall = passes_mod.run_command(cmd, timeout, log, "artist", env=artist_env(self.artist), cwd=run_dir)
         if not (run_dir / "scene.exr").is_file():
             raise BackendFailure(f"artist wrote no scene.exr in {run_dir}")
-        names, img = stokes_to_rgb(exr.read(run_dir / "scene.exr"))  # always the spectral EXR (art_writer)
+        names, img = stokes_to_rgb(run_dir / "scene.exr")  # always the spectral EXR (art_writer)
         shutil.rmtree(run_dir, ignore_errors=True)
         return {"names": names, "image": img.astype(np.float64), "time_s": wall}

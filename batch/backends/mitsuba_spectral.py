@@ -1,0 +1,173 @@
+"""Mitsuba 3 renders an exported scene.xml as a spectral image: Mitsuba 3.9.1's ``specfilm``
+with box bands, written in the spectral OpenEXR layout of Fichet et al. 2021 (batch/spectral_exr.py).
+
+    render(xml_path, out_exr, spp, seed)      # one pass, in a child process (this file as a script)
+
+The exported film (hdrfilm, exporters/mitsuba_writer.py) is replaced by a specfilm of the same
+size and reconstruction filter whose sensor response functions are boxes of ``band_nm`` over
+``range_nm`` (default 10 nm over 360-830 nm, Mitsuba's spectral range: 47 bands). specfilm
+(src/films/specfilm.cpp) samples wavelengths in proportion to the sum of the responses and stores
+in each channel an estimate of the integral of the radiance times that band's response, so a box
+of height 1 gives the integral over the band: divided by the band width it is the band average,
+stored at the band centre (measured on a constant environment: every band within 1.8 standard
+errors of the integral, benchmarks/SPECTRAL_EXR.md).
+
+specfilm records unpolarised radiance only (Film::prepare_sample takes an UnpolarizedSpectrum),
+so scenes that need polarisation (a polarised variant, the stokes integrator, a camera polariser)
+are refused; a mono or RGB variant is replaced by its spectral twin.
+"""
+import argparse
+import json
+import math
+import sys
+import time
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+BAND_NM = 10.0
+RANGE_NM = (360.0, 830.0)  # Mitsuba 3's MI_CIE_MIN, MI_CIE_MAX
+MAX_WAVEFRONT = 1 << 24  # samples per render call on the LLVM variants (as mitsuba_worker.py)
+# the film parameters specfilm shares with hdrfilm (src/films/specfilm.cpp); the rest are dropped
+FILM_KEEP = {"width", "height", "crop_offset_x", "crop_offset_y", "crop_width", "crop_height", "sample_border"}
+HERE = Path(__file__).resolve()
+
+
+class SpectralRenderError(RuntimeError):
+    pass
+
+
+def bands(band_nm=BAND_NM, range_nm=RANGE_NM):
+    """[(lo, hi)] of the box bands tiling range_nm (the last one ends at range_nm[1])."""
+    lo, hi = map(float, range_nm)
+    count = math.ceil((hi - lo) / band_nm - 1e-9)
+    if not (band_nm > 0 and hi > lo and count >= 2):
+        raise ValueError(f"bands of {band_nm} nm over {lo}-{hi} nm: need at least 2")
+    edges = [min(lo + band_nm * k, hi) for k in range(count + 1)]
+    return list(zip(edges[:-1], edges[1:]))
+
+
+def band_name(k):
+    return f"band_{k:03d}"  # zero-padded: specfilm may order its channels by name
+
+
+def spectral_variant(variant):
+    """The spectral twin of a variant (llvm_ad_rgb -> llvm_ad_spectral); polarised ones refused."""
+    if variant.endswith("_polarized"):
+        raise SpectralRenderError(f"variant {variant}: specfilm records unpolarised radiance only "
+                                  "(Film::prepare_sample takes an UnpolarizedSpectrum); a polarised scene has no spectral output here")
+    prefix = "llvm_ad_" if variant.startswith("llvm_ad_") else "scalar_"
+    return prefix + "spectral"
+
+
+def spectral_xml(xml_text, band_list, where="scene.xml"):
+    """The scene XML with its sensor's film replaced by a specfilm of box bands ``band_list``."""
+    root = ET.fromstring(xml_text)
+    integrator = root.find("integrator")
+    if integrator is not None and integrator.get("type") == "stokes":
+        raise SpectralRenderError(f"{where}: the stokes integrator (a polarised scene): specfilm records unpolarised radiance only")
+    films = root.findall("sensor/film")
+    if len(films) != 1:
+        raise SpectralRenderError(f"{where}: expected one <sensor><film>, found {len(films)}")
+    film = films[0]
+    for child in list(film):
+        if child.tag != "rfilter" and child.get("name") not in FILM_KEEP:
+            film.remove(child)
+    film.set("type", "specfilm")
+    ET.SubElement(film, "string", name="component_format", value="float32")
+    for k, (lo, hi) in enumerate(band_list):
+        srf = ET.SubElement(film, "spectrum", type="irregular", name=band_name(k))
+        ET.SubElement(srf, "string", name="wavelengths", value=f"{lo!r}, {hi!r}")
+        ET.SubElement(srf, "string", name="values", value="1, 1")
+    return ET.tostring(root, encoding="unicode")
+
+
+def render(xml_path, out_exr, spp, seed=0, variant=None, band_nm=BAND_NM, range_nm=RANGE_NM, timeout=1800,
+           log_path=None):
+    """Render one pass of ``xml_path`` (an exported Mitsuba scene) into the Fichet 2021 EXR
+    ``out_exr`` in a child process; returns its record (variant, spp, seed, time_s, bands,
+    versions). ``variant``: a Mitsuba variant whose spectral twin renders (default
+    llvm_ad_spectral where LLVM works, else scalar_spectral)."""
+    import subprocess
+
+    from . import child, llvm
+    xml_path = Path(xml_path)
+    if (xml_path.parent / "camera_filter.json").is_file():
+        raise SpectralRenderError(f"{xml_path.parent / 'camera_filter.json'}: a camera polariser needs Stokes output; "
+                                  "specfilm records unpolarised radiance only")
+    variant = spectral_variant(variant or ("llvm_ad_spectral" if llvm.find()[0] else "scalar_spectral"))
+    result = Path(out_exr).with_suffix(".result.json")
+    cmd = [sys.executable, str(HERE), "--xml", str(xml_path), "--out", str(out_exr), "--result", str(result),
+           "--spp", str(int(spp)), "--seed", str(int(seed)), "--variant", variant, "--band-nm", repr(float(band_nm)),
+           "--range-nm", repr(float(range_nm[0])), repr(float(range_nm[1]))]
+    try:
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, env=llvm.env(), **child.popen_kwargs())
+    except subprocess.TimeoutExpired as exc:
+        raise SpectralRenderError(f"spectral render of {xml_path} timed out after {timeout} s") from exc
+    if log_path:
+        Path(log_path).write_text(f"$ {' '.join(cmd)}\n{proc.stdout}\n{proc.stderr}")
+    if proc.returncode != 0:
+        tail = (proc.stderr.strip() or proc.stdout.strip()).splitlines()[-3:]
+        raise SpectralRenderError(f"spectral render of {xml_path} exited with {proc.returncode}: {' | '.join(tail)[-600:]}")
+    return json.loads(result.read_text())
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description="Render an exported Mitsuba scene.xml to a Fichet 2021 spectral EXR.")
+    ap.add_argument("--xml", required=True)
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--result", required=True)
+    ap.add_argument("--spp", type=int, required=True)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--variant", default="scalar_spectral")
+    ap.add_argument("--band-nm", type=float, default=BAND_NM)
+    ap.add_argument("--range-nm", type=float, nargs=2, default=RANGE_NM)
+    args = ap.parse_args(argv)
+    t0 = time.perf_counter()
+    sys.path.insert(0, str(HERE.parents[2]))
+    import pkg_bootstrap
+    pkg_bootstrap.package()
+    import drjit as dr
+    import mitsuba as mi
+    import numpy as np
+
+    from spectral_bench.batch import spectral_exr
+    from spectral_bench.exporters import mitsuba_plugins
+
+    xml = Path(args.xml)
+    band_list = bands(args.band_nm, args.range_nm)
+    mi.set_variant(args.variant)
+    mitsuba_plugins.register_exported(xml.parent)
+    mi.Thread.thread().file_resolver().prepend(str(xml.parent.resolve()))  # spectra/*.spd, meshes/
+    scene = mi.load_string(spectral_xml(xml.read_text(), band_list, str(xml)))
+    film = scene.sensors()[0].film()
+    width, height = film.size()
+    chunks = max(1, math.ceil(args.spp * width * height / MAX_WAVEFRONT)) if args.variant.startswith("llvm") else 1
+    while args.spp % chunks:
+        chunks += 1
+    acc, render_s = None, 0.0
+    for j in range(chunks):
+        t = time.perf_counter()
+        img = mi.render(scene, spp=args.spp // chunks, seed=args.seed * chunks + j)
+        dr.eval(img)
+        arr = np.array(img, dtype=np.float64)
+        render_s += time.perf_counter() - t
+        acc = arr if acc is None else acc + arr
+    acc /= chunks
+    bitmap = film.bitmap()
+    names = [bitmap.struct_()[i].name for i in range(bitmap.channel_count())]
+    names = [n for n in names if n != "W"]
+    if len(names) != acc.shape[-1]:
+        raise RuntimeError(f"specfilm channels {names[:4]}... do not match the image's {acc.shape[-1]} channels")
+    order = [names.index(band_name(k)) for k in range(len(band_list))]
+    widths = np.array([hi - lo for lo, hi in band_list])
+    centres = np.array([(lo + hi) / 2 for lo, hi in band_list])
+    spectral_exr.write(args.out, centres, acc[..., order] / widths)  # band integrals -> band averages
+    Path(args.result).write_text(json.dumps({
+        "variant": args.variant, "spp": args.spp, "seed": args.seed, "chunks": chunks, "time_s": render_s,
+        "wall_s": time.perf_counter() - t0, "resolution": [int(width), int(height)],
+        "bands": [[lo, hi] for lo, hi in band_list], "film": "specfilm, box bands",
+        "versions": {"mitsuba": mi.__version__, "drjit": dr.__version__}}, indent=1))
+
+
+if __name__ == "__main__":
+    main()
