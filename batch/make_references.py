@@ -107,7 +107,7 @@ def merge(work, passes):
 
 
 def parser():
-    from spectral_bench.batch import cli, scene_sources  # noqa: F401
+    from spectral_bench.batch import cli
     from spectral_bench.batch.verdict import references
     T = cli.TYPES  # the runner's checked option types: a bad value exits 2 naming the option
     ap = argparse.ArgumentParser(prog="batch/make_references.py", description=__doc__.splitlines()[0])

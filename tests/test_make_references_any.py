@@ -241,3 +241,13 @@ def test_a_reference_one_percent_brighter_is_refused_unless_accepted(toy_made, t
             ["accepted_despite_verdict"]]
     assert len(kept) == 1 and (sha(kept[0] / f"{SCENE}.exr"), sha(kept[0] / f"{SCENE}.json")) == before
     assert json.loads((out / f"{SCENE}.json").read_text())["backend"] == "toy_brighter"
+
+
+def test_the_extension_build_leaves_history_out():
+    import importlib.util
+    spec = importlib.util.spec_from_file_location("build_extension", ROOT / "scripts" / "build_extension.py")
+    build = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(build)
+    assert "history" in build.IGNORE(str(ROOT / "references"), ["history", f"{SCENE}.exr", ".work"])
+    assert f"{SCENE}.exr" not in build.IGNORE(str(ROOT / "references"), ["history", f"{SCENE}.exr"])
+    assert "history" not in build.IGNORE(str(ROOT / "docs"), ["history"])  # only the references' history
