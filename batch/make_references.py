@@ -221,7 +221,7 @@ SHOWN = ("backend", "mode", "spp", "passes", "resolution", "scale", "versions", 
 
 def _cell(value):
     if isinstance(value, dict):
-        return "; ".join(f"{k} {v}" for k, v in value.items()) or "-"
+        return "; ".join(f"{k} {v}" for k, v in sorted(value.items(), key=lambda kv: str(kv[0]))) or "-"
     if isinstance(value, list):
         return "x".join(map(str, value)) if all(isinstance(v, int) for v in value) else ", ".join(map(str, value))
     return "-" if value is None else str(value)
@@ -369,6 +369,10 @@ def _make(args, argv, out, held, backend):
                     print(line, flush=True)
             else:
                 print(f"  not judged against the old one: it is {state}", flush=True)
+            if old is not None and mean.shape[0] < old.mean.shape[0]:
+                (H, W), (h, w) = old.mean.shape[:2], mean.shape[:2]
+                print(f"  note: the new reference is {w}x{h}, the old one {W}x{H}: renders at {W}x{H} (or any size that "
+                      f"is not {w}x{h} divided by an integer) can no longer be judged against it", flush=True)
             if verdict is not None and not verdict["same"] and not args.accept:
                 why = "differs from the old beyond noise" if verdict["comparable"] else "cannot be judged against the old one"
                 print(f"{name}: NOT replaced: the new reference {why}; the old one is left as it is (exit status 1). "

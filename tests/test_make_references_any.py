@@ -251,3 +251,16 @@ def test_the_extension_build_leaves_history_out():
     assert "history" in build.IGNORE(str(ROOT / "references"), ["history", f"{SCENE}.exr", ".work"])
     assert f"{SCENE}.exr" not in build.IGNORE(str(ROOT / "references"), ["history", f"{SCENE}.exr"])
     assert "history" not in build.IGNORE(str(ROOT / "docs"), ["history"])  # only the references' history
+
+
+@pytest.mark.slow
+def test_the_mitsuba_executable_route_makes_a_reference_that_records_it(tmp_path):
+    exe = shutil.which("mitsuba", path=str(ROOT / ".venv" / "bin")) or shutil.which("mitsuba")
+    if exe is None:
+        pytest.skip("no mitsuba executable in this environment")
+    out = tmp_path / "refs"
+    proc = maker("-e", f"mitsuba={exe}", "-s", SCENE, "--scale", "0.0625", "--spp", "4", "--passes", "2", "--out", out)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    meta = json.loads((out / f"{SCENE}.json").read_text())
+    assert meta["backend"] == "mitsuba" and meta["executable"] == exe and meta["versions"]["route"] == "executable"
+    assert meta["resolution"] == [32, 32] and "declaration" not in meta
