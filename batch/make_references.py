@@ -230,14 +230,14 @@ def _cell(value):
 def provenance_table(old, new):
     """Lines: the old and the new provenance side by side (what a reader checks before trusting
     the replacement); values from the old record are any text: shown with repr where not plain."""
-    rows = [(key, _cell(old.get(key)) if old is not None else "(no readable record)", _cell(new.get(key)))
+    shown = lambda t: (t if t.isprintable() else repr(t))[:120]
+    rows = [(key, shown(_cell(old.get(key))) if old is not None else "(no readable record)", _cell(new.get(key)))
             for key in SHOWN]
     if "declaration" in new or (old or {}).get("declaration"):
         src = lambda p: (p or {}).get("declaration", {}).get("source") if isinstance((p or {}).get("declaration"), dict) else None
-        rows.append(("declared in", _cell(src(old)), _cell(src(new))))
+        rows.append(("declared in", shown(_cell(src(old))), _cell(src(new))))
     width = max(len(r[1]) for r in rows)
-    printable = lambda t: t if t.isprintable() else repr(t)
-    return [f"  {'':<12}{'old':<{width + 2}}new"] + [f"  {k:<12}{printable(o)[:200]:<{width + 2}}{n}" for k, o, n in rows]
+    return [f"  {'':<12}{'old':<{width + 2}}new"] + [f"  {k:<12}{o:<{width + 2}}{n}" for k, o, n in rows]
 
 
 def verdict_lines(v):
