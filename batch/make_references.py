@@ -1,7 +1,9 @@
 """Render reference images (an explicit request: this is the only thing that changes references/).
 
-    .venv/bin/python batch/make_references.py [-s SCENE ...] [--spp 4096 | --factor F] [--passes 8]
-                                              [--cluster ADDRESS | local:N] [--replace]
+    .venv/bin/python batch/make_references.py [-s SCENE ...] [-r NAME] [-e [NAME=]PATH] [--variant V]
+                                              [--renderers FILE ...] [--art-ggx] [--scale F]
+                                              [--spp 4096 | --factor F] [--passes 8]
+                                              [--cluster ADDRESS | local:N] [--replace [--accept]]
 
 References change only on request: a scene whose reference (its .exr or .json) is already in the
 output folder is left alone and named, with what is wrong with it if anything (stale, broken), unless
@@ -9,16 +11,45 @@ output folder is left alone and named, with what is wrong with it if anything (s
 holds the scene's lock (references/.work/<scene>.lock) from planning to writing; a scene locked by
 another maker is skipped and named (exit status 1).
 
-Each reference is rendered with the Mitsuba backend at the scene's resolution with ``spp`` samples
-per pixel in all (or ``factor`` x the scene's own), in ``passes`` independent passes (distinct
-seeds). Every pass is a job (batch/jobs/job.py) on the chosen engine (this machine, or a Dask
-cluster: passes of one scene run on several workers at once); each finished pass is kept in
+Any one backend renders it: ``-r NAME`` (default mitsuba) is a built-in backend or a renderer
+declared with ``--renderers FILE`` (README, "Add your renderer"); ``-e [NAME=]PATH``, ``--variant``
+(Mitsuba) and ``--art-ggx`` (ART) mean what they mean to the runner and go through the runner's
+own option types and declaration loading (batch/cli.py); a bad value is a usage error (exit 2)
+naming the option. Each reference is rendered at the scene's resolution (times ``--scale F``, as
+the runner scales it: such a reference judges renders at that resolution or an integer fraction
+of it, batch/verdict/references.py ``usable_for``) with ``spp`` samples per pixel in all (or
+``factor`` x the scene's own), in ``passes`` independent passes (distinct seeds). Every pass is a
+``reference`` job (batch/jobs/job.py) whose backend options rebuild the backend on any worker (a
+declared renderer's carry its declaration) on the chosen engine (this machine, or a Dask cluster:
+passes of one scene run on several workers at once); each finished pass is kept in
 references/.work/, so a run that is stopped resumes where it was. When every pass of a scene is
 there, their mean and the standard error of that mean (the pass-to-pass spread) are written as
-the reference with its provenance, and the passes are removed. The reference is saved as one step
-(batch/verdict/references.py ``save``: unique temporary files, synced, the record carrying the
-image's sha256 and renamed first, so an interrupted save is seen as a broken reference, never as a
-new image with an old record).
+the reference with its provenance (backend, mode, spp, passes, seeds, resolution and scale, the
+versions the passes recorded, a declared renderer's declaration, the executable, the command),
+and the passes are removed. The reference is saved as one step (batch/verdict/references.py
+``save``: unique temporary files, synced, the record carrying the image's sha256 and renamed
+first, so an interrupted save is seen as a broken reference, never as a new image with an old
+record).
+
+Replacing (``--replace``) a usable reference judges the new one against the old first, on both
+their noises, with the block test that judges every render against a reference
+(batch/verdict/references.py ``judge_replacement``), and prints the verdict (p_min against its
+Sidak threshold, the mean ratio new/old per channel with its standard error, the smallest uniform
+change the test would have refused) and the two provenances side by side. A new reference that
+differs from the old beyond noise (or cannot be judged against it: other channels, resolutions
+not an integer factor apart) is refused, the old one left untouched (exit status 1; the new passes
+stay in references/.work/, so the same command with ``--accept`` replaces it without rendering
+again); ``--accept`` replaces it anyway. A stale (the scene changed) or broken old reference is
+replaced without a verdict.
+
+History: a replaced reference is never overwritten. Its record and image move to
+``<out>/history/<scene>/<UTC time YYYYmmddTHHMMSSZ>-<old backend>/`` with ``replaced.json`` (when,
+who: user@host, why: the old one's state and the verdict, whether ``--accept`` overrode it, the
+command, both provenances). They are linked there, under the scene's lock, after the new reference
+is rendered and judged and before it is saved; the save itself is the same atomic step (the old
+files stay current until it). A search never reads history (only <folder>/<scene>.exr/.json are
+candidates, and a folder holding ``replaced.json`` is refused even when named with --references);
+the extension build leaves history/ out. To restore an old reference, move its two files back.
 """
 import argparse
 import contextlib
@@ -27,6 +58,7 @@ import json
 import math
 import os
 import platform
+import shlex
 import shutil
 import sys
 from pathlib import Path
@@ -37,17 +69,22 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import pkg_bootstrap  # noqa: E402
 
 SEED_STRIDE = 1000  # pass k renders with seeds seed + k * SEED_STRIDE + chunk (chunks < 1000)
+DEFAULT_BACKEND = "mitsuba"
 
 
-def pass_jobs(name, scene, mode, spp, passes, seed, work):
-    """One job per pass; passes already in ``work`` (same scene, mode and samples) are skipped."""
+class Usage(ValueError):
+    """A usage error (exit 2); the message names the option."""
+
+
+def pass_jobs(name, scene, backend, mode, spp, passes, seed, work):
+    """One job per pass; passes already in ``work`` (same scene, backend, mode and samples) are skipped."""
     from spectral_bench.batch.jobs import job as jobs
     per_pass = math.ceil(spp / passes)
     todo = []
     for k in range(passes):
-        j = jobs.make("reference", name, scene, "mitsuba", mode, per_pass, work, f"pass{k}", passes=1,
-                      seed=seed + k * SEED_STRIDE, timeout=6 * 3600, label=f"{name} pass {k + 1}/{passes}",
-                      extra={"pass": k})
+        j = jobs.make("reference", name, scene, backend.name, mode, per_pass, work, f"pass{k}", passes=1,
+                      backend_options=backend.options, seed=seed + k * SEED_STRIDE, timeout=6 * 3600,
+                      label=f"{name} pass {k + 1}/{passes}", extra={"pass": k})
         done = work / f"pass{k}" / "done.json"
         if not (done.is_file() and json.loads(done.read_text()).get("job") == jobs.job_id(j)):
             todo.append(j)
@@ -69,18 +106,27 @@ def merge(work, passes):
     return names, stack.mean(axis=0), stack.std(axis=0, ddof=1) / math.sqrt(passes), seconds, versions
 
 
-def main(argv=None):
-    pkg_bootstrap.package()
-    from spectral_bench.batch import backends, scene_sources
-    from spectral_bench.batch.verdict import references
-
+def parser():
     from spectral_bench.batch import cli
-    from spectral_bench.batch.jobs import engines
+    from spectral_bench.batch.verdict import references
     T = cli.TYPES  # the runner's checked option types: a bad value exits 2 naming the option
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="batch/make_references.py", description=__doc__.splitlines()[0])
     ap.add_argument("-i", "--input", nargs="+", action="extend", type=T["input"],
                     help="scenes.blend or scene IR JSON files (repeatable; default: scenes.blend)")
     ap.add_argument("-s", "--scene", action="append", type=T["scene"])
+    ap.add_argument("-r", "--renderer", type=T["renderer"], metavar="NAME",
+                    help=f"the backend that renders the references: a built-in one or a renderer declared with "
+                         f"--renderers (one, not a group; default {DEFAULT_BACKEND})")
+    ap.add_argument("-e", "--exec", action="append", type=T["exec"], metavar="[NAME=]PATH",
+                    help="the renderer's executable, e.g. mitsuba=/opt/mitsuba/mitsuba (a bare PATH is -r's)")
+    ap.add_argument("--variant", type=T["variant"], help="force a Mitsuba variant (-r mitsuba; default: cheapest that models the scene)")
+    ap.add_argument("--renderers", action="append", type=T["renderers"], metavar="FILE",
+                    help="declare renderers that run as a command ([renderers.NAME] tables; repeatable); select one with -r NAME")
+    ap.add_argument("--art-ggx", action="store_true",
+                    help="-r art: write GGX_MICROFACET_DISTRIBUTION_CONST for an ART build that has GGX")
+    ap.add_argument("--scale", type=T["scale"], default=1.0, metavar="F",
+                    help="resolution scale as the runner's --scale (default 1.0: the scene's resolution); the "
+                         "reference then judges renders at that resolution or an integer fraction of it")
     ap.add_argument("--spp", type=T["spp"], default=4096, help="reference samples per pixel in all (default 4096)")
     ap.add_argument("--factor", type=cli.int_in(1, 1 << 16), help="reference spp = factor x the scene's spp (instead of --spp)")
     ap.add_argument("--passes", type=cli.int_in(2, cli.MAX_PASSES), default=8,
@@ -89,13 +135,75 @@ def main(argv=None):
     ap.add_argument("--out", type=T["out"], default=str(references.REFERENCE_DIR))
     ap.add_argument("--cluster", metavar="ADDRESS", type=T["cluster"], help="a Dask scheduler, or local:N (default: this machine)")
     ap.add_argument("--replace", action="store_true",
-                    help="render again scenes whose reference is already in the output folder (default: leave them)")
-    args = ap.parse_args(argv)
+                    help="render again scenes whose reference is already in the output folder (default: leave them); "
+                         "the new one is judged against the old, which is kept in <out>/history/")
+    ap.add_argument("--accept", action="store_true",
+                    help="with --replace: replace a reference even where the new one differs from the old beyond noise")
+    ap.add_argument("--alpha", type=T["alpha"], help="with --replace: significance level of the noise test of new "
+                    "against old, as the runner's --alpha (default 0.01)")
+    ap.add_argument("--block", type=T["block"], help="with --replace: block side in pixels of that test (default: from --min-samples)")
+    ap.add_argument("--min-samples", type=T["min_samples"], help="with --replace: samples pooled per block of that test "
+                    "(default 65536, as the runner's; larger blocks see smaller uniform changes)")
+    return ap
+
+
+def chosen_backend(args):
+    """(backend, its name) from -r, -e, --variant, --renderers and --art-ggx, built by the runner
+    (batch/jobs/runner.py ``make_backend``) from the options dict the runner's parser gives;
+    raises Usage naming the option."""
+    from spectral_bench.batch import backends, cli
+    from spectral_bench.batch.backends import command
+    from spectral_bench.batch.jobs import runner
+    try:
+        declared = cli.merge_declarations([(f, command.load_file(f)) for f in args.renderers or []])
+    except command.DeclarationError as exc:
+        raise Usage(f"--renderers: {exc}") from None
+    name = args.renderer or DEFAULT_BACKEND
+    known = backends.known_names(declared)
+    if name not in known:
+        raise Usage(f"-r {name}: unknown backend or declared renderer (known: {', '.join(known)})")
+    members = backends.expand([name], declared)
+    if members != [name]:
+        raise Usage(f"-r {name}: a group ({', '.join(members)}); a reference comes from one backend: -r NAME")
+    execs = {}
+    for item in args.exec or []:
+        who, path = cli.split_exec(item)
+        if who != "*" and who not in known:
+            raise Usage(f"-e {item}: {who!r} is no backend or declared renderer (known: {', '.join(known)})")
+        if who not in ("*", name):
+            raise Usage(f"-e {item}: the references are rendered by -r {name}, not {who}")
+        execs[name] = path
+    if args.variant and name != "mitsuba":
+        raise Usage(f"--variant {args.variant}: a Mitsuba variant, but -r {name} renders the references")
+    if args.art_ggx and name != "art":
+        raise Usage(f"--art-ggx: an ART option, but -r {name} renders the references")
+    if args.accept and not args.replace:
+        raise Usage("--accept: only with --replace (it lets a reference be replaced by one that differs beyond noise)")
+    opts = {"renderer": [name], "exec": execs, "variant": args.variant, "art_ggx": args.art_ggx,
+            "approximate": False, "renderers": declared or None}
+    return runner.make_backend(name, opts), name
+
+
+def main(argv=None):
+    pkg_bootstrap.package()
+    args = parser().parse_args(argv)
+    from spectral_bench.batch import scene_sources
+    try:
+        backend, _name = chosen_backend(args)
+    except Usage as exc:
+        print(f"batch/make_references.py: error: {exc}", file=sys.stderr, flush=True)
+        return 2
+    ok, why = backend.availability()
+    if not ok:
+        option = "-e" if args.exec else "-r"
+        print(f"batch/make_references.py: error: {option} {backend.name}: cannot render here: {why}", file=sys.stderr, flush=True)
+        return 2
     args.input = args.input or [str(scene_sources.DEFAULT_BLEND)]
-    print(backends.get("mitsuba").llvm_message(), flush=True)
+    if backend.name == "mitsuba":
+        print(backend.llvm_message(), flush=True)
     out = Path(args.out)
     with contextlib.ExitStack() as held:  # the scenes' locks, released however this ends
-        return _make(args, argv, out, held)
+        return _make(args, argv, out, held, backend)
 
 
 def existing_state(out, name, scene):
@@ -107,20 +215,76 @@ def existing_state(out, name, scene):
     return "its reference exists but is not usable: " + "; ".join(f"{p['file']}: {p['problem']}" for p in found.problems)
 
 
-def _make(args, argv, out, held):
-    from spectral_bench.batch import backends, scene_sources
-    from spectral_bench.batch.jobs import engines, job as jobs
+# -- replacing: the old reference against the new -------------------------------------------------
+SHOWN = ("backend", "mode", "spp", "passes", "resolution", "scale", "versions", "date")
+
+
+def _cell(value):
+    if isinstance(value, dict):
+        return "; ".join(f"{k} {v}" for k, v in sorted(value.items(), key=lambda kv: str(kv[0]))) or "-"
+    if isinstance(value, list):
+        return "x".join(map(str, value)) if all(isinstance(v, int) for v in value) else ", ".join(map(str, value))
+    return "-" if value is None else str(value)
+
+
+def provenance_table(old, new):
+    """Lines: the old and the new provenance side by side (what a reader checks before trusting
+    the replacement); values from the old record are any text: shown with repr where not plain."""
+    shown = lambda t: (t if t.isprintable() else repr(t))[:120]
+    rows = [(key, shown(_cell(old.get(key))) if old is not None else "(no readable record)", _cell(new.get(key)))
+            for key in SHOWN]
+    if "declaration" in new or (old or {}).get("declaration"):
+        src = lambda p: (p or {}).get("declaration", {}).get("source") if isinstance((p or {}).get("declaration"), dict) else None
+        rows.append(("declared in", shown(_cell(src(old))), _cell(src(new))))
+    width = max(len(r[1]) for r in rows)
+    return [f"  {'':<12}{'old':<{width + 2}}new"] + [f"  {k:<12}{o:<{width + 2}}{n}" for k, o, n in rows]
+
+
+def verdict_lines(v):
+    """The verdict of judge_replacement as lines."""
+    if not v["comparable"]:
+        return [f"  cannot judge the new reference against the old: {v['reason']}"]
+    t = v["test"]
+    lines = [f"  new against old on both noises ({t['name']}, alpha {t['alpha']}, {t['tests']} tests of "
+             f"{t['block']}x{t['block']} px blocks at {v['judged_at'][0]}x{v['judged_at'][1]}): p_min = {t['p_min']:.3g} "
+             f"{'>=' if t['pass'] else '<'} threshold {t['threshold']:.3g}, max |z| = {t['z_max']:.2f}: "
+             + ("the same within noise" if v["same"] else "they DIFFER beyond noise")]
+    ratios = ", ".join(f"{c} {r[0]:.5f} +- {r[1]:.5f}" if r else f"{c} -" for c, r in v["ratio"].items())
+    lines.append(f"  mean ratio new/old (+- standard error): {ratios}")
+    d = v["detectable"]
+    lines.append("  the test would have refused a uniform change of the whole image of "
+                 + (f"+-{100 * d:.2g} % or more (detected half the time at that size)" if d is not None else "no size up to 100 %"))
+    return lines
+
+
+def _who():
+    import getpass
+    try:
+        user = getpass.getuser()
+    except Exception:  # noqa: BLE001 - no user name in this environment
+        user = f"uid {os.getuid()}" if hasattr(os, "getuid") else "unknown"
+    return f"{user}@{platform.node()}"
+
+
+def _make(args, argv, out, held, backend):
+    from spectral_bench.batch import scene_sources
+    from spectral_bench.batch.jobs import engines, job as jobs, plan as planning
     from spectral_bench.batch.verdict import references
-    backend = backends.get("mitsuba")
-    plans, failed = [], 0
+    plans, failed = [], []
     for name, scene in scene_sources.load(args.input):
         if args.scene and name not in args.scene:
             continue
         if isinstance(scene, Exception):
             print(f"{name}: {scene}", flush=True)
-            failed += 1
+            failed.append(name)
             continue
-        mode, why = backend.mode_for(scene)
+        try:
+            rendered = planning.for_run(scene, {"scale": args.scale})
+        except Exception as exc:  # noqa: BLE001 - a scale that leaves the IR's bounds fails this scene
+            print(f"{name}: {exc}", flush=True)
+            failed.append(name)
+            continue
+        mode, why = backend.mode_for(rendered)
         if mode is None:
             print(f"{name}: unsupported: {why}", flush=True)
             continue
@@ -130,7 +294,7 @@ def _make(args, argv, out, held):
         except filelock.Timeout:
             print(f"{name}: another make_references is writing this reference (lock {lock.lock_file}); skipped",
                   flush=True)
-            failed += 1
+            failed.append(name)
             continue
         held.callback(lock.release)
         # checked under the lock: a reference another maker has just written counts as existing
@@ -140,11 +304,12 @@ def _make(args, argv, out, held):
             continue
         spp = scene["render"]["spp"] * args.factor if args.factor else args.spp
         work = out / ".work" / name
-        todo, per_pass = pass_jobs(name, scene, mode, spp, args.passes, args.seed, work)
+        todo, per_pass = pass_jobs(name, rendered, backend, mode, spp, args.passes, args.seed, work)
         plans.append((name, scene, mode, per_pass, work, todo))
         if len(todo) < args.passes:
             print(f"{name}: resuming, {args.passes - len(todo)} of {args.passes} passes already rendered", flush=True)
     remaining = {name: len(todo) for name, *_, todo in plans}
+    command = "batch/make_references.py " + shlex.join(argv if argv is not None else sys.argv[1:])
 
     def finished(job, record):
         work = Path(job["out"])
@@ -160,16 +325,73 @@ def _make(args, argv, out, held):
     def write_reference(plan):
         name, scene, mode, per_pass, work, _todo = plan
         names, mean, stderr, seconds, versions = merge(work, args.passes)
-        prov = {"backend": "mitsuba", "mode": mode, "spp": per_pass * args.passes, "passes": args.passes,
-                "seed": args.seed, "resolution": [int(mean.shape[1]), int(mean.shape[0])],
+        prov = {"backend": backend.name, "mode": mode, "spp": per_pass * args.passes, "passes": args.passes,
+                "seed": args.seed, "resolution": [int(mean.shape[1]), int(mean.shape[0])], "scale": args.scale,
                 "time_s": round(seconds, 2), "date": dt.datetime.now().isoformat(timespec="seconds"),
                 "versions": versions, "engine": args.cluster or "local",
-                "machine": f"{platform.machine()} {platform.system()}, {os.cpu_count()} cores",
-                "command": "batch/make_references.py " + " ".join(argv if argv is not None else sys.argv[1:])}
-        path = references.save(scene, names, mean, stderr, prov, out)
+                "machine": f"{platform.machine()} {platform.system()}, {os.cpu_count()} cores", "command": command}
+        if getattr(backend, "decl", None) is not None:
+            prov["declaration"] = backend.decl
+        if backend.options.get("executable"):
+            prov["executable"] = backend.options["executable"]
+        if args.art_ggx:
+            prov["art_ggx"] = True
+        if not replace_or_refuse(name, scene, names, mean, stderr, prov, work):
+            failed.append(name)
+            return
         shutil.rmtree(work, ignore_errors=True)
-        print(f"{name}: {prov['spp']} spp in {seconds:.1f} s -> {path} "
+
+    def replace_or_refuse(name, scene, names, mean, stderr, prov, work):
+        """Judge the new reference against the one it replaces, print both, keep the old one in
+        history and save the new one, or refuse (False)."""
+        import numpy as np
+        new = references.Reference(names, mean, stderr, prov, None)
+        bad_new = references.usable_for(new) or (None if np.isfinite(mean).all() and np.isfinite(stderr).all()
+                                                 else "non-finite values in its mean or noise")
+        if bad_new:
+            print(f"{name}: the new reference cannot be used ({bad_new}); nothing replaced", flush=True)
+            return False
+        old, problem = references.examine(out, name, references.fingerprint(scene))
+        exists = problem is not None or old is not None
+        verdict, state = None, "none"
+        if exists:
+            if old is not None and problem is None:
+                state, old_prov = "usable", old.provenance
+                verdict = references.judge_replacement(old, new, args.alpha, args.min_samples, args.block)
+            else:
+                state = ("stale" if old is not None else "broken") + f": {problem['file']}: {problem['problem']}"
+                old_prov = old.provenance if old is not None else references.read_record(out / f"{name}.json")[0]
+            print(f"{name}: the old reference ({state.split(':')[0]}) against the new one", flush=True)
+            for line in provenance_table(old_prov, prov):
+                print(line, flush=True)
+            if verdict is not None:
+                for line in verdict_lines(verdict):
+                    print(line, flush=True)
+            else:
+                print(f"  not judged against the old one: it is {state}", flush=True)
+            if old is not None and mean.shape[0] < old.mean.shape[0]:
+                (H, W), (h, w) = old.mean.shape[:2], mean.shape[:2]
+                print(f"  note: the new reference is {w}x{h}, the old one {W}x{H}: renders at {W}x{H} (or any size that "
+                      f"is not {w}x{h} divided by an integer) can no longer be judged against it", flush=True)
+            if verdict is not None and not verdict["same"] and not args.accept:
+                why = "differs from the old beyond noise" if verdict["comparable"] else "cannot be judged against the old one"
+                print(f"{name}: NOT replaced: the new reference {why}; the old one is left as it is (exit status 1). "
+                      f"If the change is intended, run the same command with --accept: the new passes are kept in "
+                      f"{work}, so it replaces the reference without rendering again.", flush=True)
+                return False
+        now = dt.datetime.now(dt.timezone.utc)
+        record = {"scene": name, "replaced_at": now.isoformat(timespec="seconds"), "by": _who(), "command": command,
+                  "why": {"old": state, "verdict": verdict,
+                          "accepted_despite_verdict": bool(verdict is not None and not verdict["same"])},
+                  "old": {k: (old_prov or {}).get(k) for k in (*SHOWN, "exr_sha256")} if exists else None,
+                  "new": {k: prov.get(k) for k in SHOWN}}
+        path, kept = references.replace(scene, names, mean, stderr, prov, out, record, now.strftime("%Y%m%dT%H%M%SZ"))
+        print(f"{name}: {prov['spp']} spp in {prov['time_s']:.1f} s -> {path} "
               f"(mean stderr / mean = {float(stderr.mean() / max(mean.mean(), 1e-12)):.2e})", flush=True)
+        if kept is not None:
+            print(f"{name}: replaced" + (" (--accept: despite the verdict)" if record["why"]["accepted_despite_verdict"] else "")
+                  + f"; the old reference is kept in {kept}", flush=True)
+        return True
 
     for plan in plans:
         if not plan[5]:

@@ -51,8 +51,18 @@ WHEELS = ["jsonschema", "jsonschema-specifications", "referencing", "rpds-py", "
 PLATFORMS = {"linux-x64": ["manylinux_2_17_x86_64", "manylinux_2_28_x86_64", "manylinux2014_x86_64"],
              "windows-x64": ["win_amd64"], "macos-arm64": ["macosx_11_0_arm64", "macosx_12_0_arm64",
                                                            "macosx_14_0_arm64"]}
-IGNORE = shutil.ignore_patterns(".git", ".venv", "__pycache__", "tests", "golden", "benchmarks", "outputs-*",
-                                "dist", "build", "*.blend1", ".ci", "wheels", ".pytest_cache", ".work", ".hypothesis", ".lock")
+_IGNORE_NAMES = shutil.ignore_patterns(".git", ".venv", "__pycache__", "tests", "golden", "benchmarks", "outputs-*",
+                                       "dist", "build", "*.blend1", ".ci", "wheels", ".pytest_cache", ".work", ".hypothesis",
+                                       ".lock")
+
+
+def IGNORE(folder, names):
+    """What copytree leaves out: the patterns above anywhere, and references/history/ (the replaced
+    references batch/make_references.py keeps: never shipped, never a current reference)."""
+    left_out = set(_IGNORE_NAMES(folder, names))
+    if Path(folder).resolve() == (ROOT / "references").resolve() and "history" in names:
+        left_out.add("history")
+    return left_out
 PLATFORM_LIMIT_MB = 200  # assumed upload limit of extensions.blender.org (see the module docstring)
 SIZE_TARGET_MB = 170     # the default --max-mb: margin under that limit (wheels differ between builds)
 # the references the extension ships by default: one scene or more of every case (the smaller

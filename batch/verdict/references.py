@@ -19,6 +19,12 @@ file. ``save`` writes unique temporary files, syncs them and renames them into p
 scene's lock, the record (with the image's hash) first: a reader between the two renames, or
 after a crash between them, sees a record that does not match its image and passes it over.
 Records written before the hash was recorded (no exr_sha256) are accepted as they are.
+
+A replaced reference is kept, not overwritten (``replace``, for ``make_references.py --replace``):
+its record and image move to <references>/history/<scene>/<UTC time>-<backend>/ beside a
+``replaced.json`` record (who replaced it, why: the verdict of the new against the old on both
+noises, the command). A search never reads history: it looks only at <folder>/<scene>.exr and
+.json, and a folder holding a ``replaced.json`` is refused as a candidate even when named directly.
 """
 import copy
 import hashlib
@@ -162,6 +168,10 @@ def examine(folder, scene_name, fp=None, shape=None, names=None):
     has_exr, has_meta = exr_path.exists(), meta_path.exists()
     if not has_exr and not has_meta:
         return None, None
+    if is_history(folder):
+        return None, problem(folder / HISTORY_RECORD, (
+            "this folder keeps a replaced reference (history of batch/make_references.py --replace), "
+            "never a current one"))
     if not has_meta:
         return None, problem(exr_path, f"no record {meta_path.name} beside it: not a complete reference")
     if not has_exr:
@@ -338,3 +348,131 @@ def save(scene, names, mean, stderr, provenance, directory=None):
             for tmp in (exr_tmp, meta_tmp):
                 tmp.unlink(missing_ok=True)
     return exr_path
+
+
+# -- replacing a reference (batch/make_references.py --replace): judged, the old one kept ----------
+HISTORY = "history"                # <references>/history/<scene>/<UTC time>-<backend>/
+HISTORY_RECORD = "replaced.json"   # in each history folder: who replaced it, why, with what command
+
+
+def is_history(folder):
+    """Whether ``folder`` keeps a replaced reference (it holds a replacement record): never a
+    current reference, whoever points a search at it."""
+    return (Path(folder) / HISTORY_RECORD).exists()
+
+
+def judge_replacement(old, new, alpha=None, min_samples=None, block=None):
+    """The new reference judged against the old on both their noises, by the block test that
+    judges a render against a reference (batch/verdict/compare.py ``z_test``, Sidak-corrected):
+    the image of finer resolution is the "render" (its own per-pixel standard error from its own
+    passes), the other one the reference brought to that resolution (``reference_at``; the
+    resolutions must differ by an integer factor, the channels must be the same). ``alpha``,
+    ``min_samples`` and ``block`` are the runner's --alpha, --min-samples and --block (default: its
+    defaults, so that "the same within noise" means what it means for a render).
+
+    Returns plain data: ``comparable`` (False with ``reason`` when the two cannot be judged),
+    ``same`` (within noise), ``test`` (the block test's record: p_min, threshold, ...), ``ratio``
+    ({channel: [mean new / mean old over the image, its standard error]} for R, G, B: the standard
+    error by first-order propagation of the two image means' independent standard errors, JCGM
+    100:2008 (GUM) section 5.1.2, the means' variances being the sums of the per-pixel variances
+    over N^2 since pixels are independent) and ``detectable`` (the smallest uniform relative change
+    of the whole image the test would have refused: the expected difference alone reaching the
+    Sidak threshold in the most sensitive block, found with the test's own ``rejudge`` on a zero
+    difference; detected about half the time at that size, more often above it; None beyond
+    100 %)."""
+    import dataclasses
+    from . import compare, stats
+    alpha = stats.ALPHA if alpha is None else alpha
+    min_samples = compare.MIN_SAMPLES if min_samples is None else min_samples
+    if list(old.names) != list(new.names):
+        return {"comparable": False, "same": False, "reason": f"their channels differ: old {old.names}, new {new.names}"}
+    (H, W), (h, w) = old.mean.shape[:2], new.mean.shape[:2]
+    if H >= h and W >= w and not (H % h or W % w) and H // h == W // w:
+        test, ref, new_is_test = new, old, True
+    elif h >= H and w >= W and not (h % H or w % W) and h // H == w // W:
+        test, ref, new_is_test = old, new, False
+    else:
+        return {"comparable": False, "same": False,
+                "reason": f"their resolutions {W}x{H} (old) and {w}x{h} (new) differ by no integer factor"}
+    at = compare.reference_at(ref.mean, ref.stderr, ref.spp, test.mean.shape, ref.provenance.get("passes", 8))
+    own = test.stderr.astype(np.float64) ** 2
+    zt = compare.z_test(test.mean.astype(np.float64), at, test.spp, own_var_of_mean=own,
+                        own_passes=test.provenance.get("passes", 8), alpha=alpha, block=block, min_samples=min_samples)
+    n = test.mean.shape[0] * test.mean.shape[1]
+    means = {"test": test.mean.astype(np.float64).reshape(n, -1).mean(axis=0), "ref": at.mean.reshape(n, -1).mean(axis=0)}
+    var = {"test": own.reshape(n, -1).sum(axis=0) / n**2, "ref": at.var_of_mean.reshape(n, -1).sum(axis=0) / n**2}
+    num, den = ("test", "ref") if new_is_test else ("ref", "test")
+    ratio = {}
+    for c in ("R", "G", "B"):
+        i = new.names.index(c)
+        a, b = means[num][i], means[den][i]
+        if not abs(b) > 0 or not abs(a) > 0:
+            ratio[c] = None
+            continue
+        r = a / b
+        ratio[c] = [float(r), float(abs(r) * np.sqrt(var[num][i] / a**2 + var[den][i] / b**2))]
+    zero = dataclasses.replace(zt, diff=np.zeros_like(zt.diff))
+    detectable = None
+    if not zero.rejudge(2.0):
+        lo, hi = 0.0, 1.0
+        for _ in range(40):  # bisection on the test's own re-judgement: the smallest change it refuses
+            mid = (lo + hi) / 2
+            lo, hi = (mid, hi) if zero.rejudge(1.0 + mid) else (lo, mid)
+        detectable = hi
+    return {"comparable": True, "same": bool(zt.passed), "test": zt.as_dict(), "ratio": ratio,
+            "detectable": detectable, "judged_at": [int(test.mean.shape[1]), int(test.mean.shape[0])]}
+
+
+def history_folder(directory, scene_name, backend, when):
+    """A new folder <directory>/history/<scene>/<when>-<backend>[-k] for a replaced reference;
+    ``backend`` comes from the old record (any text): one that is not a plain name becomes
+    "unknown"."""
+    from ...exporters import names as scene_names
+    tag = backend if isinstance(backend, str) and scene_names.problem(backend) is None else "unknown"
+    base = Path(directory) / HISTORY / scene_names.file_stem(scene_name)
+    base.mkdir(parents=True, exist_ok=True)
+    for k in range(1, 1000):
+        folder = base / (f"{when}-{tag}" if k == 1 else f"{when}-{tag}-{k}")
+        try:
+            folder.mkdir()
+            return folder
+        except FileExistsError:
+            continue
+    raise FileExistsError(f"{base}: too many replacements at {when}")
+
+
+def replace(scene, names, mean, stderr, provenance, directory, record, when):
+    """Save a new reference (``save``: the pair replaced as one step) and keep what it replaces:
+    under the scene's lock, the old record and image (whatever of the two is there) are linked
+    (copied where a link cannot be made) into a new history folder with ``record`` (who, why,
+    command: written first, so the folder is marked as history before it holds any reference
+    file), synced, and only then is the new pair saved. The old files stay current until that
+    save; if it fails the history folder is removed. Returns (new image path, history folder or
+    None when there was nothing to keep)."""
+    import shutil
+    directory = Path(directory)
+    name = scene["name"]
+    old = [p for p in (directory / f"{name}.json", directory / f"{name}.exr") if p.exists()]
+    with scene_lock(directory, name):
+        if not old:
+            return save(scene, names, mean, stderr, provenance, directory), None
+        backend = None
+        if (directory / f"{name}.json").exists():
+            meta, _bad = read_record(directory / f"{name}.json")
+            backend = (meta or {}).get("backend")
+        folder = history_folder(directory, name, backend, when)
+        try:
+            _write_synced(folder / HISTORY_RECORD, (json.dumps(record, indent=1, sort_keys=True, default=str) + "\n").encode())
+            for path in old:
+                try:
+                    os.link(path, folder / path.name)
+                except OSError:
+                    shutil.copy2(path, folder / path.name)
+                    with open(folder / path.name, "rb+") as f:
+                        os.fsync(f.fileno())
+            _fsync_dir(folder)
+            path = save(scene, names, mean, stderr, provenance, directory)
+        except BaseException:
+            shutil.rmtree(folder, ignore_errors=True)
+            raise
+    return path, folder
