@@ -255,3 +255,19 @@ def test_example_renderer_ok_brighter_failed_polarisation_unsupported(tmp_path):
     for backend in ("toy", "toy_brighter"):
         r = runs[("polarizing_plane_0", backend)]
         assert r["status"] == "unsupported" and "does not model polarization" in r["reason"]
+
+
+@pytest.mark.slow
+def test_example_renderer_writing_spectral_exr(tmp_path):
+    """The same with ``writes = "spectral"``: the example writes the Fichet 2021 layout (5 nm
+    bands), which the benchmark integrates with the CIE 1931 observer."""
+    proc, runs = run_batch(tmp_path / "out", "--renderers", str(EXAMPLE / "toy.toml"),
+                           "--renderers", str(EXAMPLE / "toy_brighter.toml"), "-r", "toy_spectral",
+                           "-r", "toy_spectral_brighter", "-s", "ggx_copper_50", "-s", "ggx_copper_70",
+                           "-s", "polarizing_plane_0")
+    assert proc.returncode == 1, proc.stdout[-3000:] + proc.stderr[-3000:]
+    for name in ("ggx_copper_50", "ggx_copper_70"):
+        ok, bright = runs[(name, "toy_spectral")], runs[(name, "toy_spectral_brighter")]
+        assert ok["status"] == "ok" and ok["mode"] == "spectral", ok
+        assert bright["status"] == "failed" and "noise test" in bright["reason"], bright
+    assert runs[("polarizing_plane_0", "toy_spectral")]["status"] == "unsupported"
