@@ -113,6 +113,10 @@ def problems(value, field):
         yield f"{field}.type", f"unknown IOR model {kind!r} (known: {', '.join(MODEL_TYPES)})"
         return
     if kind == "named":
+        if "B" in value or "C" in value:
+            # inline coefficients that exporters/inline_data.py left in place are malformed: say where
+            yield from problems({"type": "sellmeier", "B": value.get("B", []), "C": value.get("C", [])}, field)
+            return
         if value.get("name") not in NAMED_GLASSES:
             yield f"{field}.name", f"unknown glass {value.get('name')!r} (known: {', '.join(NAMED_GLASSES)})"
             return

@@ -11,7 +11,7 @@ from pathlib import Path
 import jsonschema
 import numpy as np
 
-from . import dispersion, fluorescence, ir, mesh_io, names, spectra
+from . import dispersion, fluorescence, inline_data, ir, mesh_io, names, spectra
 
 SCHEMA_PATH = Path(__file__).resolve().parent / "schema" / "scene.schema.json"
 
@@ -297,7 +297,9 @@ def bsdf_problems(bsdf):
 
 
 def check(scene):
-    """Raise SceneError listing every problem of ``scene`` (an IR dict); return it otherwise."""
+    """Raise SceneError listing every problem of ``scene`` (an IR dict); return it otherwise.
+    A scene in the self-contained form (inline tables) is first turned into the internal IR, in
+    place (exporters/inline_data.py ``apply``)."""
     name = scene.get("name", "?") if isinstance(scene, dict) else "?"
     if names.scene_problem(name) is not None:
         name = "?"  # the problem is reported below; a bad name never labels anything
@@ -306,8 +308,9 @@ def check(scene):
     if scene.get("format") != ir.FORMAT or scene.get("version") != ir.VERSION:
         raise SceneError(name, [("scene", "version", f"expected format {ir.FORMAT!r} version {ir.VERSION}, "
                                  f"got {scene.get('format')!r} version {scene.get('version')!r}")])
-    data = {k: v for k, v in scene.items() if not k.startswith("_")}
     try:
+        inline_data.apply(scene)  # a self-contained file's tables: dropped when the project's, else they win
+        data = {k: v for k, v in scene.items() if not k.startswith("_")}
         problems = list(_schema_problems(data))
         if problems:
             raise SceneError(name, problems)
