@@ -6,6 +6,9 @@ Kinds (the IR's JSON form, see schema/scene.schema.json):
   {"type": "named", "name": "cie_d65", "scale": s}          illuminants (cie_*) and
   {"type": "named", "name": "colorchecker_red"}             ColorChecker reflectances
   {"type": "blackbody", "temperature": K, "scale": s}
+A scene file may carry a named spectrum's table inline (``wavelengths``, ``values``: the
+self-contained form, exporters/inline_data.py); validation turns it back into this internal form
+before anything here evaluates it.
 
 Radiometric normalisation (identical in every writer): a named illuminant or a blackbody
 with scale s is s * S(l) / S(560 nm), i.e. 1.0 at 560 nm, in the renderer's radiance unit.

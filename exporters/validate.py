@@ -269,6 +269,12 @@ def bsdf_problems(bsdf):
                 rho = bsdf["reflectance"]
                 yield from fluorescence.problems(bsdf["fluorescence"], lambda wl: spectra.evaluate(rho, wl))
     if kind == "conductor":
+        if "material" in bsdf and ("eta" in bsdf or "k" in bsdf):
+            # inline data that exporters/inline_data.py left beside the name is incomplete: say so
+            # rather than render the named table and ignore it
+            missing = "k" if "eta" in bsdf else "eta"
+            yield missing, f"a conductor's inline data needs both eta and k beside material {bsdf['material']!r}"
+            return
         if "material" in bsdf and bsdf["material"] not in spectra.NAMED_CONDUCTORS:
             yield "material", (f"unknown conductor {bsdf['material']!r} "
                                f"(known: {', '.join(spectra.NAMED_CONDUCTORS)})")

@@ -203,6 +203,12 @@ def test_malformed_inline_data_is_refused_by_object_and_field(edit, obj, field):
     assert any(o == obj and f.startswith(field) for o, f, _ in err.value.problems), err.value.problems
 
 
+def test_a_conductor_with_half_its_inline_data_is_refused_not_rendered_as_the_name():
+    with pytest.raises(validate.SceneError) as err:
+        edited("ggx_copper_50", lambda raw: raw["objects"][0]["bsdf"].pop("k"))
+    assert [(o, f) for o, f, _ in err.value.problems] == [("copper_plate_50", "bsdf.k")]
+
+
 def test_malformed_inline_glass_coefficients_are_refused_by_field():
     def edit(raw):
         next(o for o in raw["objects"] if o["name"] == "prism")["bsdf"]["int_ior"]["C"] = [0.1, 0.2]
