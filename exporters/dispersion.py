@@ -16,6 +16,8 @@ import math
 
 import numpy as np
 
+from ..reference_code import appearance  # the formulas (tested against SCHOTT's indices)
+
 LAMBDA_MIN, LAMBDA_MAX = 360.0, 830.0  # nm: the renderers' range (spectra.py)
 
 # Fraunhofer lines (nm): F (hydrogen), d (helium), C (hydrogen); the Abbe number is
@@ -70,13 +72,9 @@ def ior(value, wavelengths_nm):
     wl = np.asarray(wavelengths_nm, dtype=np.float64)
     if not is_model(value):
         return np.full(wl.shape, float(value))
-    l2 = (wl * 1e-3) ** 2
     if value.get("type") == "cauchy":
-        return float(value["A"]) + float(value.get("B", 0.0)) / l2 + float(value.get("C", 0.0)) / l2 ** 2
-    b, c = sellmeier(value)
-    n2 = 1.0 + sum(bi * l2 / (l2 - ci) for bi, ci in zip(b, c))
-    with np.errstate(invalid="ignore"):
-        return np.sqrt(n2)
+        return appearance.cauchy(wl, value["A"], value.get("B", 0.0), value.get("C", 0.0))
+    return appearance.sellmeier(wl, *sellmeier(value))
 
 
 def abbe_number(value):
@@ -113,6 +111,10 @@ def problems(value, field):
         yield f"{field}.type", f"unknown IOR model {kind!r} (known: {', '.join(MODEL_TYPES)})"
         return
     if kind == "named":
+        if "B" in value or "C" in value:
+            # inline coefficients that exporters/inline_data.py left in place are malformed: say where
+            yield from problems({"type": "sellmeier", "B": value.get("B", []), "C": value.get("C", [])}, field)
+            return
         if value.get("name") not in NAMED_GLASSES:
             yield f"{field}.name", f"unknown glass {value.get('name')!r} (known: {', '.join(NAMED_GLASSES)})"
             return

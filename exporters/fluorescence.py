@@ -45,7 +45,9 @@ import math
 
 import numpy as np
 
-DOMAIN = (300.0, 830.0)  # nm, both axes of P
+from ..reference_code import appearance
+
+DOMAIN = appearance.FLUORESCENCE_DOMAIN_NM  # (300, 830) nm, both axes of P
 STEP = 1.0  # nm, the renderers' cells
 FLUORESCENT_SPECTRA_FROM = DOMAIN[0]  # writers tabulate spectra of fluorescent scenes from here
 BAND_KEYS = ("absorption_peak", "absorption_width", "emission_peak", "emission_width", "strength")
@@ -61,14 +63,11 @@ def reradiation(fl, l_i, l_o):
     """P(l_i, l_o) in 1/nm (numpy broadcasting over l_i and l_o)."""
     l_i = np.asarray(l_i, dtype=np.float64)
     l_o = np.asarray(l_o, dtype=np.float64)
-    if fl["type"] == "bands":
-        fx = 1.0 - np.abs(l_i - fl["absorption_peak"]) / fl["absorption_width"]
-        fy = 1.0 - np.abs(l_o - fl["emission_peak"]) / fl["emission_width"]
-        p = fl["strength"] * np.maximum(0.0, np.minimum(fx, fy))
-    else:
-        w = np.asarray(fl["wavelengths"], dtype=np.float64)
-        m = np.asarray(fl["matrix"], dtype=np.float64)
-        p = _bilinear(w, m, l_i, l_o)
+    if fl["type"] == "bands":  # the reference implementation (its domain is DOMAIN)
+        return appearance.art_fluorescence_bands(l_i, l_o, *(fl[key] for key in BAND_KEYS))
+    w = np.asarray(fl["wavelengths"], dtype=np.float64)
+    m = np.asarray(fl["matrix"], dtype=np.float64)
+    p = _bilinear(w, m, l_i, l_o)
     inside = (l_i >= DOMAIN[0]) & (l_i <= DOMAIN[1]) & (l_o >= DOMAIN[0]) & (l_o <= DOMAIN[1])
     return np.where((l_o > l_i) & inside, p, 0.0)
 

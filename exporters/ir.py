@@ -1,4 +1,7 @@
-"""The scene IR: a JSON-compatible dict, one test scene each, described by schema/scene.schema.json.
+"""The scene IR: a JSON-compatible dict, one test scene each, described by schema/scene.schema.json
+and specified for importers in docs/scene-format.md (the conventions below, in full). Inside the
+project named spectra, conductors and glasses stay named; scene files carry their data beside the
+names (exporters/inline_data.py).
 
 Conventions (every writer follows them):
 - World space is Blender's: right-handed, Z up, lengths in scene units.

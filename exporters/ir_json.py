@@ -1,12 +1,15 @@
 """The generic JSON form of the IR: the IR serialised, versioned, schema-checked.
 
 It is an input as well as an output: every command that takes scenes.blend takes these files.
+Files are written self-contained (inline tables beside every name, exporters/inline_data.py);
+``load`` reads both forms and returns the internal IR (named where the tables are the project's).
+``dumps`` serialises a scene as it is (the references' fingerprint hashes the named form).
 """
 import json
 import re
 from pathlib import Path
 
-from . import ir, validate
+from . import inline_data, ir, validate
 
 
 _NUMBER_LIST = re.compile(r"\[\s*(-?[\d.eE+-]+(?:,\s*-?[\d.eE+-]+)*)\s*\]")
@@ -20,10 +23,13 @@ def dumps(scene):
     return text + "\n"
 
 
-def write(scene, path):
+def write(scene, path, self_contained=True):
+    """Write ``scene`` as a scene file: self-contained by default (every named spectrum, conductor
+    and glass carries its data, exporters/inline_data.py; docs/scene-format.md), or in the named
+    form (the internal IR as it is) with ``self_contained=False``."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(dumps(scene))
+    path.write_text(dumps(inline_data.embed(scene) if self_contained else scene))
     return path
 
 

@@ -6,6 +6,9 @@ Kinds (the IR's JSON form, see schema/scene.schema.json):
   {"type": "named", "name": "cie_d65", "scale": s}          illuminants (cie_*) and
   {"type": "named", "name": "colorchecker_red"}             ColorChecker reflectances
   {"type": "blackbody", "temperature": K, "scale": s}
+A scene file may carry a named spectrum's table inline (``wavelengths``, ``values``: the
+self-contained form, exporters/inline_data.py); validation turns it back into this internal form
+before anything here evaluates it.
 
 Radiometric normalisation (identical in every writer): a named illuminant or a blackbody
 with scale s is s * S(l) / S(560 nm), i.e. 1.0 at 560 nm, in the renderer's radiance unit.
@@ -161,6 +164,10 @@ def check(spec, where, allow_negative=False):
         if any(b <= a for a, b in zip(wls, wls[1:])):
             yield f"{where}.wavelengths", "must be strictly increasing"
     elif kind == "named":
+        if "wavelengths" in spec or "values" in spec:
+            # inline data that exporters/inline_data.py left in place is malformed: say where
+            yield from check(dict(spec, type="sampled"), where, allow_negative)
+            return
         if spec.get("name") not in _named_tables():
             yield f"{where}.name", f"unknown named spectrum {spec.get('name')!r} (known: {', '.join(named_spectra())})"
         s = spec.get("scale", 1.0)

@@ -11,7 +11,7 @@ from pathlib import Path
 import jsonschema
 import numpy as np
 
-from . import dispersion, fluorescence, ir, mesh_io, names, spectra
+from . import dispersion, fluorescence, inline_data, ir, mesh_io, names, spectra
 
 SCHEMA_PATH = Path(__file__).resolve().parent / "schema" / "scene.schema.json"
 
@@ -269,6 +269,12 @@ def bsdf_problems(bsdf):
                 rho = bsdf["reflectance"]
                 yield from fluorescence.problems(bsdf["fluorescence"], lambda wl: spectra.evaluate(rho, wl))
     if kind == "conductor":
+        if "material" in bsdf and ("eta" in bsdf or "k" in bsdf):
+            # inline data that exporters/inline_data.py left beside the name is incomplete: say so
+            # rather than render the named table and ignore it
+            missing = "k" if "eta" in bsdf else "eta"
+            yield missing, f"a conductor's inline data needs both eta and k beside material {bsdf['material']!r}"
+            return
         if "material" in bsdf and bsdf["material"] not in spectra.NAMED_CONDUCTORS:
             yield "material", (f"unknown conductor {bsdf['material']!r} "
                                f"(known: {', '.join(spectra.NAMED_CONDUCTORS)})")
@@ -297,7 +303,9 @@ def bsdf_problems(bsdf):
 
 
 def check(scene):
-    """Raise SceneError listing every problem of ``scene`` (an IR dict); return it otherwise."""
+    """Raise SceneError listing every problem of ``scene`` (an IR dict); return it otherwise.
+    A scene in the self-contained form (inline tables) is first turned into the internal IR, in
+    place (exporters/inline_data.py ``apply``)."""
     name = scene.get("name", "?") if isinstance(scene, dict) else "?"
     if names.scene_problem(name) is not None:
         name = "?"  # the problem is reported below; a bad name never labels anything
@@ -306,8 +314,9 @@ def check(scene):
     if scene.get("format") != ir.FORMAT or scene.get("version") != ir.VERSION:
         raise SceneError(name, [("scene", "version", f"expected format {ir.FORMAT!r} version {ir.VERSION}, "
                                  f"got {scene.get('format')!r} version {scene.get('version')!r}")])
-    data = {k: v for k, v in scene.items() if not k.startswith("_")}
     try:
+        inline_data.apply(scene)  # a self-contained file's tables: dropped when the project's, else they win
+        data = {k: v for k, v in scene.items() if not k.startswith("_")}
         problems = list(_schema_problems(data))
         if problems:
             raise SceneError(name, problems)

@@ -247,7 +247,8 @@ def check_detailed(text, root):
     arm, _missing = art_writer.write(scene, out / name / "art")
     check_art(arm, art_vocabulary_cached())
     json_path = ir_json.write(scene, out / name / "json" / f"{name}.json")
-    assert json.loads(json_path.read_text()) == {k: v for k, v in scene.items() if not k.startswith("_")}
+    back = ir_json.load(json_path)  # the self-contained file reads back to the same scene
+    assert {k: v for k, v in back.items() if not k.startswith("_")} == {k: v for k, v in scene.items() if not k.startswith("_")}
     try:
         rgb = rgb_scene.build(scene, ("ggx", "beckmann"), approximate=True)
     except ValueError as exc:  # what even an approximation cannot express: "object.field: why" (unsupported)
