@@ -182,6 +182,10 @@ class _Writer:
         ET.SubElement(film, "integer", name="width", value=str(r["width"]))
         ET.SubElement(film, "integer", name="height", value=str(r["height"]))
         ET.SubElement(film, "string", name="pixel_format", value="rgb")
+        # float32 when the film is written to a file (the mitsuba executable, load_plugins.py):
+        # hdrfilm's default float16 rounds a constant region (a light seen directly: no variance)
+        # by up to 2^-11, which the noise test sees at |z| in the thousands (measured)
+        ET.SubElement(film, "string", name="component_format", value="float32")
         ET.SubElement(film, "rfilter", type="box")
         env = sc.get("environment")
         if env:
