@@ -8,14 +8,13 @@ every job, so finished results survive a crash of the runner itself. ``--resume 
 interrupted run: results whose job id (batch/jobs/job.py) still matches are kept, the rest run.
 """
 import datetime as _dt
-import json
 import logging
 import time
 from pathlib import Path
 
 
 from ...exporters import art_writer, ir_json
-from .. import backends, scene_sources
+from .. import backends, records, scene_sources
 from ..verdict import known, status
 from ..report import html as report, summary
 from ..studies import stability, sweep
@@ -182,16 +181,8 @@ class Run:
         return done
 
     def save(self):
-        data = {"started": self.started, "options": dict(self.opts), "runs": self.runs}
-        if self.results:
-            data["jobs"] = self.results
-        if self.sweeps:
-            data["sweeps"] = self.sweeps
-        if self.stability:
-            data["stability"] = self.stability
-        tmp = self.out / "metrics.json.tmp"
-        tmp.write_text(json.dumps(data, indent=1, default=str) + "\n")
-        tmp.replace(self.out / "metrics.json")
+        """metrics.json, rewritten atomically (batch/records.py: versioned, paths relative to OUT)."""
+        records.write(self.out, self.started, self.opts, self.runs, self.results, self.sweeps, self.stability)
 
     def add(self, entry):
         self.runs.append(entry)
