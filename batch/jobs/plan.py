@@ -12,7 +12,8 @@ from . import job as jobs
 
 job_id = jobs.job_id
 # options a resumed run takes from this command; every other option comes from the run being resumed
-ENGINE_KEYS = ("resume", "out", "cluster", "cluster_timeout", "dashboard", "log", "visualize", "list", "settings")
+ENGINE_KEYS = ("resume", "out", "cluster", "cluster_timeout", "dashboard", "log", "visualize", "list", "settings",
+               "junit")
 VERDICT_KEYS = ("alpha", "min_samples", "block", "flip", "references", "known")
 
 
