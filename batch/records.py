@@ -212,11 +212,35 @@ def _version_of(data, file, strict):
     return SCHEMA_VERSION, problem + f"; read as version {SCHEMA_VERSION}"
 
 
+def _v1_folder(data):
+    """Where a version-1 file's run folder was when it was written: from a study job's absolute
+    ``image_path`` and its relative ``image``, else an absolute ``options.out``; None if unknown."""
+    for job in data.get("jobs") if isinstance(data.get("jobs"), list) else ():
+        if isinstance(job, dict) and isinstance(job.get("image_path"), str) and isinstance(job.get("image"), str):
+            full, rel = Path(job["image_path"]), Path(job["image"])
+            if full.is_absolute() and not rel.is_absolute() and rel.parts and full.parts[-len(rel.parts):] == rel.parts:
+                return Path(*full.parts[:-len(rel.parts)])
+    out = (data.get("options") or {}).get("out") if isinstance(data.get("options"), dict) else None
+    return Path(out) if isinstance(out, str) and Path(out).is_absolute() else None
+
+
 def _from_v1(data, folder):
     """Version 1 (no schema_version, before issue 24): paths of references, reference problems
-    and jobs' images were absolute; no tool. Everything else is as version 2 has it."""
+    and study jobs' images were absolute; no tool; everything else is as version 2 has it. An
+    absolute path inside the run folder where the file was written becomes relative to that folder
+    (it moved with it, if the folder moved); any other (a reference) relative to where the file
+    is now, so it still names the same file."""
     data["tool"] = {"version": None, "commit": None}
-    return _map_paths(data, lambda v: relative(v, folder))
+    then = _v1_folder(data)
+
+    def upgrade(value):
+        if then is not None and isinstance(value, str) and Path(value).is_absolute():
+            try:
+                return Path(value).relative_to(then).as_posix()
+            except ValueError:
+                pass
+        return relative(value, folder)
+    return _map_paths(data, upgrade)
 
 
 # version -> the function that lifts a file's content from it to the next version
@@ -273,9 +297,10 @@ def _number(x):
 
 
 def noise_test_text(test):
-    """The noise test of a run entry (its ``test``) as one line of text: "pass: p_min P >= T
-    (max |z| Z)", "FAIL: p_min P < T (max |z| Z)", "not judged: why", "FAIL: why", or "" when
-    there is no test. Any value of the wrong type is shown as text or left out, never raises."""
+    """The noise test of a run entry (its ``test``) as one line of text: "pass: p_min P
+    (threshold T), z_max Z", "FAIL: p_min P (threshold T), z_max Z", "not judged: why", "FAIL:
+    why", or "" when there is no test (no character that Markdown or HTML would escape). Any value
+    of the wrong type is shown as text or left out, never raises."""
     if not isinstance(test, dict):
         return ""
     passed, reason = test.get("pass"), test.get("reason")
@@ -284,6 +309,6 @@ def noise_test_text(test):
         return f"not judged: {reason}" if reason else "not judged"
     word = "pass" if passed else "FAIL"
     if _number(test.get("p_min")) and _number(test.get("threshold")):
-        line = f"{word}: p_min {test['p_min']:.3g} {'>=' if passed else '<'} {test['threshold']:.3g}"
-        return line + (f" (max |z| {test['z_max']:.2f})" if _number(test.get("z_max")) else "")
+        line = f"{word}: p_min {test['p_min']:.3g} (threshold {test['threshold']:.3g})"
+        return line + (f", z_max {test['z_max']:.2f}" if _number(test.get("z_max")) else "")
     return f"{word}: {reason}" if reason else word
