@@ -24,6 +24,7 @@ from ..batch.backends import command
 from ..batch.jobs import background as background_job
 from ..batch.report import html as report_html
 from ..batch.report import results
+from ..batch.verdict import status as verdict_status
 from ..exporters import extract_blender, ir_json, validate
 from ..exporters import names as ir_names
 from . import canonical, preferences
@@ -35,8 +36,6 @@ SCENE_SOURCES = [
     ("FILE", "This File", "Every scene of the open file (annotated in Scene > Spectral Bench)"),
     ("ACTIVE", "Active Scene", "Only the active scene of the open file"),
 ]
-# results view: failures first, statuses the view does not know next, passes last
-STATUS_ORDER = {"failed": 0, "unjudged": 2, "known": 3, "fixed": 4, "unsupported": 5, "skipped": 6, "ok": 7}
 STATUS_ICONS = {"ok": "CHECKMARK", "failed": "ERROR", "unjudged": "QUESTION", "known": "INFO", "fixed": "CHECKMARK",
                 "skipped": "CANCEL", "unsupported": "CANCEL"}
 STOKES = ("S0", "S1", "S2", "S3")
@@ -317,8 +316,8 @@ def poll_run(context):
                 report_html.write(job.out_dir)  # the report of what finished
         else:
             word = FINISHED_WORDS.get(job.returncode(), f"stopped (exit {job.returncode()})")
-        data = results.load(job.out_dir) or {}
-        counts = collections.Counter(r.get("status") for r in data.get("runs", []))
+        data = results.load(job.out_dir)
+        counts = collections.Counter(r.get("status") for r in (data.entries("runs") if data is not None else []))
         tally = ", ".join(f"{counts[k]} {k}" for k in STATUS_ICONS if counts[k])
         s.status = f"{word}: {done}/{total} jobs" + (f" ({tally})" if tally else "")
         return False
@@ -343,10 +342,11 @@ def report_path(out_dir):
 
 # -- results --------------------------------------------------------------------------------------
 def result_rows(out_dir):
-    """[(scene, backend, run entry)] of an outputs folder: failures first, passes last."""
+    """[(scene, backend, run entry)] of an outputs folder in the summary's and the report's order
+    (batch/verdict/status.py ORDER: failures first)."""
     status = results.last_status(out_dir) if out_dir else {}
     rows = [(scene, backend, run) for scene, per in status.items() for backend, run in per.items()]
-    return sorted(rows, key=lambda r: (STATUS_ORDER.get(r[2]["status"], 1), r[0], r[1]))
+    return sorted(rows, key=lambda r: (verdict_status.rank(r[2].get("status")), r[0], r[1]))
 
 
 def status_icon(status):

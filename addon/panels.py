@@ -5,6 +5,7 @@ tests/test_blender_ui.py runs every panel's draw() against a recording layout th
 drawn property, operator and icon exists."""
 import bpy
 
+from ..batch import records
 from ..batch.report import results
 from . import benchmark, preferences, reference_sources, validation
 
@@ -288,11 +289,9 @@ class SPECTRAL_BENCH_PT_benchmark_results(_Base, bpy.types.Panel):
                 box.label(text="RMSE {rmse:.3g}  relMSE {relmse:.3g}  MAPE {mape:.3g}".format(**m)
                           + (f"  FLIP {m['flip']:.3g}" if m.get("flip") is not None else ""))
             t = run.get("test")
-            if t and t.get("p_min") is not None and t.get("pass") is not None:
-                box.label(text=f"noise test: p_min {t['p_min']:.3g} (threshold {t['threshold']:.3g}), "
-                               f"max |z| {t['z_max']:.2f}")
-            elif t:
-                box.label(text=f"noise test: {t.get('reason')}", icon="ERROR" if t.get("pass") is False else "QUESTION")
+            if isinstance(t, dict):
+                box.label(text=f"noise test: {records.noise_test_text(t)}"[:200],
+                          icon={True: "NONE", False: "ERROR"}.get(t.get("pass"), "QUESTION"))
             for p in run.get("probes", [])[:30]:
                 err = "" if p.get("error") is None else f"{p['error']:.3g} {p.get('unit') or ''}"
                 mark = {True: "CHECKMARK", False: "ERROR"}.get(p.get("pass"), "QUESTION")

@@ -34,6 +34,7 @@ DEFAULTS = {
     "variant": None, "alpha": 0.01, "block": None, "min_samples": 65536, "timeout": 1800, "passes": 2, "seed": 0, "flip": True,
     "references": None, "known": None, "list": False, "art_ggx": False, "sweep": False, "ladder": None, "sweep_modes": None, "stability": False,
     "approximate": False, "renderers": None, "cluster": None, "cluster_timeout": DEFAULT_CLUSTER_TIMEOUT, "dashboard": None, "resume": None,
+    "junit": None,
 }
 
 
@@ -243,7 +244,7 @@ TYPES = {
     "ladder": _comma_list(SPP, "N,N,..."), "sweep_modes": _comma_list(_MODE, "MODE,..."),
     "cluster": text_kind(_cluster, "address"), "cluster_timeout": number(0, 3600, lo_open=True),
     "dashboard": text_kind(_dashboard, "[HOST]:PORT"), "resume": text_kind(_nonempty, "path"),
-    "renderers": text_kind(_nonempty, "path"),
+    "renderers": text_kind(_nonempty, "path"), "junit": text_kind(_nonempty, "path"),
 }
 
 
@@ -302,6 +303,9 @@ def parser():
                     help="serve the Dask dashboard of a --cluster local:N there (default: no dashboard)")
     ap.add_argument("--resume", type=T["resume"], metavar="OUT",
                     help="finish the interrupted run in OUT with its own options: finished jobs are kept, the rest run")
+    ap.add_argument("--junit", type=T["junit"], metavar="FILE",
+                    help="also write the jobs as JUnit XML to FILE (one test case per job: failed a failure; skipped, "
+                         "unsupported and unjudged skipped; known and fixed passed, naming the deviation)")
     ap.add_argument("--sweep", action="store_true",
                     help="also render each scene over a ladder of sample counts and chart error against time")
     ap.add_argument("--ladder", type=T["ladder"], metavar="N,N,...",

@@ -38,7 +38,58 @@ def run_batch(*args, timeout=900):
 
 
 def metrics(out):
-    return json.loads((Path(out) / "metrics.json").read_text())
+    """OUT/metrics.json through the reader (batch/records.py): upgraded to the current version,
+    every path field absolute (a test opens the files it names)."""
+    from spectral_bench.batch import records
+    return records.read(Path(out) / "metrics.json").resolved()
+
+
+HAND_MADE = ".hand-made-metrics"  # beside a metrics.json a test wrote itself, off the contract on purpose
+
+
+def write_hand_made_metrics(out, data):
+    """Write OUT/metrics.json as a test makes it (hostile, broken, of another shape: not the
+    runner's), marked so that the session's schema check (validate_every_metrics_json) leaves it out."""
+    out = Path(out)
+    (out / HAND_MADE).write_text("written by a test, not by the runner\n")
+    (out / "metrics.json").write_text(data if isinstance(data, str) else json.dumps(data))
+
+
+def runner_metrics_files(root):
+    """([metrics.json the runner wrote under root], [those left out]): a file the runner wrote
+    carries schema_version (tests/test_records.py checks that it always does); a file without it
+    is a version-1 or hand-made input that a test wrote itself, and one marked HAND_MADE is
+    hand-made on purpose."""
+    found, left_out = [], []
+    for path in sorted(Path(root).rglob("metrics.json")):
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError, RecursionError):
+            left_out.append(path)  # a broken file a test made (the runner writes atomically)
+            continue
+        if (path.parent / HAND_MADE).exists() or not isinstance(data, dict) or "schema_version" not in data:
+            left_out.append(path)
+        else:
+            found.append(path)
+    return found, left_out
+
+
+@pytest.fixture(scope="session", autouse=True)
+def validate_every_metrics_json(tmp_path_factory):
+    """After the session (each xdist worker: its own temporary folders), every metrics.json the
+    runner wrote under the tests' temporary folders must validate against
+    schemas/metrics.schema.json; the first files that do not are named with their fields."""
+    yield
+    from spectral_bench.batch import records
+    found, _left_out = runner_metrics_files(tmp_path_factory.getbasetemp())
+    bad = []
+    for path in found:
+        problems = records.validate(json.loads(path.read_text(encoding="utf-8")))
+        if problems:
+            bad.append(f"{path}:\n  " + "\n  ".join(problems[:8]))
+    if bad:
+        pytest.fail(f"{len(bad)} of {len(found)} metrics.json written by the runner break "
+                    f"schemas/metrics.schema.json:\n" + "\n".join(bad[:10]), pytrace=False)
 
 
 def write_scene(tmp_path, scene, name=None):

@@ -180,6 +180,7 @@ def test_every_panel_draws_with_real_data(tmp_path):
             "props": sorted({{c[2]["property"] for p, c in calls if c[1] == "prop"}}),
             "status_order": [t.split(": ", 1)[1] for t in results if t and t.startswith("scene_") and "/" in t][:8],
             "reference_labels": [t for t in results if t and t.startswith("reference (")],
+            "noise_labels": sorted({{t for t in results if t and t.startswith("noise test:")}}),
             "load_kinds": sorted({{c[2]["properties"].get("kind") for p, c in calls
                                  if c[1] == "operator" and c[2]["operator"] == "spectral_bench.load_result"}}),
             "backend_buttons": sorted(set(texts("SPECTRAL_BENCH_PT_benchmark", "operator")) - {{None}}),
@@ -191,9 +192,15 @@ def test_every_panel_draws_with_real_data(tmp_path):
     assert all(n > 0 for n in out["drawn"].values()), out["drawn"]  # every panel's poll() let it draw
     assert len(out["drawn"]) >= 9
     assert {"kind", "scene_source", "canonical_scene", "spp", "scale", "passes", "use_flip", "output_dir"} <= set(out["props"])
-    # failures first, a status the view does not know next, passes last; every status shown as it is
-    assert out["status_order"][0] == "failed" and out["status_order"][1] == "brand_new_status"
-    assert out["status_order"][-1] == "ok" and sorted(out["status_order"]) == sorted(statuses)
+    # the order of summary.md and report.html (batch/verdict/status.py), a status the view does not
+    # know last; every status shown as it is
+    from spectral_bench.batch import records
+    from spectral_bench.batch.verdict import status
+    assert out["status_order"] == sorted(statuses, key=status.rank)
+    assert out["status_order"][0] == "failed" and out["status_order"][-1] == "brand_new_status"
+    # the noise test in the words of summary.md and report.html (batch/records.py noise_test_text)
+    assert out["noise_labels"] == ["noise test: " + records.noise_test_text(
+        {"p_min": 0.5, "threshold": 0.001, "z_max": 1.2, "pass": True})] == ["noise test: pass: p_min 0.5 (threshold 0.001), z_max 1.20"]
     assert out["reference_labels"] and all(t.startswith("reference (extension): mitsuba llvm_ad_spectral 4096 spp")
                                            for t in out["reference_labels"])
     assert out["load_kinds"] == sorted(["render", "reference", "diff_abs", "diff_rel", "flip", "zscore",
@@ -342,9 +349,11 @@ def test_run_from_blender_then_load_images_and_open_report(tmp_path):
                        ("zscore", "zscore.exr")):
         expected = exr.read_rgb(f"{res}/{name}")
         assert np.allclose(np.array(out["loaded"][kind]), expected, atol=1e-6), kind
-    runs = json.loads(open(f"{out['out']}/metrics.json").read())["runs"]
+    from spectral_bench.batch import records
+    data = records.read(f"{out['out']}/metrics.json")  # the reference path, stored relative to the run folder
+    runs = data["runs"]
     assert [r["scene"] for r in runs] == ["ggx_copper_80"] and runs[0]["status"] == "ok"
-    assert runs[0]["test"]["pass"] and runs[0]["reference"]["path"] == str(ROOT / "references" / "ggx_copper_80.exr")
+    assert runs[0]["test"]["pass"] and data.path(runs[0]["reference"]["path"]) == ROOT / "references" / "ggx_copper_80.exr"
     assert any(t and t.startswith("reference (extension): mitsuba") for t in out["labels"])
     assert out["rep"] == ["FINISHED"]
     for _ in range(100):

@@ -23,7 +23,7 @@ import textwrap
 
 import pytest
 
-from conftest import ROOT
+from conftest import ROOT, metrics
 
 TESTS = str(ROOT / "tests")
 MODULE = "bl_ext.user_default.spectral_bench"
@@ -244,7 +244,8 @@ def test_installed_extension_opens_scenes_runs_one_against_a_shipped_reference_a
         s.scene_source, s.canonical_scene = "CANONICAL", "ggx_copper_50"
         s.spp, s.scale, s.passes, s.output_parent = 0, 0.125, 2, {str(tmp_path / "runs")!r}
         r_run = bpy.ops.spectral_bench.run_benchmark(wait=True)
-        runs = json.load(open(os.path.join(s.output_dir, "metrics.json")))["runs"]
+        import importlib
+        runs = importlib.import_module({MODULE!r} + ".batch.records").read(s.output_dir).resolved()["runs"]  # paths absolute
     """, draw_everything(), """
         results = lr.draw(bpy.types.SPECTRAL_BENCH_PT_benchmark_results, lr.Context())
         print(json.dumps({"open": list(r_open), "opened": opened, "blend": canonical.BLEND.as_posix(),
@@ -301,7 +302,8 @@ def test_references_folder_preference_persists_and_each_reference_names_its_orig
         s.scene_source, s.use_flip = "FILE", False
         s.spp, s.scale, s.passes, s.output_parent = 16, 0.125, 1, {str(tmp_path / "runs")!r}
         r = bpy.ops.spectral_bench.run_benchmark(wait=True)
-        runs = json.load(open(os.path.join(s.output_dir, "metrics.json")))["runs"]
+        import importlib
+        runs = importlib.import_module({MODULE!r} + ".batch.records").read(s.output_dir).resolved()["runs"]  # paths absolute
         results = lr.draw(bpy.types.SPECTRAL_BENCH_PT_benchmark_results, lr.Context())
         print(json.dumps({{"before": before, "dir": addon.preferences.references_dir,
                           "source": addon.preferences.reference_source,
@@ -358,7 +360,7 @@ def test_platform_zip_with_wheels_fits_the_platform_and_runs_on_its_wheels_alone
                                    str(ROOT / "golden" / "ir" / "ggx_copper_50.json"), "-r", "mitsuba", "--scale",
                                    "0.125", "--passes", "2", "-o", str(tmp_path / "o")],
                          capture_output=True, text=True, env=env, timeout=600)
-    (entry,) = json.loads((tmp_path / "o" / "metrics.json").read_text())["runs"]
+    (entry,) = metrics(tmp_path / "o")["runs"]  # through the reader: paths absolute
     assert entry["status"] == "ok" and entry["test"]["pass"], run.stderr[-3000:]
     assert entry["reference"]["path"] == os.path.join(out["ext_dir"], "references", "ggx_copper_50.exr")
     assert entry["metrics"]["flip"] is not None  # flip-evaluator from its wheel, in its child process

@@ -20,7 +20,7 @@ from urllib.parse import unquote
 
 import pytest
 
-from conftest import run_batch
+from conftest import run_batch, write_hand_made_metrics
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 pytestmark = pytest.mark.skipif(not CHROMIUM, reason="no chromium: report not checked in a browser "
@@ -150,7 +150,7 @@ def make_hostile_report(run, tmp_path, keep_images):
     unjudged["test"] = {"pass": None, "reason": "no reference"}
     data["runs"].append(unjudged)
     data, paths = hostile(data, out if keep_images else None)
-    (out / "metrics.json").write_text(json.dumps(data))
+    write_hand_made_metrics(out, data)
     summary.write(out, data["runs"], 1.0, data["sweeps"], data["stability"])
     with open(out / "summary.md", "a") as f:  # summary.md is read back by the page: a section of it, hostile
         f.write("\n## RGB renderers against the spectral references\n\n" + PAYLOAD.format(n=len(paths)) + "\n")
@@ -264,7 +264,7 @@ def test_a_value_of_the_wrong_type_does_not_stop_the_report(run, tmp_path):
         kept = holder[path[-1]]
         for value in (None, -1.5, True, "text", [], {"a": 1}):
             holder[path[-1]] = value
-            (out / "metrics.json").write_text(json.dumps(data))
+            write_hand_made_metrics(out, data)
             try:
                 html.write(out)
             except Exception as e:  # noqa: BLE001 - collected, all reported at once

@@ -33,7 +33,7 @@ class BackgroundRun:
 
     def done_jobs(self):
         data = results.load(self.out_dir)
-        return len(data["runs"]) if data else 0
+        return len(data.entries("runs")) if data is not None else 0
 
     def running(self):
         return self.proc is not None and self.proc.poll() is None

@@ -124,14 +124,11 @@ def run(job, deviations=None):
 
 
 def new_entry(job, **kw):
-    """A metrics.json run record for a render job (the interface every reader of metrics.json uses)."""
+    """A metrics.json run record for a render job (batch/records.py ``run_record``: the one builder)."""
+    from .. import records
     r = job["scene"]["render"]
-    e = {"scene": job["scene_name"], "case": job["scene"].get("case"), "backend": job["backend"],
-         "mode": job["mode"], "status": "ok", "reason": "", "spp": job["spp"],
-         "resolution": [r["width"], r["height"]], "time_s": None, "image": None,
-         "metrics": {"rmse": None, "relmse": None, "mape": None, "flip": None}, "probes": [], "job": job_id(job)}
-    e.update(kw)
-    return e
+    return records.run_record(job["scene_name"], job["scene"], job["backend"], mode=job["mode"], spp=job["spp"],
+                              resolution=[r["width"], r["height"]], job=job_id(job), **kw)
 
 
 def describe(exc):

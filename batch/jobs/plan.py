@@ -3,16 +3,17 @@ and the results that need no render (a bad scene, a missing backend, a scene a b
 model). Plain data in, plain data out: no rendering here.
 """
 import copy
-import json
 from pathlib import Path
 
 from ...exporters import validate
+from .. import records
 from ..studies import sweep
 from . import job as jobs
 
 job_id = jobs.job_id
 # options a resumed run takes from this command; every other option comes from the run being resumed
-ENGINE_KEYS = ("resume", "out", "cluster", "cluster_timeout", "dashboard", "log", "visualize", "list", "settings")
+ENGINE_KEYS = ("resume", "out", "cluster", "cluster_timeout", "dashboard", "log", "visualize", "list", "settings",
+               "junit")
 VERDICT_KEYS = ("alpha", "min_samples", "block", "flip", "references", "known")
 
 
@@ -78,12 +79,9 @@ def _main_job(name, scene, bname, backend, opts, out, settings):
 
 
 def entry(name, scene, backend, **kw):
-    """A metrics.json run record for a job decided without rendering (and for exports)."""
-    e = {"scene": name, "case": scene.get("case") if isinstance(scene, dict) else None, "backend": backend,
-         "mode": None, "status": "ok", "reason": "", "spp": None, "resolution": None, "time_s": None,
-         "image": None, "metrics": {"rmse": None, "relmse": None, "mape": None, "flip": None}, "probes": []}
-    e.update(kw)
-    return e
+    """A metrics.json run record for a job decided without rendering (and for exports):
+    batch/records.py ``run_record``, the one builder."""
+    return records.run_record(name, scene, backend, **kw)
 
 
 def _decided(name, scene, backend, status, reason, **kw):
@@ -157,15 +155,15 @@ class ResumeError(ValueError):
 
 
 def read_metrics(out):
-    """The metrics.json of a run being resumed, or ResumeError naming the file."""
-    path = Path(out) / "metrics.json"
+    """The metrics.json of a run being resumed (batch/records.py ``read``, strict: upgraded to the
+    current version, path fields absolute), or ResumeError naming the file."""
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError, RecursionError) as exc:
-        raise ResumeError(f"cannot resume from {path}: {type(exc).__name__}: {exc}") from None
-    if not isinstance(data, dict) or not isinstance(data.get("options", {}), dict) \
+        data = records.read(Path(out) / records.FILE_NAME).resolved()
+    except records.RecordError as exc:
+        raise ResumeError(f"cannot resume: {exc}") from None
+    if not isinstance(data.get("options", {}), dict) \
             or not all(isinstance(data.get(k, []), list) for k in ("runs", "jobs")):
-        raise ResumeError(f"cannot resume from {path}: not the metrics.json of a run (an object with options and runs)")
+        raise ResumeError(f"cannot resume from {data.file}: not the metrics.json of a run (an object with options and runs)")
     return data
 
 

@@ -8,14 +8,13 @@ every job, so finished results survive a crash of the runner itself. ``--resume 
 interrupted run: results whose job id (batch/jobs/job.py) still matches are kept, the rest run.
 """
 import datetime as _dt
-import json
 import logging
 import time
 from pathlib import Path
 
 
 from ...exporters import art_writer, ir_json
-from .. import backends, scene_sources
+from .. import backends, records, scene_sources
 from ..verdict import known, status
 from ..report import html as report, summary
 from ..studies import stability, sweep
@@ -182,16 +181,8 @@ class Run:
         return done
 
     def save(self):
-        data = {"started": self.started, "options": dict(self.opts), "runs": self.runs}
-        if self.results:
-            data["jobs"] = self.results
-        if self.sweeps:
-            data["sweeps"] = self.sweeps
-        if self.stability:
-            data["stability"] = self.stability
-        tmp = self.out / "metrics.json.tmp"
-        tmp.write_text(json.dumps(data, indent=1, default=str) + "\n")
-        tmp.replace(self.out / "metrics.json")
+        """metrics.json, rewritten atomically (batch/records.py: versioned, paths relative to OUT)."""
+        records.write(self.out, self.started, self.opts, self.runs, self.results, self.sweeps, self.stability)
 
     def add(self, entry):
         self.runs.append(entry)
@@ -340,6 +331,27 @@ class Run:
 
 
 
+def check_junit(path):
+    """--junit FILE must be writable where it is asked for: checked before anything renders."""
+    path = Path(path)
+    if path.is_dir():
+        raise UsageError(f"--junit {path}: is a folder (give a file name)")
+    if not path.parent.is_dir():
+        raise UsageError(f"--junit {path}: no such folder {path.parent}")
+
+
+def write_junit(path, batch):
+    """The run's jobs as JUnit XML (batch/report/junit.py); a file that cannot be written is logged."""
+    from ..report import junit
+    tool = records.tool_info()
+    try:
+        junit.write(path, batch.runs, name=f"spectral_bench {batch.out.name}", started=batch.started,
+                    properties={"run": str(batch.out), "tool.version": tool["version"] or "",
+                                "tool.commit": tool["commit"] or ""})
+    except OSError as exc:
+        log.error("--junit %s: cannot write it: %s", path, exc.strerror or exc)
+
+
 def run(opts):
     """Run the batch; returns the exit status (batch/verdict/status.py: 0 when every judged job
     is ok, known or fixed and nothing was left unjudged, 3 when something was unjudged, 4 when
@@ -349,6 +361,8 @@ def run(opts):
     to the folder used."""
     t0 = time.perf_counter()
     deviations = None if opts.get("resume") else load_known(opts.get("known"))
+    if opts.get("junit"):
+        check_junit(opts["junit"])
     out, lock = claim(opts)
     opts["out"] = str(out)
     try:
@@ -384,6 +398,8 @@ def _run(opts, out, deviations, t0):
     text = summary.write(batch.out, batch.runs, time.perf_counter() - t0, batch.sweeps, batch.stability)
     report.write(batch.out)
     print(text)
+    if opts.get("junit"):
+        write_junit(opts["junit"], batch)
     if code is None:
         code = status.exit_code(batch.runs + batch.stability)
         if code == status.EXIT_NOTHING_RAN:

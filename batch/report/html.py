@@ -8,13 +8,14 @@ from templates/report.html with autoescaping on, values inside <script> go throu
 element ids are made here from a safe alphabet, and an image's src is only ever a relative,
 percent-encoded path to a file that exists inside the output folder (anything else in an
 image or chart field is not linked)."""
-import json
 import re
 from pathlib import Path, PurePosixPath, PureWindowsPath
 from urllib.parse import quote
 
 import jinja2
 
+from .. import records
+from ..records import noise_test_text
 from ..verdict.status import ORDER
 
 VIEWS = [("render", "render.png"), ("reference", "reference.png"), ("difference", "diff.png"),
@@ -112,13 +113,8 @@ def _viewer(out, run):
     if not views:
         return None
     numbers = [f"{_text(k)}: {_fmt(v)}" for k, v in _dict(run.get("metrics")).items()]
-    test = run.get("test")
-    if isinstance(test, dict):
-        verdict = _verdict(test.get("pass"), "not judged")
-        if all(isinstance(test.get(k), (int, float)) for k in ("p_min", "threshold")) and test.get("pass") is not None:
-            numbers.append(f"noise test: p_min {test['p_min']:.3g} vs {test['threshold']:.3g} ({verdict})")
-        else:
-            numbers.append(f"noise test: {_text(test.get('reason'))} ({verdict})")
+    if isinstance(run.get("test"), dict):
+        numbers.append(f"noise test: {noise_test_text(run['test'])}")
     for p in _list(run.get("probes")):
         if not isinstance(p, dict):
             numbers.append(_text(p))
@@ -169,10 +165,17 @@ def _ids(runs, viewers):
     return ids
 
 
+def load(out):
+    """The run's metrics.json through batch/records.py (upgraded to the current version; paths
+    stay relative to the run folder, as the page links them). Lenient: a file whose version this
+    code does not know is shown as far as it can be."""
+    return records.read(out, strict=False)
+
+
 def render(out_dir):
     """The page of an output folder, as a string."""
     out = Path(out_dir)
-    data = _dict(json.loads((out / "metrics.json").read_text()))
+    data = load(out)
     runs = [r for r in _list(data.get("runs")) if isinstance(r, dict)]
     sweeps = [s for s in _list(data.get("sweeps")) if isinstance(s, dict)]
     viewers = {}

@@ -1,23 +1,25 @@
 """Reading a batch runner's output folder (metrics.json and its images): shared by the
 Blender panel and anything else that inspects results, whoever started the run."""
-import json
 from pathlib import Path
 
 from ...exporters import names
+from .. import records
 
 IMAGE_KINDS = {"render": "render.exr", "reference": "reference.exr", "diff_abs": "diff_abs.exr",
                "diff_rel": "diff_rel.exr", "flip": "flip.exr", "zscore": "zscore.exr"}
 
 
 def load(out_dir):
-    """The metrics.json of an output folder, or None if there is none (yet)."""
-    path = Path(out_dir) / "metrics.json"
+    """The metrics.json of an output folder through batch/records.py (upgraded to the current
+    version, every path field absolute: the panel opens the files), or None if there is none (yet)
+    or it cannot be read. Lenient: a version this code does not know is shown as far as it can be."""
+    path = Path(out_dir) / records.FILE_NAME
     if not path.is_file():
         return None
     try:
-        return json.loads(path.read_text())
-    except ValueError:
-        return None  # being replaced right now; the next read gets it
+        return records.read(path, strict=False).resolved()
+    except records.RecordError:
+        return None  # not a metrics.json the panel can show (the report and resume name the problem)
 
 
 def latest_output(parent):
@@ -28,10 +30,10 @@ def latest_output(parent):
 
 def last_status(out_dir):
     """{scene: {backend: run entry}} of an output folder (latest entry wins)."""
-    data = load(out_dir) or {"runs": []}
+    data = load(out_dir)
     status = {}
-    for run in data["runs"]:
-        status.setdefault(run["scene"], {})[run["backend"]] = run
+    for run in data.entries("runs") if data is not None else []:
+        status.setdefault(str(run.get("scene")), {})[str(run.get("backend"))] = run
     return status
 
 

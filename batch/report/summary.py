@@ -1,7 +1,8 @@
 """The readable summary: summary.md in the output folder, also printed. Failures first."""
 from pathlib import Path
 
-from ..verdict.status import ORDER
+from ..records import noise_test_text
+from ..verdict.status import rank
 from .results import judged_without_reference
 
 
@@ -12,12 +13,9 @@ def _num(x, fmt="{:.4g}"):
 def table(runs):
     rows = ["| status | scene | backend | mode | spp | resolution | time (s) | RMSE | relMSE | MAPE | FLIP | noise test | reason |",
             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    for r in sorted(runs, key=lambda r: (ORDER.get(r["status"], 9), r["scene"], r["backend"])):
+    for r in sorted(runs, key=lambda r: (rank(r["status"]), r["scene"], r["backend"])):
         m = r.get("metrics") or {}
-        t = r.get("test")
-        test = ("" if not t else "not judged" if t.get("pass") is None
-                else f"p_min {t['p_min']:.2g} / {t['threshold']:.2g}" if t.get("p_min") is not None
-                else "failed (see reason)")
+        test = _cell(noise_test_text(r.get("test")))
         res = "x".join(map(str, r["resolution"])) if r.get("resolution") else ""
         reason = _cell(r.get("reason") or "")
         shown = f"{r['status']} (without reference)" if judged_without_reference(r) else r["status"]
@@ -143,7 +141,7 @@ def rgb_comparison(runs):
 
 def write(out_dir, runs, elapsed_s, sweeps=None, stability=None):
     c = counts(runs)
-    head = ", ".join(f"{n} {s}" for s, n in sorted(c.items(), key=lambda kv: ORDER.get(kv[0], 9)))
+    head = ", ".join(f"{n} {s}" for s, n in sorted(c.items(), key=lambda kv: rank(kv[0])))
     without = sum(1 for r in runs if judged_without_reference(r))
     if without:
         head += f" ({without} judged without a usable reference: see Reference problems)"

@@ -28,6 +28,12 @@ EXIT_FAILED, EXIT_UNJUDGED, EXIT_NOTHING_RAN = 1, 3, 4
 NOT_RUN = ("skipped", "unsupported")
 
 
+def rank(status):
+    """Where a status sorts in every list of results (summary, report, Blender panel): ORDER, a
+    status this code does not know last."""
+    return ORDER.get(status, len(ORDER)) if isinstance(status, str) else len(ORDER)
+
+
 @dataclass
 class Check:
     name: str

@@ -1,0 +1,314 @@
+"""metrics.json as a contract: one builder of a run record, one writer, one reader.
+
+Layout: ``schemas/metrics.schema.json`` (JSON Schema, draft 2020-12) describes every field; the
+file carries ``schema_version`` (SCHEMA_VERSION; files written before it existed are version 1)
+and ``tool`` (this checkout's version from blender_manifest.toml and its git commit, or null).
+
+- ``run_record``: the metrics.json entry of one render job or one job decided without rendering
+  (batch/jobs/job.py ``new_entry`` and batch/jobs/plan.py ``entry`` call it).
+- ``write``: the file, atomically; every path field (PATHS) relative to the run folder.
+- ``read``: a metrics.json (or its run folder) as a Run (a plain dict, upgraded to SCHEMA_VERSION,
+  that knows its file and folder); errors name the file. ``Run.path`` resolves a path field
+  against the run folder; ``Run.resolved`` is a copy with every path field absolute.
+- ``validate``: the schema's complaints about a dict, each naming the field.
+- ``noise_test_text``: the noise test of a run entry as one line (summary, report, panel).
+
+Paths: a path the runner writes is stored relative to the run folder (``os.path.relpath``, with
+``/``; a reference outside the folder gets ``..`` parts), so a run folder can be moved together
+with what it points to. Only where no relative path exists (another drive on Windows) is a path
+stored absolute. Options (``options``) and ``baseline.run`` are the user's and stay as given.
+"""
+import copy
+import functools
+import json
+import math
+import os
+import subprocess
+import tomllib
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+SCHEMA_FILE = ROOT / "schemas" / "metrics.schema.json"
+FILE_NAME = "metrics.json"
+SCHEMA_VERSION = 2
+
+# Where paths live, per top-level list: dotted fields, "[]" steps into a list's items. A reader
+# resolves them against the run folder; the writer makes them relative to it.
+PATHS = {
+    "runs": ("image", "export", "reference.path", "reference_problems[].file", "baseline.zmap", "baseline.image"),
+    "jobs": ("image", "image_path", "row.image", "point.reference_problems[].file"),
+    "sweeps": ("chart", "points[].reference_problems[].file"),
+}
+
+
+class RecordError(ValueError):
+    """A metrics.json that cannot be read (named by its file)."""
+
+
+# -- the tool's identity ---------------------------------------------------------------------------
+@functools.lru_cache(maxsize=1)
+def tool_info():
+    """{"version": blender_manifest.toml's version, "commit": the checkout's git commit or None
+    (not a git checkout, or no git)}. Read once per process."""
+    try:
+        version = tomllib.loads((ROOT / "blender_manifest.toml").read_text(encoding="utf-8")).get("version")
+    except (OSError, ValueError):
+        version = None
+    return {"version": version if isinstance(version, str) else None, "commit": _git_commit()}
+
+
+def _git_commit():
+    """HEAD of the git repository whose top level is this checkout (not of a repository that
+    merely contains it, e.g. an extension folder inside someone's dotfiles)."""
+    try:
+        proc = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--show-toplevel", "HEAD"],
+                              capture_output=True, text=True, timeout=10)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    lines = proc.stdout.split()
+    if proc.returncode != 0 or len(lines) != 2:
+        return None
+    try:
+        same = Path(lines[0]).resolve() == ROOT
+    except OSError:
+        return None
+    return lines[1] if same and len(lines[1]) in (40, 64) else None
+
+
+# -- building a record ---------------------------------------------------------------------------
+def run_record(scene_name, scene, backend, *, mode=None, spp=None, resolution=None, job=None, **fields):
+    """A metrics.json run entry (runs[]) with every field a reader may rely on: the job's identity
+    (scene, case, backend, mode, job id), its settings (spp, resolution), the status (``ok`` until
+    a verdict or a decision sets it), the reason, time, image, metrics and probes; ``fields``
+    override or add (their names and meaning: schemas/metrics.schema.json)."""
+    e = {"scene": scene_name, "case": scene.get("case") if isinstance(scene, dict) else None, "backend": backend,
+         "mode": mode, "status": "ok", "reason": "", "spp": spp,
+         "resolution": list(resolution) if resolution is not None else None, "time_s": None, "image": None,
+         "metrics": {"rmse": None, "relmse": None, "mape": None, "flip": None}, "probes": []}
+    if job is not None:
+        e["job"] = job
+    e.update(fields)
+    return e
+
+
+# -- paths -----------------------------------------------------------------------------------------
+def relative(value, folder):
+    """``value`` (a path) relative to ``folder`` with ``/`` separators; a relative path is taken
+    as relative to the folder already and kept; not a path: unchanged."""
+    if not isinstance(value, (str, os.PathLike)) or not str(value):
+        return value
+    path = Path(value)
+    if not path.is_absolute():
+        return value if isinstance(value, str) else path.as_posix()
+    try:
+        return Path(os.path.relpath(path, Path(folder).absolute())).as_posix()
+    except ValueError:  # another drive (Windows): no relative path exists
+        return str(path)
+
+
+def absolute(value, folder):
+    """A path field's value as an absolute path string (resolved lexically against ``folder``);
+    not a non-empty string: unchanged."""
+    if not isinstance(value, str) or not value or "\0" in value:
+        return value
+    return os.path.normpath(os.path.join(Path(folder).absolute(), value))
+
+
+def _map_paths(data, fn):
+    """Apply fn to every path field (PATHS) of data, in place; anything not shaped as expected
+    (a hand-edited or foreign file) is left alone."""
+    for section, fields in PATHS.items():
+        items = data.get(section)
+        if not isinstance(items, list):
+            continue
+        for item in items:
+            for field in fields:
+                _map_field(item, field.split("."), fn)
+    return data
+
+
+def _map_field(holder, steps, fn):
+    if not isinstance(holder, dict) or not steps:
+        return
+    step, rest = steps[0], steps[1:]
+    many = step.endswith("[]")
+    key = step[:-2] if many else step
+    if key not in holder:
+        return
+    if many:
+        for item in holder[key] if isinstance(holder[key], list) else ():
+            _map_field(item, rest, fn)
+    elif rest:
+        _map_field(holder[key], rest, fn)
+    else:
+        holder[key] = fn(holder[key])
+
+
+# -- writing ---------------------------------------------------------------------------------------
+def document(folder, started, options, runs, jobs=None, sweeps=None, stability=None):
+    """The metrics.json content of a run in ``folder``: versioned, paths relative to the folder."""
+    data = {"schema_version": SCHEMA_VERSION, "tool": dict(tool_info()), "started": started,
+            "options": dict(options), "runs": list(runs)}
+    for key, value in (("jobs", jobs), ("sweeps", sweeps), ("stability", stability)):
+        if value:
+            data[key] = list(value)
+    data = json.loads(json.dumps(data, default=str))  # a copy of plain JSON data: the caller's records stay as they are
+    return _map_paths(data, lambda v: relative(v, folder))
+
+
+def write(folder, started, options, runs, jobs=None, sweeps=None, stability=None):
+    """Write ``folder``/metrics.json atomically (a reader never sees half a file); returns its path."""
+    folder = Path(folder)
+    data = document(folder, started, options, runs, jobs, sweeps, stability)
+    tmp = folder / (FILE_NAME + ".tmp")
+    tmp.write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
+    tmp.replace(folder / FILE_NAME)
+    return folder / FILE_NAME
+
+
+# -- reading ---------------------------------------------------------------------------------------
+class Run(dict):
+    """A metrics.json read and upgraded to SCHEMA_VERSION: the plain dict of the file, plus
+    ``file`` (the metrics.json), ``folder`` (its run folder), ``read_version`` (the version the
+    file had) and ``problems`` (what a lenient read passed over)."""
+
+    def __init__(self, data, file, read_version, problems=()):
+        super().__init__(data)
+        self.file = Path(file)
+        self.folder = self.file.parent
+        self.read_version = read_version
+        self.problems = list(problems)
+
+    def path(self, value):
+        """A path field's value resolved against the run folder (a Path), or None."""
+        out = absolute(value, self.folder)
+        return Path(out) if isinstance(out, str) and out else None
+
+    def resolved(self):
+        """A deep copy with every path field (PATHS) absolute (for code that opens the files)."""
+        out = Run(copy.deepcopy(dict(self)), self.file, self.read_version, self.problems)
+        return _map_paths(out, lambda v: absolute(v, self.folder))
+
+    def entries(self, section="runs"):
+        """The dict items of runs (or jobs, sweeps, stability); anything else is passed over."""
+        items = self.get(section)
+        return [r for r in items if isinstance(r, dict)] if isinstance(items, list) else []
+
+
+def _version_of(data, file, strict):
+    """(the version of a file's content, problem or None)."""
+    if "schema_version" not in data:
+        return 1, None
+    v = data["schema_version"]
+    if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+        problem = f"{file}: schema_version {v!r} is not a version (a positive integer)"
+    elif v > SCHEMA_VERSION:
+        problem = (f"{file}: schema_version {v} was written by a newer spectral_bench (this one reads up to "
+                   f"{SCHEMA_VERSION})")
+    else:
+        return v, None
+    if strict:
+        raise RecordError(problem)
+    return SCHEMA_VERSION, problem + f"; read as version {SCHEMA_VERSION}"
+
+
+def _v1_folder(data):
+    """Where a version-1 file's run folder was when it was written: from a study job's absolute
+    ``image_path`` and its relative ``image``, else an absolute ``options.out``; None if unknown."""
+    for job in data.get("jobs") if isinstance(data.get("jobs"), list) else ():
+        if isinstance(job, dict) and isinstance(job.get("image_path"), str) and isinstance(job.get("image"), str):
+            full, rel = Path(job["image_path"]), Path(job["image"])
+            if full.is_absolute() and not rel.is_absolute() and rel.parts and full.parts[-len(rel.parts):] == rel.parts:
+                return Path(*full.parts[:-len(rel.parts)])
+    out = (data.get("options") or {}).get("out") if isinstance(data.get("options"), dict) else None
+    return Path(out) if isinstance(out, str) and Path(out).is_absolute() else None
+
+
+def _from_v1(data, folder):
+    """Version 1 (no schema_version, before issue 24): paths of references, reference problems
+    and study jobs' images were absolute; no tool; everything else is as version 2 has it. An
+    absolute path inside the run folder where the file was written becomes relative to that folder
+    (it moved with it, if the folder moved); any other (a reference) relative to where the file
+    is now, so it still names the same file."""
+    data["tool"] = {"version": None, "commit": None}
+    then = _v1_folder(data)
+
+    def upgrade(value):
+        if then is not None and isinstance(value, str) and Path(value).is_absolute():
+            try:
+                return Path(value).relative_to(then).as_posix()
+            except ValueError:
+                pass
+        return relative(value, folder)
+    return _map_paths(data, upgrade)
+
+
+# version -> the function that lifts a file's content from it to the next version
+UPGRADES = {1: _from_v1}
+
+
+def read(path, *, strict=True):
+    """The metrics.json at ``path`` (the file or its run folder) as a Run upgraded to
+    SCHEMA_VERSION. RecordError, naming the file, when it cannot be read, is not JSON, is not an
+    object; with ``strict`` (resume, compare) also when its schema_version is not a version this
+    code reads. Not strict (report, panel: show what can be shown of any file): such a version is
+    read as the current one, with the problem in ``Run.problems``. Content is not validated here:
+    ``validate`` does that."""
+    path = Path(path)
+    if path.is_dir() or path.name != FILE_NAME and not path.suffix:
+        path = path / FILE_NAME
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise RecordError(f"cannot read {path}: {exc.strerror or exc}") from None
+    except (ValueError, RecursionError) as exc:  # not UTF-8, not JSON, nested too deep
+        raise RecordError(f"{path} is not a readable metrics.json: {type(exc).__name__}: {exc}") from None
+    if not isinstance(data, dict):
+        raise RecordError(f"{path} is not the metrics.json of a run: an object expected, got {type(data).__name__}")
+    version, problem = _version_of(data, path, strict)
+    read_version = version
+    while version < SCHEMA_VERSION:
+        data = UPGRADES[version](data, path.parent)
+        version += 1
+    data["schema_version"] = SCHEMA_VERSION
+    return Run(data, path, read_version, [problem] if problem else [])
+
+
+# -- validating ------------------------------------------------------------------------------------
+@functools.lru_cache(maxsize=1)
+def schema():
+    return json.loads(SCHEMA_FILE.read_text(encoding="utf-8"))
+
+
+def validate(data):
+    """["<field path>: <problem>"] for every place ``data`` breaks the schema ([] when it holds)."""
+    import jsonschema
+    validator = jsonschema.Draft202012Validator(schema(), format_checker=jsonschema.Draft202012Validator.FORMAT_CHECKER)
+    out = []
+    for err in sorted(validator.iter_errors(data), key=lambda e: [str(p) for p in e.absolute_path]):
+        where = "/".join(str(p) for p in err.absolute_path) or "(top level)"
+        out.append(f"{where}: {err.message[:300]}")
+    return out
+
+
+# -- formatting ------------------------------------------------------------------------------------
+def _number(x):
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+
+def noise_test_text(test):
+    """The noise test of a run entry (its ``test``) as one line of text: "pass: p_min P
+    (threshold T), z_max Z", "FAIL: p_min P (threshold T), z_max Z", "not judged: why", "FAIL:
+    why", or "" when there is no test (no character that Markdown or HTML would escape). Any value
+    of the wrong type is shown as text or left out, never raises."""
+    if not isinstance(test, dict):
+        return ""
+    passed, reason = test.get("pass"), test.get("reason")
+    reason = "" if reason is None else " ".join(str(reason).split())
+    if passed is not True and passed is not False:
+        return f"not judged: {reason}" if reason else "not judged"
+    word = "pass" if passed else "FAIL"
+    if _number(test.get("p_min")) and _number(test.get("threshold")):
+        line = f"{word}: p_min {test['p_min']:.3g} (threshold {test['threshold']:.3g})"
+        return line + (f", z_max {test['z_max']:.2f}" if _number(test.get("z_max")) else "")
+    return f"{word}: {reason}" if reason else word
