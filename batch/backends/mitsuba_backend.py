@@ -9,10 +9,14 @@ pass loop (batch/backends/passes.py) and the same conversion of the film's chann
 its banner, so the known deviations of that Mitsuba version apply to it. Scenes that need this
 project's Python plugins are unsupported on the executable route, with the reason.
 """
+import atexit
 import importlib.util
 import json
+import os
 import subprocess
 import sys
+import tempfile
+import threading
 import time
 from functools import lru_cache
 from pathlib import Path
@@ -173,81 +177,140 @@ def executable_version(executable):
     return m.group(1) if m else "unknown"
 
 
-class WarmWorker:
-    """The Python route's session: batch/backends/mitsuba_worker.py started once per render,
-    loading the scene once; each pass is one request answered within the pass's time limit (a
-    worker that dies or overruns is killed, and a retried pass starts a fresh one)."""
+class WorkerProcess:
+    """One batch/backends/mitsuba_worker.py process of one variant: started once, then kept warm
+    (``_POOL``) across passes and jobs, so a job pays neither the Python start, the Mitsuba import
+    nor the JIT compilation of kernels another job of that variant already compiled."""
 
-    def __init__(self, xml_path, variant, log):
-        self.xml, self.variant, self.log = str(xml_path), variant, log
-        self.proc, self.info = None, {}
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.stop()
-        return False
-
-    def start(self, timeout):
-        cmd = [sys.executable, str(WORKER), "--xml", self.xml, "--variant", self.variant]
-        self.log.write(f"$ {' '.join(cmd)}\n")
-        self.log.flush()
-        self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self.log,
+    def __init__(self, variant, timeout):
+        self.variant = variant
+        self.stderr = tempfile.TemporaryFile()  # what it prints before its first scene's log takes over
+        cmd = [sys.executable, str(WORKER), "--variant", variant]
+        self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self.stderr,
                                      env=llvm.env(), **child.popen_kwargs())
-        ready = self._reply(timeout, "loading the scene")
-        self.info = {"versions": ready.get("versions", {})}
+        self.versions = self.ask(None, timeout, "starting")["versions"]
 
-    def stop(self):
-        if self.proc is not None:
-            try:
-                self.proc.stdin.close()
-                self.proc.wait(timeout=30)
-            except (OSError, subprocess.TimeoutExpired):
-                self.proc.kill()
-                self.proc.wait()
-            self.proc = None
+    def alive(self):
+        return self.proc is not None and self.proc.poll() is None
 
-    def _reply(self, timeout, what):
-        """The worker's next JSON line within ``timeout`` seconds."""
+    def ask(self, request, timeout, what):
+        """Send ``request`` (None: only wait) and return the reply within ``timeout`` seconds; a
+        worker that overruns is killed (PassTimeout), one that dies is a BackendFailure."""
         import selectors
+        if request is not None:
+            try:
+                self.proc.stdin.write((json.dumps(request) + "\n").encode())
+                self.proc.stdin.flush()
+            except OSError as exc:
+                self.kill()
+                raise BackendFailure(f"mitsuba worker stopped: {exc}") from exc
         sel = selectors.DefaultSelector()
         sel.register(self.proc.stdout, selectors.EVENT_READ)
         ready = sel.select(timeout)
         sel.close()
         if not ready:
-            self.proc.kill()
-            self.proc.wait()
-            self.proc = None
+            self.kill()
             raise passes_mod.PassTimeout(f"mitsuba worker: {what} took longer than {timeout} s")
         line = self.proc.stdout.readline()
         if not line:
             code = self.proc.wait()
-            self.proc = None
-            self.log.flush()
-            raise BackendFailure(f"mitsuba worker exited with {code} while {what}: {_log_tail(self.log)}")
+            self.stderr.seek(0)
+            early = self.stderr.read().decode(errors="replace")
+            self.kill()
+            raise BackendFailure(f"mitsuba worker exited with {code} while {what}"
+                                 + (f": {passes_mod.tail(early)}" if early.strip() else " (its output is in render.log)"))
         return json.loads(line)
 
-    def render_pass(self, spp, seed, out, timeout):
+    def kill(self):
+        if self.proc is not None:
+            if self.proc.poll() is None:
+                self.proc.kill()
+            self.proc.wait()
+            self.proc = None
+
+    def close(self):
+        if self.proc is not None:
+            try:
+                self.proc.stdin.close()
+                self.proc.wait(timeout=10)
+            except (OSError, subprocess.TimeoutExpired):
+                pass
+            self.kill()
+
+
+_POOL = {}  # variant -> idle WorkerProcess (a local run renders one job at a time)
+_POOL_LOCK = threading.Lock()
+
+
+def _take(variant, timeout):
+    with _POOL_LOCK:
+        worker = _POOL.pop(variant, None)
+    if worker is not None and worker.alive():
+        return worker
+    return WorkerProcess(variant, timeout)
+
+
+def _give(worker):
+    with _POOL_LOCK:
+        old = _POOL.pop(worker.variant, None)
+        _POOL[worker.variant] = worker
+    if old is not None:
+        old.close()
+
+
+@atexit.register
+def close_pool():
+    """Stop the idle workers (they also die with this process: child.popen_kwargs)."""
+    with _POOL_LOCK:
+        workers = list(_POOL.values())
+        _POOL.clear()
+    for w in workers:
+        w.close()
+
+
+class WarmWorker:
+    """The Python route's session: a warm worker of the variant (from the pool, or a new one)
+    loads the scene, then renders one pass per request within the pass's time limit. A worker that
+    fails or overruns is killed and never returned to the pool; a retried pass gets a fresh one."""
+
+    def __init__(self, xml_path, variant, log):
+        self.xml, self.variant, self.log = str(xml_path), variant, log
+        self.worker, self.info = None, {}
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, *exc):
+        if self.worker is not None:
+            if exc_type is None and self.worker.alive():
+                _give(self.worker)
+            else:
+                self.worker.kill()
+            self.worker = None
+        return False
+
+    def _ready(self, timeout):
         t0 = time.perf_counter()
-        if self.proc is None:
-            self.start(timeout)
-        left = max(1.0, timeout - (time.perf_counter() - t0))
+        if self.worker is None or not self.worker.alive():
+            self.worker = _take(self.variant, timeout)
+            self.log.flush()
+            log_name = getattr(self.log, "name", None)
+            reply = self.worker.ask({"load": self.xml, "log": log_name if isinstance(log_name, str) else os.devnull},
+                                    max(1.0, timeout - (time.perf_counter() - t0)), "loading the scene")
+            self.info = {"versions": self.worker.versions, "load_s": reply.get("load_s")}
+        return max(1.0, timeout - (time.perf_counter() - t0))
+
+    def render_pass(self, spp, seed, out, timeout):
         try:
-            self.proc.stdin.write((json.dumps({"spp": spp, "seed": seed, "out": str(out)}) + "\n").encode())
-            self.proc.stdin.flush()
-        except OSError as exc:
-            self.stop()
-            raise BackendFailure(f"mitsuba worker stopped: {exc}") from exc
-        done = self._reply(left, f"rendering {spp} spp with seed {seed}")
+            left = self._ready(timeout)
+            done = self.worker.ask({"spp": spp, "seed": seed, "out": str(out)}, left,
+                                   f"rendering {spp} spp with seed {seed}")
+        except BackendFailure:
+            if self.worker is not None:
+                self.worker.kill()
+                self.worker = None
+            raise
         ch = exr.read(out)
         names, img = film_to_ir(done["names"], np.stack([ch[n] for n in done["names"]], axis=-1), Path(self.xml).parent)
         info = dict(self.info, chunks_per_pass=done.get("chunks", 1))
         return {"names": names, "image": img, "time_s": done["time_s"], "info": info}
-
-
-def _log_tail(log):
-    try:
-        return passes_mod.tail(Path(log.name).read_text(errors="replace"))
-    except (OSError, AttributeError, TypeError):
-        return "(see the render log)"

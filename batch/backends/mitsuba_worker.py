@@ -1,10 +1,13 @@
-"""A warm Mitsuba 3 render process for one exported scene (started by batch/backends/mitsuba_backend.py).
+"""A warm Mitsuba 3 render process for one variant (started and kept by batch/backends/mitsuba_backend.py).
 
-    python batch/backends/mitsuba_worker.py --xml scene.xml --variant llvm_ad_spectral
+    python batch/backends/mitsuba_worker.py --variant llvm_ad_spectral
 
-It loads the scene once (the variant's JIT kernels are compiled by the first pass and reused),
-says so with one JSON line ``{"ready": true, "versions": {...}, "load_s": ...}``, then renders one
-pass per request line read from stdin, ``{"spp": N, "seed": S, "out": "pass.exr"}``: the film's
+It imports Mitsuba once and says so with one JSON line ``{"ready": true, "versions": {...}}``,
+then answers request lines read from stdin, one JSON line each: ``{"load": "scene.xml", "log":
+"render.log"}`` loads a scene (registering the Python plugins its folder carries; what Mitsuba
+prints from then on goes to that job's log), and ``{"spp": N, "seed": S, "out": "pass.exr"}``
+renders one pass of the loaded scene (the variant's JIT kernels are compiled once and reused by
+every later pass and scene of this process): the film's
 raw channels (R, G, B or Y, then Stokes channels; no alpha or weight) as float32 EXR, answered by
 ``{"ok": true, "names": [...], "time_s": ..., "chunks": ...}`` (``time_s``: the render calls only).
 Replies go to the original stdout; anything Mitsuba or a plugin prints goes to stderr (the
@@ -35,7 +38,6 @@ def channel_names(scene, count):
 
 def main(argv=None):
     ap = argparse.ArgumentParser()
-    ap.add_argument("--xml", required=True)
     ap.add_argument("--variant", required=True)
     args = ap.parse_args(argv)
     reply = os.fdopen(os.dup(1), "w", buffering=1)
@@ -51,17 +53,27 @@ def main(argv=None):
     import numpy as np
 
     mi.set_variant(args.variant)
-    mitsuba_plugins.register_exported(Path(args.xml).parent)  # the plugins the exported folder carries
-    scene = mi.load_file(args.xml)
-    width, height = scene.sensors()[0].film().size()
     versions = {"mitsuba": mi.__version__, "drjit": dr.__version__, "numpy": np.__version__,
                 "python": sys.version.split()[0]}
-    reply.write(json.dumps({"ready": True, "versions": versions, "load_s": time.perf_counter() - t0}) + "\n")
+    reply.write(json.dumps({"ready": True, "versions": versions, "start_s": time.perf_counter() - t0}) + "\n")
+    scene = None
     for line in sys.stdin:
         if not line.strip():
             continue
         req = json.loads(line)
+        if "load" in req:  # a scene for the next passes; this job's log receives what is printed
+            log = os.open(req.get("log") or os.devnull, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+            os.dup2(log, 1)
+            os.dup2(log, 2)
+            os.close(log)
+            t = time.perf_counter()
+            scene = None
+            mitsuba_plugins.register_exported(Path(req["load"]).parent)  # the plugins the exported folder carries
+            scene = mi.load_file(req["load"])
+            reply.write(json.dumps({"ok": True, "load_s": time.perf_counter() - t}) + "\n")
+            continue
         spp, seed = int(req["spp"]), int(req["seed"])
+        width, height = scene.sensors()[0].film().size()
         # The LLVM variants trace all samples of a render call as one wavefront: keep each call
         # under MAX_WAVEFRONT samples (memory), averaging equal chunks of consecutive seeds.
         chunks = max(1, math.ceil(spp * width * height / MAX_WAVEFRONT))

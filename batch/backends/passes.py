@@ -60,7 +60,9 @@ def render(backend, path, mode, spp, out_exr, passes=1, seed=0, timeout=1800, lo
     t0 = time.perf_counter()
     names = shape = mean = m2 = None
     times, taken, retried, info = [], [], [], {}
-    with open(log_path or os.devnull, "w", encoding="utf-8") as log:
+    if log_path:
+        Path(log_path).write_text("")  # this render's log; children append to it (a warm worker too)
+    with open(log_path or os.devnull, "a", encoding="utf-8") as log:
         with backend.session(path, mode, log) as session:
             for k in range(passes):
                 s = seed + k * SEED_STRIDE
