@@ -34,6 +34,7 @@ DEFAULTS = {
     "variant": None, "alpha": 0.01, "block": None, "min_samples": 65536, "timeout": 1800, "passes": 2, "seed": 0, "flip": True,
     "references": None, "known": None, "list": False, "art_ggx": False, "sweep": False, "ladder": None, "sweep_modes": None, "stability": False,
     "approximate": False, "renderers": None, "cluster": None, "cluster_timeout": DEFAULT_CLUSTER_TIMEOUT, "dashboard": None, "resume": None,
+    "baseline": None,
 }
 
 
@@ -244,6 +245,7 @@ TYPES = {
     "cluster": text_kind(_cluster, "address"), "cluster_timeout": number(0, 3600, lo_open=True),
     "dashboard": text_kind(_dashboard, "[HOST]:PORT"), "resume": text_kind(_nonempty, "path"),
     "renderers": text_kind(_nonempty, "path"),
+    "baseline": text_kind(_nonempty, "path"),
 }
 
 
@@ -302,6 +304,10 @@ def parser():
                     help="serve the Dask dashboard of a --cluster local:N there (default: no dashboard)")
     ap.add_argument("--resume", type=T["resume"], metavar="OUT",
                     help="finish the interrupted run in OUT with its own options: finished jobs are kept, the rest run")
+    ap.add_argument("--baseline", type=T["baseline"], metavar="OUT_PREV",
+                    help="also judge every job against the matching job (scene, backend, mode) of the previous run in "
+                         "OUT_PREV, both on their own noise (metrics.json: baseline; summary: changed jobs first); "
+                         "does not change a job's status or the exit status")
     ap.add_argument("--sweep", action="store_true",
                     help="also render each scene over a ladder of sample counts and chart error against time")
     ap.add_argument("--ladder", type=T["ladder"], metavar="N,N,...",
