@@ -15,7 +15,9 @@ change is called ``changed`` with probability alpha.
 
 The record (``entry["baseline"]``, field names of the helpers' contract):
   run        the baseline folder as the user gave it
-  status     same | changed | missing (no such job in the baseline) | unjudged (cannot be compared: reason)
+  status     same | changed | missing (no such job in the baseline) | unjudged (cannot be compared: reason);
+             a job rendered in one run only is changed, one rendered in neither is same when its
+             status is (both skipped, say)
   reason     what changed and where, or why it could not be compared
   p_min, threshold   the image test's smallest p and its Sidak threshold
   ratio      [[mean new / mean baseline, its standard error]] for R, G, B
@@ -328,14 +330,17 @@ def judge_pair(new_entry, new_folder, old_entry, old_folder, settings, zmap_path
     tc = time_change(old_entry, new_entry, alpha)
     common = {"image": old_entry.get("image") if isinstance(old_entry.get("image"), str) else None,
               "time_ratio": None if tc is None else [tc["ratio"], tc["se"]], "time": tc}
-    new_img = inside(new_folder, new_entry.get("image"))
-    if new_img is None:
-        return _record(run_label, "unjudged", f"not rendered in this run (status {new_entry.get('status')})", **common)
-    old_img = inside(old_folder, old_entry.get("image"))
-    if old_img is None:
-        why = old_entry.get("reason") or ""
-        return _record(run_label, "unjudged", f"the baseline's job has no render (status {old_entry.get('status')}"
-                       + (f": {why}" if why else "") + ")", **common)
+    new_img, old_img = inside(new_folder, new_entry.get("image")), inside(old_folder, old_entry.get("image"))
+    if new_img is None or old_img is None:  # a render that appeared or went away is a change in itself
+        so, sn = old_entry.get("status"), new_entry.get("status")
+        if new_img is None and old_img is None:
+            return _record(run_label, "same" if so == sn else "changed", f"rendered in neither run (status {so}"
+                           + ("" if so == sn else f" -> {sn}") + ")", **common)
+        if new_img is None:
+            return _record(run_label, "changed", f"rendered in the baseline, not in this run (status {sn}"
+                           + (f": {new_entry.get('reason')}" if new_entry.get("reason") else "") + ")", **common)
+        return _record(run_label, "changed", f"rendered now, not in the baseline (status {so}"
+                       + (f": {old_entry.get('reason')}" if old_entry.get("reason") else "") + ")", **common)
     try:
         n_names, n_img, n_se = exr.read_image_and_stderr(new_img)
         o_names, o_img, o_se = exr.read_image_and_stderr(old_img)
