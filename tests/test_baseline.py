@@ -4,6 +4,7 @@
 Real renders, real EXRs, real subprocesses. The renders use fixed seeds, so every outcome is
 reproducible (the same job gives the same image: tests/test_engines.py)."""
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -267,3 +268,36 @@ def test_results_panel_compares_with_a_baseline_and_loads_its_images(tmp_path):
     assert out["loaded"]["baseline_render"][0].startswith(str(old / "b_brighter")), out["loaded"]
     assert out["loaded"]["baseline_zscore"][0].startswith(str(new / "compare" / "b_brighter"))
     assert out["loaded"]["baseline_zscore"][1] == [16, 16]
+
+
+@pytest.mark.slow
+def test_hostile_metrics_stay_text_and_inside_their_folders(tmp_path):
+    """Names and paths from a metrics.json are anyone's text: a render path out of its folder is
+    not read (the job is unjudged, saying so), markup in a name stays text in compare.html and
+    compare.md, and nothing is written outside the comparison's folder."""
+    old, new = tmp_path / "old", tmp_path / "new"
+    _run_folder(old, 1, {"a": 1.0, "b": 1.0})
+    _run_folder(new, 2, {"a": 1.0, "b": 1.0})
+    secret = tmp_path / "secret.exr"
+    secret.write_bytes((old / "a" / "results" / "mitsuba" / "render.exr").read_bytes())
+    data = json.loads((old / "metrics.json").read_text())
+    data["runs"][0]["image"] = "../secret.exr"
+    data["runs"][1]["image"] = str(secret)
+    (old / "metrics.json").write_text(json.dumps(data))
+    data = json.loads((new / "metrics.json").read_text())
+    evil = "<script>alert(1)</script>|x"
+    data["runs"].append(dict(data["runs"][0], scene=evil, image="../../x.exr"))
+    (new / "metrics.json").write_text(json.dumps(data))
+    before = sorted(p for p in tmp_path.rglob("*"))
+    cmp = compare_runs(old, new)
+    assert cmp.returncode == 1, cmp.stderr[-2000:]
+    result = json.loads((new / "compare" / "compare.json").read_text())
+    for j in result["jobs"]:
+        assert j["baseline"]["status"] == "unjudged" and "is not a file inside its run folder" in j["baseline"]["reason"]
+    assert [j["scene"] for j in result["new_jobs"]] == [evil]
+    page = (new / "compare" / "compare.html").read_text()
+    assert "<script>" not in page and "&lt;script&gt;" in page
+    md = (new / "compare" / "compare.md").read_text()
+    assert "\\<script>" in md and not re.search(r"(?<!\\)<script>", md)  # escaped as summary.md escapes
+    after = sorted(p for p in tmp_path.rglob("*"))
+    assert all(p in before or p.is_relative_to(new / "compare") for p in after)

@@ -331,6 +331,10 @@ def judge_pair(new_entry, new_folder, old_entry, old_folder, settings, zmap_path
     common = {"image": old_entry.get("image") if isinstance(old_entry.get("image"), str) else None,
               "time_ratio": None if tc is None else [tc["ratio"], tc["se"]], "time": tc}
     new_img, old_img = inside(new_folder, new_entry.get("image")), inside(old_folder, old_entry.get("image"))
+    for img, entry, which in ((new_img, new_entry, "this run's"), (old_img, old_entry, "the baseline's")):
+        if img is None and entry.get("image"):
+            return _record(run_label, "unjudged", f"{which} render {str(entry.get('image'))[:200]!r} is not a file "
+                           "inside its run folder", **common)
     if new_img is None or old_img is None:  # a render that appeared or went away is a change in itself
         so, sn = old_entry.get("status"), new_entry.get("status")
         if new_img is None and old_img is None:
@@ -459,8 +463,8 @@ def summary_section(runs):
     for _, b in recs:
         count[b.get("status")] = count.get(b.get("status"), 0) + 1
     head = ", ".join(f"{count[s]} {s}" for s in STATUSES if s in count)
-    out = ["", f"## Against the baseline {_cell(recs[0][1].get('run'))}", "",
-           f"{head}. Each render judged against the baseline's on both their noises (two-sample block test, "
+    out = ["", "## Against the baseline", "",
+           f"Baseline: {_cell(recs[0][1].get('run'))}. {head}. Each render judged against the baseline's on both their noises (two-sample block test, "
            "Sidak-corrected), and its probes compared; this does not change a job's status or the exit status "
            "(batch/compare_runs.py has one).", "",
            "| baseline | scene | backend | mode | how much | where (z-map) | reason |", "|---|---|---|---|---|---|---|"]
