@@ -301,3 +301,37 @@ def test_hostile_metrics_stay_text_and_inside_their_folders(tmp_path):
     assert "\\<script>" in md and not re.search(r"(?<!\\)<script>", md)  # escaped as summary.md escapes
     after = sorted(p for p in tmp_path.rglob("*"))
     assert all(p in before or p.is_relative_to(new / "compare") for p in after)
+
+
+def test_probes_compared_on_both_noises():
+    """A probe whose residual moved by many of the two runs' standard errors is ``moved``; one that
+    moved within them is not, whatever its own pass flag says (the flags are compared apart)."""
+    def entry(measured, passed):
+        return {"probes": [{"name": "patch", "pass": passed,
+                            "stat": {"measured": measured, "expected": [1.0, 1.0], "se": [0.01, 0.01]}}]}
+    rows = baseline.judge_probes(baseline.compare_probes(entry([1.0, 1.0], True), entry([1.1, 1.0], False)), 0.01)
+    assert rows[0]["moved"] is True and rows[0]["z"] > 7 and (rows[0]["old"], rows[0]["new"]) == (True, False)
+    rows = baseline.judge_probes(baseline.compare_probes(entry([1.0, 1.0], True), entry([1.01, 0.99], True)), 0.01)
+    assert rows[0]["moved"] is False and rows[0]["z"] < 1
+    rows = baseline.judge_probes(baseline.compare_probes(entry([1.0, 1.0], True), {"probes": []}), 0.01)
+    assert rows[0]["moved"] is None and rows[0]["new"] is None  # gone: listed, not tested
+
+
+def test_compare_report_says_slower_only_when_the_passes_allow(tmp_path):
+    """compare_runs' timing column (item 5): "slower by X % (+- Y)" for a job whose passes all took
+    twice as long, a plain ratio marked "not beyond the spread" for one whose passes scatter; time
+    never decides the exit status."""
+    from spectral_bench.batch import compare_runs as cr
+    old, new = tmp_path / "old", tmp_path / "new"
+    _run_folder(old, 1, {"a": 1.0, "b": 1.0})
+    _run_folder(new, 2, {"a": 1.0, "b": 1.0})
+    data = json.loads((new / "metrics.json").read_text())
+    data["runs"][0]["pass_times"] = [2.0, 2.2, 1.8, 2.0]
+    data["runs"][1]["pass_times"] = [0.5, 3.0, 1.0, 2.5]
+    (new / "metrics.json").write_text(json.dumps(data))
+    (new / "compare").mkdir()
+    result = cr.compare(old, new, new / "compare")
+    text = cr.markdown(result)
+    row = {l.split(" | ")[1]: l for l in text.splitlines() if l.startswith("| same |")}
+    assert "slower by 100 % (+- " in row["a"] and "not beyond the spread" in row["b"], text
+    assert result["changed"] is False
