@@ -69,6 +69,9 @@ class RunSettings(bpy.types.PropertyGroup):
                                               ".blend, or the extension's user folder)")
     output_dir: StringProperty(name="Results", subtype="DIR_PATH", default="",
                                description="The outputs folder shown in the results view")
+    baseline_dir: StringProperty(name="Baseline", subtype="DIR_PATH", default="",
+                                 description="A previous run's outputs folder to compare the results with "
+                                             "(batch/compare_runs.py; changed jobs first)")
     status: StringProperty(name="Status", default="")
 
 
@@ -341,25 +344,65 @@ def report_path(out_dir):
 
 
 # -- results --------------------------------------------------------------------------------------
-def result_rows(out_dir):
-    """[(scene, backend, run entry)] of an outputs folder in the summary's and the report's order
-    (batch/verdict/status.py ORDER: failures first)."""
+def result_rows(out_dir, baseline_dir=None):
+    """[(scene, backend, run entry)] of an outputs folder: failures first, passes last; with
+    baseline records (a chosen baseline folder, or the run's own --baseline), changed jobs first."""
     status = results.last_status(out_dir) if out_dir else {}
     rows = [(scene, backend, run) for scene, per in status.items() for backend, run in per.items()]
-    return sorted(rows, key=lambda r: (verdict_status.rank(r[2].get("status")), r[0], r[1]))
+    found = baseline_records(out_dir, baseline_dir)
+    from ..batch.verdict import baseline
+    return sorted(rows, key=lambda r: (baseline.order((found.get((r[0], r[1])) or (None,))[0]) if found else 0,
+                                       verdict_status.rank(r[2].get("status")), r[0], r[1]))
+
+
+# -- a baseline: a previous run to compare with (batch/verdict/baseline.py, batch/compare_runs.py) --
+def baseline_records(out_dir, baseline_dir=None):
+    """{(scene, backend): (record, z-map folder, baseline folder)}: batch/verdict/baseline.py records."""
+    from ..batch.verdict import baseline
+    if not out_dir:
+        return {}
+    base = bpy.path.abspath(baseline_dir) if baseline_dir else None
+    return baseline.records(out_dir, results.load(out_dir) or {}, base)
+
+
+def compare_with_baseline(out_dir, baseline_dir):
+    """Compare the results folder with the baseline folder (batch/compare_runs.py, written to
+    OUT/compare); returns the comparison. Raises baseline.BaselineError for a folder that is not a run."""
+    from ..batch import compare_runs
+    from ..batch.verdict import baseline
+    out_dir, base = Path(bpy.path.abspath(out_dir)), Path(bpy.path.abspath(baseline_dir))
+    target = out_dir / baseline.COMPARE_DIR
+    baseline.read_metrics(base)
+    baseline.read_metrics(out_dir)
+    target.mkdir(parents=True, exist_ok=True)
+    result = compare_runs.compare(base, out_dir, target)
+    compare_runs.write(result, target)
+    return result
+
+
+def baseline_line(found):
+    """One line for the panel: the baseline verdict and how much."""
+    from ..batch.verdict import baseline
+    rec = found[0]
+    how = baseline.how_much(rec)
+    return f"baseline: {rec.get('status')}" + (f": {how}" if how else "")
 
 
 def status_icon(status):
     return STATUS_ICONS.get(status, "DOT")
 
 
-def image_kinds(out_dir, scene, backend, run=None):
+def image_kinds(out_dir, scene, backend, run=None, found=None):
     """Image kinds present for one result: render, reference, differences, FLIP, z-score, and for
-    Stokes output S0..S3."""
+    Stokes output S0..S3; with a baseline record (``found``), the baseline's render and the
+    two-sample z-map."""
     kinds = [k for k in results.IMAGE_KINDS if results.image_path(out_dir, scene, backend, k)]
     channels = (run or {}).get("channels") or []
     if results.image_path(out_dir, scene, backend, "render") and all(f"{k}.R" in channels for k in STOKES):
         kinds += list(STOKES)
+    if found is not None:
+        from ..batch.verdict import baseline
+        kinds += [k for k in baseline.IMAGE_KINDS if baseline.image_path(found, k)]
     return kinds
 
 
@@ -391,10 +434,14 @@ def plain_rgb(path):
     return rgb
 
 
-def load_result_image(out_dir, scene, backend, kind):
+def load_result_image(out_dir, scene, backend, kind, baseline_dir=None):
     """Load one result EXR as an Image datablock (reusing one already loaded from that file)."""
     if kind in STOKES:
         path = stokes_path(out_dir, scene, backend, kind)
+    elif kind.startswith("baseline_"):
+        from ..batch.verdict import baseline
+        path = baseline.image_path(baseline_records(out_dir, baseline_dir).get((scene, backend)), kind)
+        path = plain_rgb(path) if path is not None else None
     else:
         path = results.image_path(out_dir, scene, backend, kind)
         path = plain_rgb(path) if path is not None else None

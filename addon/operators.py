@@ -379,17 +379,44 @@ class SPECTRAL_BENCH_OT_load_result(bpy.types.Operator):
     scene: StringProperty()
     backend: StringProperty(default="mitsuba")
     kind: EnumProperty(items=[(k, k.replace("_", " ").title(), "") for k in results.IMAGE_KINDS]
-                       + [(k, k, f"Stokes component {k} of the render") for k in benchmark.STOKES])
+                       + [(k, k, f"Stokes component {k} of the render") for k in benchmark.STOKES]
+                       + [("baseline_render", "Baseline Render", "The baseline run's render of this job"),
+                          ("baseline_zscore", "Baseline Zscore", "Per-block z of this render against the baseline's, "
+                                                                 "both on their own noise")])
 
     def execute(self, context):
-        out_dir = bpy.path.abspath(benchmark.settings(context).output_dir)
+        s = benchmark.settings(context)
+        out_dir = bpy.path.abspath(s.output_dir)
         try:
-            image = benchmark.load_result_image(out_dir, self.scene, self.backend, self.kind)
+            image = benchmark.load_result_image(out_dir, self.scene, self.backend, self.kind, s.baseline_dir)
         except (FileNotFoundError, RuntimeError) as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
         _show_in_image_editor(context, image)
         self.report({"INFO"}, f"loaded {image.name}")
+        return {"FINISHED"}
+
+
+class SPECTRAL_BENCH_OT_compare_baseline(bpy.types.Operator):
+    """Compare the results with the baseline folder (batch/compare_runs.py): each render against the
+    baseline's on both their noises, probes, status and time; written to the results' compare/ folder"""
+    bl_idname = "spectral_bench.compare_baseline"
+    bl_label = "Compare with Baseline"
+
+    def execute(self, context):
+        from ..batch.verdict import baseline
+        s = benchmark.settings(context)
+        if not s.output_dir or not s.baseline_dir:
+            self.report({"ERROR"}, "choose a results folder and a baseline folder first")
+            return {"CANCELLED"}
+        try:
+            result = benchmark.compare_with_baseline(s.output_dir, s.baseline_dir)
+        except (baseline.BaselineError, OSError) as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        changed = sum(1 for j in result["jobs"] if j["changed"])
+        self.report({"INFO"}, f"{changed} of {len(result['jobs'])} jobs changed; {len(result['new_jobs'])} new, "
+                              f"{len(result['missing_jobs'])} missing")
         return {"FINISHED"}
 
 
@@ -425,7 +452,7 @@ CLASSES = (SPECTRAL_BENCH_OT_export_json, SPECTRAL_BENCH_OT_export_mitsuba, SPEC
            SPECTRAL_BENCH_OT_toggle_backend, SPECTRAL_BENCH_OT_add_renderers_file,
            SPECTRAL_BENCH_OT_remove_renderers_file, SPECTRAL_BENCH_OT_open_canonical_scenes,
            SPECTRAL_BENCH_OT_append_canonical_scene, SPECTRAL_BENCH_OT_open_report,
-           SPECTRAL_BENCH_OT_load_result, SPECTRAL_BENCH_OT_load_chart)
+           SPECTRAL_BENCH_OT_load_result, SPECTRAL_BENCH_OT_load_chart, SPECTRAL_BENCH_OT_compare_baseline)
 
 
 def register():

@@ -272,10 +272,20 @@ class SPECTRAL_BENCH_PT_benchmark_results(_Base, bpy.types.Panel):
         row.prop(s, "output_dir", text="")
         row.operator("spectral_bench.open_report", text="Open Report", icon="URL")
         out_dir = bpy.path.abspath(s.output_dir) if s.output_dir else ""
+        row = layout.row(align=True)  # a previous run to compare with: changed jobs first
+        row.prop(s, "baseline_dir", text="Baseline")
+        row.operator("spectral_bench.compare_baseline", text="Compare", icon="FILE_REFRESH")
+        found = benchmark.baseline_records(out_dir, s.baseline_dir)
         search = preferences.reference_folders(context)
-        for scene, backend, run in benchmark.result_rows(out_dir):
+        for scene, backend, run in benchmark.result_rows(out_dir, s.baseline_dir):
             box = layout.box()
             box.label(text=f"{scene} / {backend}: {run['status']}", icon=benchmark.status_icon(run["status"]))
+            base = found.get((scene, backend))
+            if base is not None:
+                box.label(text=benchmark.baseline_line(base)[:200],
+                          icon={"changed": "ERROR", "same": "CHECKMARK"}.get(base[0].get("status"), "QUESTION"))
+                if base[0].get("reason"):
+                    box.label(text=str(base[0]["reason"])[:200])
             if run.get("reason"):
                 box.label(text=run["reason"][:160], icon="ERROR" if results.judged_without_reference(run) else "NONE")
             for text in results.reference_problems(run):  # every reference passed over, with its file
@@ -299,7 +309,7 @@ class SPECTRAL_BENCH_PT_benchmark_results(_Base, bpy.types.Panel):
             if results.chart_path(out_dir, scene):
                 box.operator("spectral_bench.load_chart", text="Error against time").scene = scene
             flow = box.grid_flow(columns=4, align=True)
-            for kind in benchmark.image_kinds(out_dir, scene, backend, run):
+            for kind in benchmark.image_kinds(out_dir, scene, backend, run, base):
                 op = flow.operator("spectral_bench.load_result", text=kind.replace("_", " "))
                 op.scene, op.backend, op.kind = scene, backend, kind
 

@@ -35,6 +35,7 @@ DEFAULTS = {
     "references": None, "known": None, "list": False, "art_ggx": False, "sweep": False, "ladder": None, "sweep_modes": None, "stability": False,
     "approximate": False, "renderers": None, "cluster": None, "cluster_timeout": DEFAULT_CLUSTER_TIMEOUT, "dashboard": None, "resume": None,
     "junit": None,
+    "baseline": None,
 }
 
 
@@ -245,6 +246,7 @@ TYPES = {
     "cluster": text_kind(_cluster, "address"), "cluster_timeout": number(0, 3600, lo_open=True),
     "dashboard": text_kind(_dashboard, "[HOST]:PORT"), "resume": text_kind(_nonempty, "path"),
     "renderers": text_kind(_nonempty, "path"), "junit": text_kind(_nonempty, "path"),
+    "baseline": text_kind(_nonempty, "path"),
 }
 
 
@@ -306,6 +308,10 @@ def parser():
     ap.add_argument("--junit", type=T["junit"], metavar="FILE",
                     help="also write the jobs as JUnit XML to FILE (one test case per job: failed a failure; skipped, "
                          "unsupported and unjudged skipped; known and fixed passed, naming the deviation)")
+    ap.add_argument("--baseline", type=T["baseline"], metavar="OUT_PREV",
+                    help="also judge every job against the matching job (scene, backend, mode) of the previous run in "
+                         "OUT_PREV, both on their own noise (metrics.json: baseline; summary: changed jobs first); "
+                         "does not change a job's status or the exit status")
     ap.add_argument("--sweep", action="store_true",
                     help="also render each scene over a ladder of sample counts and chart error against time")
     ap.add_argument("--ladder", type=T["ladder"], metavar="N,N,...",

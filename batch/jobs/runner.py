@@ -15,7 +15,7 @@ from pathlib import Path
 
 from ...exporters import art_writer, ir_json
 from .. import backends, records, scene_sources
-from ..verdict import known, status
+from ..verdict import baseline as baselines, known, status
 from ..report import html as report, summary
 from ..studies import stability, sweep
 from . import engines, plan as planning
@@ -116,6 +116,18 @@ def load_known(path):
         raise UsageError(f"known deviations {path or known.DEFAULT_FILE}: {type(exc).__name__}: {exc}") from None
 
 
+def open_baseline(opts, out=None):
+    """The previous run of --baseline (batch/verdict/baseline.py), or UsageError naming the folder:
+    missing, not a run (no readable metrics.json), or the run's own output folder."""
+    given = opts["baseline"]
+    if out is not None and Path(given).resolve() == Path(out).resolve():
+        raise UsageError(f"--baseline {given} is this run's own output folder: give the folder of a previous run")
+    try:
+        return baselines.Run(given)
+    except baselines.BaselineError as exc:
+        raise UsageError(f"--baseline {exc}") from None
+
+
 def select(results, opts):
     """Filter (name, IR or error) by --scene and --case; unknown --scene names become errors."""
     names, cases = opts["scene"], opts["case"]
@@ -166,6 +178,7 @@ class Run:
         self.started = _dt.datetime.now().isoformat(timespec="seconds")
         self.deviations = deviations if deviations is not None else load_known(opts.get("known"))
         self.previous = self._previous() if opts.get("resume") else {}
+        self.base = open_baseline(opts, self.out) if opts.get("baseline") else None
 
     def _previous(self):
         """Finished results of the run being resumed, by job id (interrupted ones run again)."""
@@ -185,6 +198,8 @@ class Run:
         records.write(self.out, self.started, self.opts, self.runs, self.results, self.sweeps, self.stability)
 
     def add(self, entry):
+        if self.base is not None:  # judged against the previous run too (--baseline); the status stays
+            baselines.attach(entry, self.out, self.base, planning.verdict_settings(self.opts))
         self.runs.append(entry)
         self.save()
         log.info("%-8s %s / %s %s%s", entry["status"].upper(), entry["scene"], entry["backend"], entry.get("mode") or "",
@@ -285,6 +300,8 @@ class Run:
 
     def _keep(self, job, result):
         if job["kind"] == "render":
+            if self.base is not None and "baseline" not in result:
+                baselines.attach(result, self.out, self.base, planning.verdict_settings(self.opts))
             self.runs.append(result)
         else:
             self.results.append(result)
@@ -363,6 +380,8 @@ def run(opts):
     deviations = None if opts.get("resume") else load_known(opts.get("known"))
     if opts.get("junit"):
         check_junit(opts["junit"])
+    if opts.get("baseline") and not opts.get("resume"):
+        open_baseline(opts, opts.get("out"))  # checked before any folder is made
     out, lock = claim(opts)
     opts["out"] = str(out)
     try:
@@ -372,6 +391,8 @@ def run(opts):
             except planning.ResumeError as exc:
                 raise UsageError(str(exc)) from None
             deviations = load_known(opts.get("known"))
+            if opts.get("baseline"):
+                open_baseline(opts, out)
         return _run(opts, out, deviations, t0)
     finally:
         lock.release()

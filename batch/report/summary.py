@@ -139,6 +139,13 @@ def rgb_comparison(runs):
     return "\n".join(rows) + "\n"
 
 
+def _against_baseline(runs):
+    """--baseline: the jobs judged against the previous run, changed first (batch/verdict/baseline.py)."""
+    from ..verdict import baseline
+    section = baseline.summary_section(runs)
+    return section.lstrip("\n") if section else ""
+
+
 def write(out_dir, runs, elapsed_s, sweeps=None, stability=None):
     c = counts(runs)
     head = ", ".join(f"{n} {s}" for s, n in sorted(c.items(), key=lambda kv: rank(kv[0])))
@@ -150,6 +157,6 @@ def write(out_dir, runs, elapsed_s, sweeps=None, stability=None):
             "the reference's; block test, Sidak-corrected) and the analytic probes (ground truth from no renderer). "
             "known: fails exactly as a recorded deviation (known_deviations.toml); unjudged: nothing could judge it. "
             "Images and diffs: `<scene>/results/<backend>/`; all numbers: `metrics.json`.\n\n"
-            + table(runs) + "\n" + reference_problems_table(runs) + rgb_comparison(runs) + sweeps_table(sweeps) + stability_table(stability))
+            + _against_baseline(runs) + table(runs) + "\n" + reference_problems_table(runs) + rgb_comparison(runs) + sweeps_table(sweeps) + stability_table(stability))
     Path(out_dir, "summary.md").write_text(text)
     return text

@@ -361,7 +361,7 @@ def is_history(folder):
     return (Path(folder) / HISTORY_RECORD).exists()
 
 
-def judge_replacement(old, new, alpha=None, min_samples=None, block=None):
+def judge_replacement(old, new, alpha=None, min_samples=None, block=None, keep=False):
     """The new reference judged against the old on both their noises, by the block test that
     judges a render against a reference (batch/verdict/compare.py ``z_test``, Sidak-corrected):
     the image of finer resolution is the "render" (its own per-pixel standard error from its own
@@ -379,7 +379,9 @@ def judge_replacement(old, new, alpha=None, min_samples=None, block=None):
     of the whole image the test would have refused: the expected difference alone reaching the
     Sidak threshold in the most sensitive block, found with the test's own ``rejudge`` on a zero
     difference; detected about half the time at that size, more often above it; None beyond
-    100 %)."""
+    100 %). ``keep``: also return the in-memory test (``_ztest``), the image brought to the test
+    resolution (``_at``) and whether the new image is the test one (``_new_is_test``), for callers
+    that write its z-map or compute its power (batch/verdict/baseline.py)."""
     import dataclasses
     from . import compare, stats
     alpha = stats.ALPHA if alpha is None else alpha
@@ -419,8 +421,11 @@ def judge_replacement(old, new, alpha=None, min_samples=None, block=None):
             mid = (lo + hi) / 2
             lo, hi = (mid, hi) if zero.rejudge(1.0 + mid) else (lo, mid)
         detectable = hi
-    return {"comparable": True, "same": bool(zt.passed), "test": zt.as_dict(), "ratio": ratio,
-            "detectable": detectable, "judged_at": [int(test.mean.shape[1]), int(test.mean.shape[0])]}
+    out = {"comparable": True, "same": bool(zt.passed), "test": zt.as_dict(), "ratio": ratio,
+           "detectable": detectable, "judged_at": [int(test.mean.shape[1]), int(test.mean.shape[0])]}
+    if keep:
+        out.update(_ztest=zt, _at=at, _new_is_test=new_is_test)
+    return out
 
 
 def history_folder(directory, scene_name, backend, when):
