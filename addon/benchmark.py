@@ -396,7 +396,7 @@ def load_result_image(out_dir, scene, backend, kind):
     if kind in STOKES:
         path = stokes_path(out_dir, scene, backend, kind)
     else:
-        path = results.image_path(out_dir, scene, backend, kind)
+        path = results.image_path(out_dir, scene, backend, kind, make=True)  # differences: written when asked for
         path = plain_rgb(path) if path is not None else None
     if path is None:
         raise FileNotFoundError(f"no {kind} image for {scene} / {backend} in {out_dir}")
