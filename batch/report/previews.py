@@ -66,6 +66,9 @@ def write_half(path, rgb):
     os.close(fd)
     try:
         exr.write_channels(tmp, {c: rgb[..., i].astype(dtype) for i, c in enumerate("RGB")})
+        umask = os.umask(0o022)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
         os.replace(tmp, path)
     finally:
         with contextlib.suppress(FileNotFoundError):
