@@ -119,6 +119,7 @@ var spectralBench = (function () {
       self.loaded = true; self.status.textContent = '';
       self.box.dataset.ready = '1';
       self.fit(); self.draw();
+      if (self.scrollTarget) self.scrollTarget.scrollIntoView();  // a #view= link: again, now that the page's height is final
     }).catch(function (e) { self.status.textContent = 'float data not shown: ' + e.message; self.box.dataset.ready = 'error'; });
   };
   Viewer.prototype.worstChannel = function () {
