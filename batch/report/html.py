@@ -43,7 +43,7 @@ SAFE_ID = re.compile(r"[A-Za-z0-9_.-]{1,120}")  # ids, #anchors, and the view=ID
 
 # the viewer's script, put inline into the page (a file of this package, not a value of the run)
 VIEWER_JS = (TEMPLATES / "viewer.js").read_text(encoding="utf-8")
-assert "</script" not in VIEWER_JS.lower()
+assert "<script" not in VIEWER_JS.lower() and "</script" not in VIEWER_JS.lower()
 _env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(TEMPLATES)), autoescape=True,
                           undefined=jinja2.StrictUndefined, trim_blocks=True, lstrip_blocks=True)
 
@@ -199,8 +199,8 @@ def _check_line(name, stat, shown=None):
     parts = [name + ":"]
     if shown:
         parts.append(shown + ";")
-    if _num(stat.get("z")):
-        parts.append(f"|z| {stat['z']:.3g},")
+    if _num(stat.get("z")):  # compare_means: the largest |z|; a one-sided test (Stokes): its largest signed z
+        parts.append(f"{'|z|' if 'blocks' not in stat else 'largest one-sided z'} {stat['z']:.3g},")
     if _num(stat.get("p")) and _num(stat.get("threshold")):
         ok = stat["p"] >= stat["threshold"]
         parts.append(f"p {stat['p']:.3g} {'>=' if ok else '<'} threshold {stat['threshold']:.3g}")
@@ -216,8 +216,8 @@ def _checks(run):
         verdict = _verdict(test.get("pass"), "not judged")
         if _num(test.get("p_min")) and _num(test.get("threshold")) and test.get("pass") is not None:
             ok = test["p_min"] >= test["threshold"]
-            text = (f"noise test ({_text(test.get('name')) or 'block test'}; {_text(test.get('tests'))} blocks of "
-                    f"{_text(test.get('block'))} px, {_text(test.get('noise'))} noise): smallest p {test['p_min']:.3g} "
+            text = (f"noise test ({_text(test.get('name')) or 'block test'}; {_text(test.get('tests'))} tests: blocks of "
+                    f"{_text(test.get('block'))} px x channels, on the render's {_text(test.get('noise'))} noise): smallest p {test['p_min']:.3g} "
                     f"{'>=' if ok else '<'} threshold {test['threshold']:.3g} (alpha {_text(test.get('alpha'))}, Sidak); "
                     f"max |z| {_fmt(test.get('z_max'), '{:.3g}')}")
         else:

@@ -1,5 +1,5 @@
 /* report.html's float image viewer (issue 21). Vanilla JS, no build step, no network: every
-   view is drawn from linear half floats that a <script> file beside the render defines (script
+   view is drawn from linear half floats that a script file beside the render defines (script
    tags load from file://, fetch does not), inflated with the browser's DecompressionStream.
 
    Data file: spectralBench.data(document.currentScript, {w, h, layers: {NAME: {channels: [..],
@@ -116,6 +116,7 @@ var spectralBench = (function () {
       self.z = job.z; self.flip = job.flip && job.flip.Y;
       if (parts[1] && parts[1].w === job.w && parts[1].h === job.h) self.ref = parts[1].reference;
       if (!self.channel) self.channel = self.worstChannel();
+      var sel = self.box.querySelector('select.channel'); if (sel) sel.value = self.channel;
       self.loaded = true; self.status.textContent = '';
       self.box.dataset.ready = '1';
       self.fit(); self.draw();
