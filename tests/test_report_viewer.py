@@ -8,6 +8,7 @@ tmp dir (not committed; look at them).
 A copy of the page gets a script that waits for a viewer's data, moves the mouse over a pixel,
 and writes what the page shows into body[data-result] for --dump-dom to carry back."""
 import json
+from pathlib import PurePosixPath
 import re
 import shutil
 import subprocess
@@ -219,3 +220,41 @@ def test_a_screenshot_of_every_view(run, tmp_path):
             shots.append(png)
     assert len(shots) >= 5 + 11
     print("screenshots in", tmp_path)
+
+
+def test_a_backend_skipped_on_every_scene_is_one_line(tmp_path):
+    """27 identical skipped rows become one; a backend skipped on some scenes only keeps its rows."""
+    from spectral_bench.batch.report import grouping, html
+    runs = [{"scene": f"s{i}", "backend": "art", "mode": "spectral46", "status": "skipped", "reason": "artist not found"}
+            for i in range(27)]
+    runs += [{"scene": "s0", "backend": "mitsuba", "mode": "m", "status": "ok", "reason": ""},
+             {"scene": "s1", "backend": "mitsuba", "mode": "m", "status": "skipped", "reason": "no reference"}]
+    left, groups = grouping.not_run_everywhere(runs)
+    assert groups == [{"backend": "art", "mode": "spectral46", "status": "skipped", "reason": "artist not found", "scenes": 27}]
+    assert [r["backend"] for r in left] == ["mitsuba", "mitsuba"]
+    (tmp_path / "metrics.json").write_text(json.dumps({"started": "now", "runs": runs}))
+    page = html.render(tmp_path)
+    assert page.count("artist not found") == 1 and "every scene (27)" in page
+    assert page.count("<tr class='skipped'>") == 2  # the group's row and mitsuba's one skipped scene
+
+
+def test_checks_one_line_each_failures_first_with_the_recorded_observer(tmp_path):
+    """A known run: the failing probe first, its statistic and threshold, and its verdict under
+    the recorded observer; the noise test with its p and threshold; a tev line."""
+    from spectral_bench.batch.report import html
+    stat = lambda z, p: {"z": z, "p": p, "threshold": 1e-4, "pass": p >= 1e-4}
+    run = {"scene": "chart", "backend": "mitsuba", "mode": "spectral", "status": "known", "known": ["dev-1"],
+           "test": {"name": "block test", "tests": 12, "block": 8, "noise": "own", "alpha": 0.01, "p_min": 0.2,
+                    "threshold": 8e-4, "z_max": 1.2, "pass": True},
+           "probes": [{"name": "lambert a", "error": 0.01, "unit": "dE00", "pass": True, "stat": stat(1.0, 0.3)},
+                      {"name": "lambert b", "error": 0.07, "unit": "dE00", "pass": False, "resolvable_dE00": 0.05,
+                       "stat": stat(6.0, 2e-9), "alternatives": {"mitsuba3": stat(1.5, 0.13)}}]}
+    lines = html._checks(run)
+    assert [l["verdict"] for l in lines] == ["FAIL", "pass", "pass"]
+    assert lines[0]["text"] == ("lambert b: 0.07 dE00 (the test resolves 0.05 dE00); |z| 6, p 2e-09 < threshold 0.0001")
+    assert lines[0]["under"] == ["under the mitsuba3 observer (recorded: dev-1): |z| 1.5, p 0.13 >= threshold 0.0001 -> pass"]
+    assert "smallest p 0.2 >= threshold 0.0008" in lines[1]["text"]
+    folder = PurePosixPath("chart/results/mitsuba")
+    assert html._tev(run, folder, "chart/results/reference_4x4.exr") == (
+        "tev chart/results/mitsuba/render.exr chart/results/reference_4x4.exr chart/results/mitsuba/zscore.exr "
+        "chart/results/mitsuba/flip.exr")
