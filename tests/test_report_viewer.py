@@ -254,7 +254,37 @@ def test_checks_one_line_each_failures_first_with_the_recorded_observer(tmp_path
     assert lines[0]["text"] == ("lambert b: 0.07 dE00 (the test resolves 0.05 dE00); |z| 6, p 2e-09 < threshold 0.0001")
     assert lines[0]["under"] == ["under the mitsuba3 observer (recorded: dev-1): |z| 1.5, p 0.13 >= threshold 0.0001 -> pass"]
     assert "smallest p 0.2 >= threshold 0.0008" in lines[1]["text"]
+    run["detectable"] = {"scale": 0.0031, "alpha": 0.01, "power": 0.9, "method": "noise test", "patch_de00": 0.2}
+    assert html._extras(run) == ["could have detected: a uniform radiance scale error of 0.31 % with 0.9 power at "
+                                 "alpha 0.01 (noise test); a ColorChecker patch shift of 0.2 dE00"]
     folder = PurePosixPath("chart/results/mitsuba")
     assert html._tev(run, folder, "chart/results/reference_4x4.exr") == (
         "tev chart/results/mitsuba/render.exr chart/results/reference_4x4.exr chart/results/mitsuba/zscore.exr "
         "chart/results/mitsuba/flip.exr")
+
+
+@pytest.mark.slow
+def test_the_panel_finds_the_shared_reference_and_makes_differences(run, tmp_path):
+    """What the Blender panel's image buttons load (batch/report/results.py, no Blender needed):
+    the reference is the scene's shared half-float one, the differences are written when asked
+    for and equal |render - reference| (and over |reference| + 0.01) to half precision."""
+    from spectral_bench.batch import exr
+    from spectral_bench.batch.report import results
+    out = tmp_path / "copy"
+    shutil.copytree(run, out)
+    ref = results.image_path(out, "macbeth_chart_D65", "mitsuba", "reference")
+    assert ref == out / "macbeth_chart_D65" / "results" / "reference_155x105.exr"
+    diff = results.image_path(out, "macbeth_chart_D65", "mitsuba", "diff_abs")
+    assert diff is not None and not diff.exists()  # listed (it can be made), not written by listing
+    for kind in ("diff_abs", "diff_rel"):
+        path = results.image_path(out, "macbeth_chart_D65", "mitsuba", kind, make=True)
+        render, reference = exr.read_rgb(out / "macbeth_chart_D65/results/mitsuba/render.exr"), exr.read_rgb(ref)
+        d = np.abs(render.astype(np.float64) - reference)
+        want = d if kind == "diff_abs" else d / (np.abs(reference) + 0.01)
+        assert np.allclose(exr.read_rgb(path), want, rtol=HALF_REL, atol=1e-7), kind
+    names = exr.read(out / "macbeth_chart_D65/results/mitsuba/render.exr")
+    assert set(names) == {"R", "G", "B", "stderr.R", "stderr.G", "stderr.B"}
+    import OpenEXR
+    with OpenEXR.File(str(out / "macbeth_chart_D65/results/mitsuba/render.exr")) as f:
+        kinds = {n: c.pixels.dtype for n, c in f.channels().items()}
+    assert kinds == {"RGB": np.float32, "stderr": np.float16}, kinds  # the mean stays float32
