@@ -305,7 +305,26 @@ def _regions(out, run, w, h):
         return []
 
 
-def _viewer(out, run):
+def _deviations(options):
+    """{id: first sentence of its explanation} of the repository's known_deviations.toml when the
+    run used it ({} when it used its own --known file: a path from metrics.json is never opened)."""
+    from ..verdict import known
+    if _dict(options).get("known"):
+        return {}
+    try:
+        devs = known.load()
+    except Exception:  # noqa: BLE001 - an explanation is an aid: without it the ids are shown
+        return {}
+    return {d.id: " ".join(d.explanation.split()).split(". ")[0].rstrip(".") + "." for d in devs}
+
+
+def _known_lines(run, deviations):
+    """Why a known run is known: each recorded deviation it matched, with its explanation."""
+    return [f"recorded deviation {_text(k)} (known_deviations.toml): " + deviations.get(_text(k), "see its evidence there")
+            for k in _list(run.get("known"))]
+
+
+def _viewer(out, run, deviations=None):
     image = run.get("image")
     if not isinstance(image, str) or not image:
         return None
@@ -333,6 +352,7 @@ def _viewer(out, run):
     return {"scene": _text(run.get("scene")), "backend": _text(run.get("backend")), "mode": _text(run.get("mode")),
             "status": status, "css": _css(run.get("status")), "views": views, "first": first,
             "src": data, "ref": ref_data or "", "checks": lines, "extras": _extras(run),
+            "reason": _text(run.get("reason")), "known": _known_lines(run, deviations or {}),
             "tev": _tev(run, folder, ref if ref_url else None), "regions": json.dumps(regions),
             "numbers": [f"{_text(k)}: {_fmt(v)}" for k, v in _dict(run.get("metrics")).items()],
             "reference_problems": _reference_problems(run)}
@@ -384,8 +404,9 @@ def render(out_dir):
     runs = [r for r in _list(data.get("runs")) if isinstance(r, dict)]
     sweeps = [s for s in _list(data.get("sweeps")) if isinstance(s, dict)]
     viewers = {}
+    deviations = _deviations(data.get("options")) if any(r.get("known") for r in runs) else {}
     for i, r in enumerate(runs):
-        v = _viewer(out, r)
+        v = _viewer(out, r, deviations)
         if v:
             viewers[i] = v
     ids = _ids(runs, viewers)
