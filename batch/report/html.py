@@ -272,15 +272,16 @@ def _tev(run, folder, ref):
 
 
 def _regions(out, run, w, h):
-    """Probe regions to outline: [{box: [x0, y0, x1, y1] pixels, label, pass, expected}] for the
-    Lambertian patches (found as the probe finds them: batch/verdict/probes/lambert.py, from the
-    scene's IR in <scene>/json/)."""
+    """Probe regions to outline: [{box: [x0, y0, x1, y1] pixels, label, pass, expected}]: each
+    Lambertian patch's measured region (found as the probe finds it: batch/verdict/probes/
+    lambert.py, from the scene's IR in <scene>/json/), and for every other probe the bounding box
+    of the object its name names (the probe measures a part of it)."""
     scene_name = _text(run.get("scene"))
     if not SAFE_ID.fullmatch(scene_name):
         return []
     ir = out / scene_name / "json" / f"{scene_name}.json"
     probes = {_text(p.get("name")): p for p in _list(run.get("probes")) if isinstance(p, dict)}
-    if not ir.is_file() or not any(n.startswith("lambert patch") or n.startswith("lambert ") for n in probes):
+    if not ir.is_file() or not probes:
         return []
     try:
         from ..verdict import raycast
@@ -300,6 +301,21 @@ def _regions(out, run, w, h):
             out_regions.append({"box": [int(xs.min()), int(ys.min()), int(xs.max()) + 1, int(ys.max()) + 1],
                                 "label": _fmt(p.get('error'), '{:.2f}'), "pass": p.get("pass"),
                                 "expected": exp if isinstance(exp, list) and len(exp) == 3 and all(_num(x) for x in exp) else None})
+        # every other probe: the object it names, outlined by its bounding box in the image
+        names = sorted(((o.get("name"), i) for i, o in enumerate(objs) if isinstance(o.get("name"), str)),
+                       key=lambda t: -len(t[0]))
+        per_object = {}
+        for pname, p in probes.items():
+            words = set(re.split(r"[\s,:]+", pname))
+            index = next((i for n, i in names if n in words), None)
+            if not pname.startswith("lambert ") and index is not None:
+                per_object.setdefault(index, []).append(p.get("pass"))
+        for index, verdicts in per_object.items():
+            ys, xs = np.nonzero(raycast.pixels_inside(cam, w, h, objs, index, margin=1.0, hits=hits))
+            if len(xs):
+                ok = False if False in verdicts else True if all(v is True for v in verdicts) else None
+                out_regions.append({"box": [int(xs.min()), int(ys.min()), int(xs.max()) + 1, int(ys.max()) + 1],
+                                    "label": str(objs[index]["name"])[:40], "pass": ok, "expected": None})
         return out_regions
     except Exception:  # noqa: BLE001 - an outline is an aid: a scene it cannot read has none
         return []
