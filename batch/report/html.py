@@ -134,7 +134,7 @@ def _pack(planes, keep_bits=10):
         drop = 10 - keep_bits
         h = ((h.astype(np.uint32) + (1 << (drop - 1))) >> drop << drop).astype(np.uint16)
     split = np.concatenate([(h & 0xFF).astype(np.uint8), (h >> 8).astype(np.uint8)])
-    return base64.b64encode(zlib.compress(split.tobytes(), 9)).decode("ascii")
+    return base64.b64encode(zlib.compress(split.tobytes(), 6)).decode("ascii")
 
 
 def _write_data(path, w, h, layers):
@@ -353,6 +353,8 @@ def _viewer(out, run, deviations=None):
     if not data:
         return None
     ref = _dict(run.get("reference")).get("image")
+    if not isinstance(ref, str) and _local_url(out, folder / "reference.exr"):
+        ref = str(PurePosixPath(*folder.parts) / "reference.exr")  # a run from before issue 21: its own copy
     ref_url = _local_url(out, ref) if isinstance(ref, str) else None
     ref_js = _reference_data(out / Path(*PurePosixPath(ref).parts)) if ref_url else None
     ref_data = _local_url(out, PurePosixPath(ref).with_suffix(".js")) if ref_js else None
