@@ -443,7 +443,7 @@ def load_result_image(out_dir, scene, backend, kind, baseline_dir=None):
         path = baseline.image_path(baseline_records(out_dir, baseline_dir).get((scene, backend)), kind)
         path = plain_rgb(path) if path is not None else None
     else:
-        path = results.image_path(out_dir, scene, backend, kind)
+        path = results.image_path(out_dir, scene, backend, kind, make=True)  # differences: written when asked for
         path = plain_rgb(path) if path is not None else None
     if path is None:
         raise FileNotFoundError(f"no {kind} image for {scene} / {backend} in {out_dir}")

@@ -75,9 +75,11 @@ def copper_table(out, runs):
             continue
         m, t = r.get("metrics") or {}, r.get("test") or {}
         ratio = ""
-        if r.get("image") and (out / r["scene"] / "results" / r["backend"] / "reference.exr").is_file():
+        # the scene's shared reference (issue 21), or a render folder's own copy (older runs)
+        ref_path = out / ((r.get("reference") or {}).get("image") or f"{r['scene']}/results/{r['backend']}/reference.exr")
+        if r.get("image") and ref_path.is_file():
             _, img = exr.read_image(out / r["image"])
-            ref = exr.read_rgb(out / r["scene"] / "results" / r["backend"] / "reference.exr")
+            ref = exr.read_rgb(ref_path)
             ratio = ", ".join(f"{a:.4f}" for a in img[..., :3].mean(axis=(0, 1)) / ref.mean(axis=(0, 1)))
         test = f"{t['p_min']:.2g} / {t['threshold']:.2g}" if t else ""
         rows.append(f"| {r['scene']} | {r['backend']} | {r.get('mode') or ''} | {r['status']} | "

@@ -345,8 +345,8 @@ def test_run_from_blender_then_load_images_and_open_report(tmp_path):
     assert "no report.html" in out["missing"]
     assert out["r"] == ["FINISHED"] and re.fullmatch(r"passed: 1/1 jobs \(1 (ok|known|fixed)\)", out["status"]), out["status"]
     res = f"{out['out']}/ggx_copper_80/results/mitsuba"
-    for kind, name in (("render", "render.exr"), ("reference", "reference.exr"), ("diff_abs", "diff_abs.exr"),
-                       ("zscore", "zscore.exr")):
+    for kind, name in (("render", "render.exr"), ("reference", "../reference_64x64.exr"), ("diff_abs", "diff_abs.exr"),
+                       ("zscore", "zscore.exr")):  # the reference is the scene's shared one; diff_abs written when loaded
         expected = exr.read_rgb(f"{res}/{name}")
         assert np.allclose(np.array(out["loaded"][kind]), expected, atol=1e-6), kind
     from spectral_bench.batch import records

@@ -1,28 +1,49 @@
 """OUT/report.html: a static page, no server, that shows a run: the summary table (scene x
-backend: status, metrics, probes, time), the speed/accuracy charts, and per scene an image viewer
-(render / reference / difference / FLIP / z-score, with exposure and zoom) beside its numbers.
-Relative links only, so the folder can be moved or zipped.
+backend: status, metrics, probes, time; failures first), the speed/accuracy charts, and per job
+a float image viewer (render / reference / per-channel difference / z / FLIP, Stokes S0..S3,
+degree and angle of polarisation; exposure, sRGB or false colour, pixel values under the cursor,
+zoom at the cursor, pan, A/B flip and side by side: templates/viewer.js) beside its checks, each
+on one line with its statistic, threshold and outcome. Relative links only, so the folder can be
+moved or zipped.
+
+The viewer's floats travel as script files beside the images (``view.js`` in a render's folder,
+``reference_WxH.js`` beside the scene's shared reference), written here from the EXRs when the
+page is made (and kept while newer than them): half floats (11 significant bits; the standard
+error rounded to 5), deflated, base64, so that the page works from file:// where fetch() does not.
 
 Every value of metrics.json is text to this page, never markup: the page is rendered by Jinja2
-from templates/report.html with autoescaping on, values inside <script> go through |tojson,
-element ids are made here from a safe alphabet, and an image's src is only ever a relative,
-percent-encoded path to a file that exists inside the output folder (anything else in an
-image or chart field is not linked)."""
+from templates/report.html with autoescaping on, values inside <script> and data attributes go
+through |tojson or the attribute escaping, element ids are made here from a safe alphabet, and a
+src is only ever a relative, percent-encoded path to a file that exists inside the output folder
+(anything else in an image or chart field is not linked)."""
+import base64
+import json
+import os
 import re
+import shlex
+import tempfile
+import zlib
 from pathlib import Path, PurePosixPath, PureWindowsPath
 from urllib.parse import quote
 
 import jinja2
+import numpy as np
 
-from .. import records
-from ..records import noise_test_text
+from .. import exr, records
 from ..verdict.status import ORDER
+from . import grouping
 
-VIEWS = [("render", "render.png"), ("reference", "reference.png"), ("difference", "diff.png"),
-         ("FLIP", "flip.png"), ("z-score", "zscore.png")]
+STOKES_VIEWS = ["S0", "S1", "S2", "S3", "DoP", "AoP"]
+DATA_JS = "view.js"
+_UMASK = os.umask(0o022)
+os.umask(_UMASK)
+SE_BITS = 4  # mantissa bits kept of the standard error's half floats (of 10): 5 significant bits
 TEMPLATES = Path(__file__).resolve().parent / "templates"
 SAFE_ID = re.compile(r"[A-Za-z0-9_.-]{1,120}")  # ids, #anchors, and the view=ID:VIEW hash of the page
 
+# the viewer's script, put inline into the page (a file of this package, not a value of the run)
+VIEWER_JS = (TEMPLATES / "viewer.js").read_text(encoding="utf-8")
+assert "<script" not in VIEWER_JS.lower() and "</script" not in VIEWER_JS.lower()
 _env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(TEMPLATES)), autoescape=True,
                           undefined=jinja2.StrictUndefined, trim_blocks=True, lstrip_blocks=True)
 
@@ -87,9 +108,9 @@ def _reference_problems(run):
     return out
 
 
-def _summary_rows(runs, anchors):
+def _summary_rows(runs, anchors, listed=None):
     rows = []
-    order = sorted(range(len(runs)), key=lambda i: (ORDER.get(_css(runs[i].get("status")), 9),
+    order = sorted((i for i in range(len(runs)) if listed is None or id(runs[i]) in listed), key=lambda i: (ORDER.get(_css(runs[i].get("status")), 9),
                                                     _text(runs[i].get("scene")), _text(runs[i].get("backend"))))
     for i in order:
         r = runs[i]
@@ -104,25 +125,254 @@ def _summary_rows(runs, anchors):
     return rows
 
 
-def _viewer(out, run):
+def _pack(planes, keep_bits=10):
+    """HxW arrays as the viewer reads them (templates/viewer.js): binary16, plane after plane, the
+    low bytes then the high bytes (a third smaller once deflated), zlib, base64. ``keep_bits`` < 10
+    rounds the mantissa to that many bits (non-negative values only: the standard error)."""
+    h = np.stack([np.asarray(p, dtype=np.float32) for p in planes]).astype(np.float16).view(np.uint16).ravel()
+    if keep_bits < 10:
+        drop = 10 - keep_bits
+        h = ((h.astype(np.uint32) + (1 << (drop - 1))) >> drop << drop).astype(np.uint16)
+    split = np.concatenate([(h & 0xFF).astype(np.uint8), (h >> 8).astype(np.uint8)])
+    return base64.b64encode(zlib.compress(split.tobytes(), 6)).decode("ascii")
+
+
+def _write_data(path, w, h, layers):
+    """One data file: spectralBench.data(document.currentScript, {...}) (plain JSON, ASCII only)."""
+    obj = {"w": int(w), "h": int(h), "layers": {k: {"channels": names, "data": _pack(planes, bits)}
+                                                 for k, (names, planes, bits) in layers.items()}}
+    fd, tmp = tempfile.mkstemp(suffix=".js", prefix=".tmp-", dir=path.parent)
+    with os.fdopen(fd, "w", encoding="ascii") as f:
+        f.write("spectralBench.data(document.currentScript, " + json.dumps(obj) + ");\n")
+    os.chmod(tmp, 0o666 & ~_UMASK)
+    os.replace(tmp, path)
+
+
+def _fresh(target, sources):
+    return target.is_file() and all(target.stat().st_mtime >= s.stat().st_mtime for s in sources if s.is_file())
+
+
+def _job_data(folder):
+    """view.js of a render's folder (written when missing or older than its EXRs): the render's
+    channels, its standard error, the z map and the FLIP map. Returns the channel names, or None
+    when there is no readable render."""
+    render, z, flip, js = (folder / n for n in ("render.exr", "zscore.exr", "flip.exr", DATA_JS))
+    if not render.is_file():
+        return None
+    try:
+        names, img, se = exr.read_image_and_stderr(render)
+        if _fresh(js, (render, z, flip)):
+            return names
+        layers = {"render": (names, [img[..., i] for i in range(len(names))], 10)}
+        if se is not None:
+            layers["stderr"] = (names, [se[..., i] for i in range(len(names))], SE_BITS)
+        if z.is_file():
+            zr = exr.read_rgb(z)
+            layers["z"] = (["R", "G", "B"], [zr[..., i] for i in range(3)], 10)
+        if flip.is_file():
+            layers["flip"] = (["Y"], [exr.read_rgb(flip)[..., 0]], 10)
+        _write_data(js, img.shape[1], img.shape[0], layers)
+        return names
+    except (OSError, ValueError, KeyError):
+        return None
+
+
+def _reference_data(ref_exr):
+    """reference_WxH.js beside the scene's shared reference (written when missing or older)."""
+    js = ref_exr.with_suffix(".js")
+    try:
+        if not _fresh(js, (ref_exr,)):
+            ref = exr.read_rgb(ref_exr)
+            _write_data(js, ref.shape[1], ref.shape[0], {"reference": (["R", "G", "B"], [ref[..., i] for i in range(3)], 10)})
+        return js
+    except (OSError, ValueError, KeyError):
+        return None
+
+
+def _num(x):
+    return isinstance(x, (int, float)) and not isinstance(x, bool)
+
+
+def _check_line(name, stat, shown=None):
+    """``name: statistic vs threshold -> outcome`` for a noise test or a probe's test."""
+    stat = _dict(stat)
+    parts = [name + ":"]
+    if shown:
+        parts.append(shown + ";")
+    if _num(stat.get("z")):  # compare_means: the largest |z|; a one-sided test (Stokes): its largest signed z
+        parts.append(f"{'|z|' if 'blocks' not in stat else 'largest one-sided z'} {stat['z']:.3g},")
+    if _num(stat.get("p")) and _num(stat.get("threshold")):
+        ok = stat["p"] >= stat["threshold"]
+        parts.append(f"p {stat['p']:.3g} {'>=' if ok else '<'} threshold {stat['threshold']:.3g}")
+    return " ".join(parts)
+
+
+def _checks(run):
+    """Each check on one line (failures first): its statistic, threshold and outcome; under each
+    recorded observer model where the probe reports one (metrics.json ``alternatives``)."""
+    lines = []
+    test = run.get("test")
+    if isinstance(test, dict):
+        verdict = _verdict(test.get("pass"), "not judged")
+        if _num(test.get("p_min")) and _num(test.get("threshold")) and test.get("pass") is not None:
+            ok = test["p_min"] >= test["threshold"]
+            text = (f"noise test ({_text(test.get('name')) or 'block test'}; {_text(test.get('tests'))} tests: blocks of "
+                    f"{_text(test.get('block'))} px x channels, on the render's {_text(test.get('noise'))} noise): smallest p {test['p_min']:.3g} "
+                    f"{'>=' if ok else '<'} threshold {test['threshold']:.3g} (alpha {_text(test.get('alpha'))}, Sidak); "
+                    f"max |z| {_fmt(test.get('z_max'), '{:.3g}')}")
+        else:
+            text = f"noise test: {_text(test.get('reason'))}"
+        lines.append({"text": text, "verdict": verdict})
+    known = ", ".join(_text(k) for k in _list(run.get("known")))
+    for p in _list(run.get("probes")):
+        if not isinstance(p, dict):
+            lines.append({"text": _text(p), "verdict": ""})
+            continue
+        verdict = _verdict(p.get("pass"), "not measured")
+        shown = f"{_fmt(p.get('error'))} {_text(p.get('unit'))}".strip()
+        if _num(p.get("resolvable_dE00")):
+            shown += f" (the test resolves {p['resolvable_dE00']:.2g} dE00)"
+        stat = p.get("stat") if isinstance(p.get("stat"), dict) else p
+        line = {"text": _check_line(_text(p.get("name")), stat, shown), "verdict": verdict}
+        alts = _dict(p.get("alternatives"))
+        if alts:
+            line["under"] = [f"under the {_text(o)} observer{' (recorded: ' + known + ')' if known else ''}: "
+                             + _check_line("", a).lstrip(": ") + f" -> {_verdict(_dict(a).get('pass'), '?')}"
+                             for o, a in alts.items()]
+        if p.get("note"):
+            line["text"] += f" ({_text(p.get('note'))})"
+        lines.append(line)
+    rank = {"FAIL": 0, "not measured": 1, "not judged": 1}
+    return sorted(lines, key=lambda l: rank.get(l["verdict"], 2))
+
+
+def _extras(run):
+    """What a judged run could have detected (``detectable``) and its baseline comparison."""
+    out = []
+    det = run.get("detectable")
+    if isinstance(det, dict) and _num(det.get("scale")):
+        out.append(f"could have detected: a uniform radiance scale error of {100 * det['scale']:.3g} % with "
+                   f"{_fmt(det.get('power'))} power at alpha {_fmt(det.get('alpha'))} ({_text(det.get('method'))})"
+                   + (f"; a ColorChecker patch shift of {_fmt(det.get('patch_de00'))} dE00" if _num(det.get("patch_de00")) else ""))
+    base = run.get("baseline")
+    if isinstance(base, dict):
+        out.append(f"against baseline {_text(base.get('run'))}: {_text(base.get('status'))}"
+                   + (f" (p_min {_fmt(base.get('p_min'))} vs {_fmt(base.get('threshold'))})" if _num(base.get("p_min")) else "")
+                   + (f": {_text(base.get('reason'))}" if base.get("reason") else ""))
+    return out
+
+
+def _tev(run, folder, ref):
+    """A tev command line (run from the output folder) for a render that failed."""
+    if _text(run.get("status")) not in ("failed", "known"):
+        return None
+    files = [str(folder / "render.exr")] + ([str(ref)] if ref else []) + [
+        str(folder / n) for n in ("zscore.exr", "flip.exr")]
+    return "tev " + " ".join(shlex.quote(f) for f in files)
+
+
+def _regions(out, run, w, h):
+    """Probe regions to outline: [{box: [x0, y0, x1, y1] pixels, label, pass, expected}]: each
+    Lambertian patch's measured region (found as the probe finds it: batch/verdict/probes/
+    lambert.py, from the scene's IR in <scene>/json/), and for every other probe the bounding box
+    of the object its name names (the probe measures a part of it)."""
+    scene_name = _text(run.get("scene"))
+    if not SAFE_ID.fullmatch(scene_name):
+        return []
+    ir = out / scene_name / "json" / f"{scene_name}.json"
+    probes = {_text(p.get("name")): p for p in _list(run.get("probes")) if isinstance(p, dict)}
+    if not ir.is_file() or not probes:
+        return []
+    try:
+        from ..verdict import raycast
+        from ..verdict.probes import lambert
+        scene = json.loads(ir.read_text())
+        cam, objs = scene["camera"], scene["objects"]
+        hits = raycast.corner_hits(cam, w, h, objs)
+        out_regions = []
+        for i in lambert._patches(scene):
+            p = probes.get(f"lambert {objs[i]['name']}")
+            if p is None:
+                continue
+            ys, xs = np.nonzero(raycast.pixels_inside(cam, w, h, objs, i, margin=0.7, hits=hits))
+            if not len(xs):
+                continue
+            exp = p.get("expected")
+            out_regions.append({"box": [int(xs.min()), int(ys.min()), int(xs.max()) + 1, int(ys.max()) + 1],
+                                "label": _fmt(p.get('error'), '{:.2f}'), "pass": p.get("pass"),
+                                "expected": exp if isinstance(exp, list) and len(exp) == 3 and all(_num(x) for x in exp) else None})
+        # every other probe: the object it names, outlined by its bounding box in the image
+        names = sorted(((o.get("name"), i) for i, o in enumerate(objs) if isinstance(o.get("name"), str)),
+                       key=lambda t: -len(t[0]))
+        per_object = {}
+        for pname, p in probes.items():
+            words = set(re.split(r"[\s,:]+", pname))
+            index = next((i for n, i in names if n in words), None)
+            if not pname.startswith("lambert ") and index is not None:
+                per_object.setdefault(index, []).append(p.get("pass"))
+        for index, verdicts in per_object.items():
+            ys, xs = np.nonzero(raycast.pixels_inside(cam, w, h, objs, index, margin=1.0, hits=hits))
+            if len(xs):
+                ok = False if False in verdicts else True if all(v is True for v in verdicts) else None
+                out_regions.append({"box": [int(xs.min()), int(ys.min()), int(xs.max()) + 1, int(ys.max()) + 1],
+                                    "label": str(objs[index]["name"])[:40], "pass": ok, "expected": None})
+        return out_regions
+    except Exception:  # noqa: BLE001 - an outline is an aid: a scene it cannot read has none
+        return []
+
+
+def _deviations(options):
+    """{id: first sentence of its explanation} of the repository's known_deviations.toml when the
+    run used it ({} when it used its own --known file: a path from metrics.json is never opened)."""
+    from ..verdict import known
+    if _dict(options).get("known"):
+        return {}
+    try:
+        devs = known.load()
+    except Exception:  # noqa: BLE001 - an explanation is an aid: without it the ids are shown
+        return {}
+    return {d.id: " ".join(d.explanation.split()).split(". ")[0].rstrip(".") + "." for d in devs}
+
+
+def _known_lines(run, deviations):
+    """Why a known run is known: each recorded deviation it matched, with its explanation."""
+    return [f"recorded deviation {_text(k)} (known_deviations.toml): " + deviations.get(_text(k), "see its evidence there")
+            for k in _list(run.get("known"))]
+
+
+def _viewer(out, run, deviations=None):
     image = run.get("image")
     if not isinstance(image, str) or not image:
         return None
-    folder = PureWindowsPath(image).parent if "\\" in image else PurePosixPath(image).parent
-    views = [{"label": label, "src": src} for label, png in VIEWS if (src := _local_url(out, folder / png))]
-    if not views:
+    src = _local_url(out, image)
+    if not src:
         return None
-    numbers = [f"{_text(k)}: {_fmt(v)}" for k, v in _dict(run.get("metrics")).items()]
-    if isinstance(run.get("test"), dict):
-        numbers.append(f"noise test: {noise_test_text(run['test'])}")
-    for p in _list(run.get("probes")):
-        if not isinstance(p, dict):
-            numbers.append(_text(p))
-            continue
-        mark = _verdict(p.get("pass"), "not measured")
-        numbers.append(f"{_text(p.get('name'))}: {_fmt(p.get('error'))} {_text(p.get('unit'))} ({mark})")
+    folder = PureWindowsPath(image).parent if "\\" in image else PurePosixPath(image).parent
+    names = _job_data(out / Path(*folder.parts))
+    data = _local_url(out, folder / DATA_JS) if names else None
+    if not data:
+        return None
+    ref = _dict(run.get("reference")).get("image")
+    if not isinstance(ref, str) and _local_url(out, folder / "reference.exr"):
+        ref = str(PurePosixPath(*folder.parts) / "reference.exr")  # a run from before issue 21: its own copy
+    ref_url = _local_url(out, ref) if isinstance(ref, str) else None
+    ref_js = _reference_data(out / Path(*PurePosixPath(ref).parts)) if ref_url else None
+    ref_data = _local_url(out, PurePosixPath(ref).with_suffix(".js")) if ref_js else None
+    views = ["render"] + (["reference", "difference"] if ref_data else [])
+    views += [v for v, f in (("z-score", "zscore.exr"), ("FLIP", "flip.exr")) if _local_url(out, folder / f)]
+    if all(f"S{k}.{c}" in names for k in range(4) for c in "RGB"):
+        views += STOKES_VIEWS
+    lines = _checks(run)
+    status = _text(run.get("status"))
+    first = "difference" if status in ("failed", "known") and "difference" in views else "render"
+    w, h = (run.get("resolution") or [0, 0])[:2] if isinstance(run.get("resolution"), list) else (0, 0)
+    regions = _regions(out, run, int(w), int(h)) if _num(w) and _num(h) and w and h else []
     return {"scene": _text(run.get("scene")), "backend": _text(run.get("backend")), "mode": _text(run.get("mode")),
-            "status": _text(run.get("status")), "views": views, "numbers": numbers,
+            "status": status, "css": _css(run.get("status")), "views": views, "first": first,
+            "src": data, "ref": ref_data or "", "checks": lines, "extras": _extras(run),
+            "reason": _text(run.get("reason")), "known": _known_lines(run, deviations or {}),
+            "tev": _tev(run, folder, ref if ref_url else None), "regions": json.dumps(regions),
+            "numbers": [f"{_text(k)}: {_fmt(v)}" for k, v in _dict(run.get("metrics")).items()],
             "reference_problems": _reference_problems(run)}
 
 
@@ -179,13 +429,17 @@ def render(out_dir):
     runs = [r for r in _list(data.get("runs")) if isinstance(r, dict)]
     sweeps = [s for s in _list(data.get("sweeps")) if isinstance(s, dict)]
     viewers = {}
+    deviations = _deviations(data.get("options")) if any(r.get("known") for r in runs) else {}
     for i, r in enumerate(runs):
-        v = _viewer(out, r)
+        v = _viewer(out, r, deviations)
         if v:
             viewers[i] = v
     ids = _ids(runs, viewers)
     for i, v in viewers.items():
         v["id"] = ids[i]
+    shown = sorted(viewers, key=lambda i: (ORDER.get(viewers[i]["css"], 9), viewers[i]["scene"], viewers[i]["backend"]))
+    listed, not_run = grouping.not_run_everywhere(runs)
+    listed_ids = {id(r) for r in listed}
     summary_md = out / "summary.md"
     summary_text = summary_md.read_text(encoding="utf-8", errors="replace") if summary_md.is_file() else ""
     charts = []
@@ -195,10 +449,11 @@ def render(out_dir):
             charts.append({"src": src, "alt": c})
     stab = _list(data.get("stability"))
     return _env.get_template("report.html").render(
-        name=out.name, started=_text(data.get("started", "")), rows=_summary_rows(runs, ids),
+        name=out.name, started=_text(data.get("started", "")), rows=_summary_rows(runs, ids, listed_ids),
+        not_run=[{k: _text(v) for k, v in g.items()} for g in not_run], viewer_js=VIEWER_JS,
         rgb=_section(summary_text, "RGB renderers against the spectral references"), charts=charts,
         sweep_text=_section(summary_text, "Speed against accuracy (sweeps)"),
-        stability=_stability(out, stab), viewers=list(viewers.values()))
+        stability=_stability(out, stab), viewers=[viewers[i] for i in shown])
 
 
 def write(out_dir):

@@ -1,9 +1,34 @@
-"""PNG previews of linear images for the summary and the Blender panel (EXRs stay the data)."""
+"""The images a verdict leaves beside a render, kept small: the report (batch/report/html.py)
+draws every view from floats, so no 8-bit previews are written for it, and what only a reader
+looks at is stored as half floats (11 significant bits: 4.9e-4 relative rounding, far below the
+noise of any render judged here):
+
+- ``zscore.exr``: the noise test's z per block and colour channel (half);
+- ``flip.exr``: the HDR-FLIP map (half);
+- ``<scene>/results/reference_<W>x<H>.exr``: the scene's reference at the render's resolution,
+  once per scene and resolution, shared by every backend of the scene (half, or float32 where a
+  value does not fit in half);
+- differences are not stored: the page computes them from the render and the reference, and
+  the Blender panel writes ``diff_abs.exr`` / ``diff_rel.exr`` when its buttons are pressed
+  (``differences``).
+
+PNG writers stay for charts and strips that are pictures (stability)."""
+import contextlib
+import os
+import tempfile
+from pathlib import Path
+
 import numpy as np
 from PIL import Image
 
+from .. import exr
+from ..verdict.compare import REL_EPS
+
+HALF_MAX = 65504.0  # largest finite IEEE 754 binary16
+
 
 def srgb_encode(x):
+    """IEC 61966-2-1 sRGB transfer function of linear values clipped to [0, 1]."""
     x = np.clip(x, 0.0, 1.0)
     return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
 
@@ -22,3 +47,67 @@ def save_signed(path, values, scale):
 def save_gray(path, values, scale=1.0):
     v = np.clip(np.asarray(values, dtype=np.float64) / max(scale, 1e-30), 0, 1)
     Image.fromarray((v * 255 + 0.5).astype(np.uint8)).save(path)
+
+
+def fits_half(values):
+    values = np.asarray(values)
+    return bool(np.all(np.isfinite(values)) and float(np.max(np.abs(values), initial=0.0)) < HALF_MAX)
+
+
+def write_half(path, rgb):
+    """An HxWx3 image as R, G, B half floats (float32 if a value would not fit), written to a
+    temporary name and renamed: a reader, or another job writing the same file, never sees half
+    a file."""
+    rgb = np.asarray(rgb)
+    dtype = np.float16 if fits_half(rgb) else np.float32
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(suffix=".exr", prefix=".tmp-", dir=path.parent)
+    os.close(fd)
+    try:
+        exr.write_channels(tmp, {c: rgb[..., i].astype(dtype) for i, c in enumerate("RGB")})
+        umask = os.umask(0o022)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
+        os.replace(tmp, path)
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+    return path
+
+
+def shared_reference_name(shape):
+    return f"reference_{int(shape[1])}x{int(shape[0])}.exr"
+
+
+def shared_reference(res_dir, mean):
+    """Write the reference at the render's resolution once per scene: ``res_dir`` is
+    <scene>/results/<backend>; returns the file's path (<scene>/results/reference_WxH.exr)."""
+    path = Path(res_dir).parent / shared_reference_name(np.shape(mean))
+    return write_half(path, mean[..., :3])
+
+
+@contextlib.contextmanager
+def float_reference(res_dir, mean):
+    """A float32 EXR of ``mean`` for the length of a ``with`` block (HDR-FLIP reads files), then
+    removed: FLIP sees the reference at full precision and no copy stays."""
+    fd, tmp = tempfile.mkstemp(suffix=".exr", prefix=".ref-", dir=res_dir)
+    os.close(fd)
+    try:
+        exr.write(tmp, mean)
+        yield Path(tmp)
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+
+
+def to_half(path):
+    """Rewrite an RGB EXR (the FLIP map) as half floats in place."""
+    return write_half(path, exr.read_rgb(path))
+
+
+def differences(render, reference):
+    """(|render - reference|, |render - reference| / (|reference| + REL_EPS)) of the RGB channels:
+    what the Blender panel's difference buttons show, computed when asked for."""
+    d = np.abs(render[..., :3].astype(np.float64) - reference[..., :3])
+    return d, d / (np.abs(reference[..., :3]) + REL_EPS)

@@ -43,12 +43,52 @@ def _safe(*parts):
     return all(names.problem(p) is None for p in parts)
 
 
-def image_path(out_dir, scene, backend, kind):
-    """Path of one result image, or None if that run did not write it (or names no safe path)."""
+def image_path(out_dir, scene, backend, kind, make=False):
+    """Path of one result image, or None if that run did not write it (or names no safe path).
+    The reference may be the scene's shared one and the differences are made from the render and
+    the reference (``derived_image``): with ``make`` they are written when missing, without it
+    their path is returned if they can be made."""
     if not _safe(scene, backend):
         return None
     path = Path(out_dir) / scene / "results" / backend / IMAGE_KINDS[kind]
+    if path.is_file():
+        return path
+    if kind == "reference":
+        return shared_reference(out_dir, scene, backend)
+    if kind in DERIVED and image_path(out_dir, scene, backend, "render") and shared_reference(out_dir, scene, backend):
+        return derived_image(out_dir, scene, backend, kind) if make else path
+    return None
+
+
+# -- issue 21: runs keep one half-float reference per scene (<scene>/results/reference_WxH.exr) and no
+# difference images; these find the reference and write a difference image when the panel asks for it
+DERIVED = ("diff_abs", "diff_rel")
+
+
+def shared_reference(out_dir, scene, backend):
+    """The scene's shared reference at the resolution of ``backend``'s render, or None."""
+    render = Path(out_dir) / scene / "results" / backend / "render.exr"
+    if not render.is_file():
+        return None
+    import OpenEXR
+    with OpenEXR.File(str(render), header_only=True) as f:
+        box = f.header()["dataWindow"]
+    w, h = int(box[1][0] - box[0][0] + 1), int(box[1][1] - box[0][1] + 1)
+    path = render.parent.parent / f"reference_{w}x{h}.exr"
     return path if path.is_file() else None
+
+
+def derived_image(out_dir, scene, backend, kind):
+    """Write (once) and return diff_abs.exr or diff_rel.exr beside the render."""
+    from .. import exr
+    from . import previews
+    folder = Path(out_dir) / scene / "results" / backend
+    path = folder / IMAGE_KINDS[kind]
+    if not path.is_file():
+        render = exr.read_rgb(folder / "render.exr")
+        reference = exr.read_rgb(shared_reference(out_dir, scene, backend))
+        previews.write_half(path, previews.differences(render, reference)[DERIVED.index(kind)])
+    return path
 
 
 def chart_path(out_dir, scene):

@@ -11,8 +11,15 @@ def _num(x, fmt="{:.4g}"):
 
 
 def table(runs):
+    """The jobs, failures first; a backend skipped or unsupported on every scene with one reason is
+    one row (batch/report/grouping.py), not a row per scene."""
+    from .grouping import not_run_everywhere
+    runs, grouped = not_run_everywhere(runs)
     rows = ["| status | scene | backend | mode | spp | resolution | time (s) | RMSE | relMSE | MAPE | FLIP | noise test | reason |",
             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for g in grouped:
+        rows.append(f"| {_cell(g['status'])} | (all {g['scenes']} scenes) | {_cell(g['backend'])} | {_cell(g.get('mode') or '')} "
+                    f"| | | | | | | | | {_cell(g['reason'] or '')[:300]} |")
     for r in sorted(runs, key=lambda r: (rank(r["status"]), r["scene"], r["backend"])):
         m = r.get("metrics") or {}
         test = _cell(noise_test_text(r.get("test")))

@@ -3,6 +3,8 @@ job record with metrics, the noise test against the scene's reference, the analy
 images a reader looks at (previews, differences, z-score, FLIP) and a status
 (batch/verdict/status.py). A function of files and settings: it never renders.
 """
+from pathlib import PurePosixPath
+
 import numpy as np
 
 from .. import exr
@@ -47,7 +49,6 @@ def render_verdict(entry, scene, rendered, image, res_dir, settings, deviations)
     if entry["sanity"]["negative"]:
         # negative linear sRGB can be a legitimate out-of-gamut colour; negative S0 never is
         entry["flags"] = [f"{entry['sanity']['negative']} negative values"]
-    previews.save_linear(res_dir / "render.png", test_all[..., :3])
     ref, unusable, problems = find_reference(entry["scene"], scene, settings.get("references"),
                                              shape=test_all.shape, names=names)
     entry["reference_problems"] = problems
@@ -112,22 +113,20 @@ def noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings):
             entry["test"]["reason"] = (
                 f"differs from the reference beyond noise: min p = {zt.p_min:.3g} < {zt.threshold:.3g} "
                 f"(alpha {zt.alpha} Sidak-corrected over {zt.blocks} tests), max |z| = {zt.z_max:.1f}")
-        exr.write(res_dir / "zscore.exr", zt.zmap[..., :3])
-        worst = np.take_along_axis(zt.zmap, np.abs(zt.zmap).argmax(axis=-1)[..., None], axis=-1)[..., 0]
-        previews.save_signed(res_dir / "zscore.png", worst, scale=6)
-    exr.write(res_dir / "reference.exr", mean)
-    exr.write(res_dir / "diff_abs.exr", np.abs(test - mean))
-    exr.write(res_dir / "diff_rel.exr", np.abs(test - mean) / (np.abs(mean) + compare.REL_EPS))
-    previews.save_linear(res_dir / "reference.png", mean)
-    previews.save_signed(res_dir / "diff.png", (test - mean).mean(axis=-1),
-                         scale=max(float(np.percentile(np.abs(mean), 99)), 1e-6) * 0.25)
+        previews.write_half(res_dir / "zscore.exr", zt.zmap[..., :3])
+    # issue 21: the reader's images kept small (batch/report/previews.py): one half-float reference per
+    # scene and resolution, shared by its backends; no difference images (the page and the panel compute them)
+    shared = previews.shared_reference(res_dir, mean)
+    entry["reference"]["image"] = str(PurePosixPath(entry["image"]).parent.parent / shared.name) \
+        if isinstance(entry.get("image"), str) else None
     if settings.get("flip", True):
-        flip, err = flip_isolated.hdr_flip(res_dir / "reference.exr", image, res_dir / "flip.exr")
+        with previews.float_reference(res_dir, mean) as ref_exr:
+            flip, err = flip_isolated.hdr_flip(ref_exr, image, res_dir / "flip.exr")
         entry["metrics"]["flip"] = flip
         if err:
             entry["flip_error"] = err
         elif (res_dir / "flip.exr").exists():
-            previews.save_gray(res_dir / "flip.png", exr.read_rgb(res_dir / "flip.exr")[..., 0])
+            previews.to_half(res_dir / "flip.exr")
     return zt
 
 

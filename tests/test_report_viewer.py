@@ -1,0 +1,290 @@
+"""report.html's float viewer (issue 21) in real headless Chromium, from file://: the values it
+decodes and shows under the cursor are the EXRs' (as half floats), exposure acts on the floats
+(a highlight above 1 is not clipped at -3 EV), the Stokes scene has S0..S3, DoP and AoP views
+whose angle is the EXR's in the README's frame, the ColorChecker's patches are outlined where the
+probe measured them with their dE00, and a screenshot of every view is written under the test's
+tmp dir (not committed; look at them).
+
+A copy of the page gets a script that waits for a viewer's data, moves the mouse over a pixel,
+and writes what the page shows into body[data-result] for --dump-dom to carry back."""
+import json
+from pathlib import PurePosixPath
+import re
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+
+from conftest import metrics, run_batch
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+pytestmark = pytest.mark.skipif(not CHROMIUM, reason="no chromium: report not checked in a browser "
+                                                      "(scripts/setup.sh installs it as root)")
+HALF_REL = 2.0 ** -11  # binary16 rounding, relative
+SHOWN_REL = 5e-4  # the readout's 4 significant digits
+
+
+def chromium(*args, timeout=120):
+    proc = subprocess.run([CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--virtual-time-budget=30000",
+                           "--window-size=1400,1000", *args], capture_output=True, text=True, timeout=timeout)
+    assert proc.returncode == 0, proc.stderr[-1000:]
+    return proc.stdout
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("viewer") / "out"
+    run_batch("-r", "mitsuba", "-s", "polarizing_spheres", "-s", "macbeth_chart_D65", "--scale", 0.25, "-o", out)
+    return out
+
+
+def probe_page(out, viewer_id, script, name="probe.html"):
+    """Run ``script`` (a function body given ``v``, the loaded Viewer, and ``box``) once the
+    viewer's floats are decoded; returns what it returns (JSON)."""
+    page = (out / "report.html").read_text()
+    inject = ("<script>window.addEventListener('load', function(){var box=document.getElementById(%s);"
+              "var v=spectralBench.viewer(box.id); v.start();"
+              "(function wait(){ if(!box.dataset.ready){ setTimeout(wait, 50); return; }"
+              "var r; try { r=(function(v, box){%s})(v, box); } catch(e) { r={error: String(e)}; }"
+              "document.body.dataset.result=JSON.stringify(r); })();});</script>") % (json.dumps(viewer_id), script)
+    copy = out / name
+    copy.write_text(page.replace("</body>", inject + "</body>"))
+    dom = chromium("--dump-dom", copy.as_uri())
+    m = re.search(r'data-result="([^"]*)"', dom)
+    assert m, "the viewer never got its data"
+    import html
+    result = json.loads(html.unescape(m.group(1)))
+    assert "error" not in result, result
+    return result
+
+
+# moves the mouse over pixel (__X__, __Y__) of the first pane and returns the readout and raw values
+HOVER = """
+var c=box.querySelector('canvas.pane-a'), r=c.getBoundingClientRect();
+var cx=r.left+(v.ox+(__X__+0.5)*v.scale)*r.width/c.width, cy=r.top+(v.oy+(__Y__+0.5)*v.scale)*r.height/c.height;
+c.dispatchEvent(new MouseEvent('mousemove', {clientX: cx, clientY: cy, bubbles: true}));
+var i=__Y__*v.w+__X__, raw={};
+['R','G','B'].forEach(function(ch){ raw['render.'+ch]=v.render[ch][i]; if(v.ref) raw['reference.'+ch]=v.ref[ch][i];
+  if(v.z) raw['z.'+ch]=v.z[ch][i]; });
+return {readout: box.querySelector('.readout').textContent, raw: raw, pixel: box.dataset.pixel, w: v.w, h: v.h};
+"""
+
+
+def half(x):
+    return float(np.float32(x).astype(np.float16))
+
+
+def shown(readout, label):
+    """{channel: value} of one readout line (``label: R 0.1234  G ...``)."""
+    line = next(line for line in readout.splitlines() if line.startswith(label + ":"))
+    return {k: float(v) for k, v in re.findall(r"(\S+) (-?[0-9.e+-]+|NaN|-?Infinity)", line.split(":", 1)[1])}
+
+
+@pytest.mark.slow
+def test_pixel_values_under_the_cursor_are_the_exrs(run):
+    from spectral_bench.batch import exr
+    entry = next(r for r in metrics(run)["runs"] if r["scene"] == "macbeth_chart_D65")
+    names, img, _ = exr.read_image_and_stderr(run / entry["image"])
+    ref = exr.read_rgb(run / entry["reference"]["image"])
+    z = exr.read_rgb(run / entry["image"].replace("render.exr", "zscore.exr"))
+    rng = np.random.default_rng(1)
+    h, w = img.shape[:2]
+    pixels = [tuple(int(v) for v in np.unravel_index(np.argmax(img[..., 0]), (h, w)))[::-1]] + \
+             [(int(rng.integers(w)), int(rng.integers(h))) for _ in range(2)]
+    for x, y in pixels:
+        got = probe_page(run, "macbeth_chart_D65--mitsuba-box", HOVER.replace("__X__", str(x)).replace("__Y__", str(y)))
+        assert got["pixel"] == f"{x},{y}" and (got["w"], got["h"]) == (w, h)
+        for k, c in enumerate("RGB"):
+            # decoded: exactly the EXR's value rounded to half
+            assert got["raw"][f"render.{c}"] == half(img[y, x, names.index(c)])
+            assert got["raw"][f"reference.{c}"] == half(ref[y, x, k])
+            assert got["raw"][f"z.{c}"] == half(z[y, x, k])
+            # shown: to 4 significant digits of that
+            for label, value in (("render", img[y, x, names.index(c)]), ("reference", ref[y, x, k])):
+                v = shown(got["readout"], label)[c]
+                assert abs(v - value) <= abs(value) * (HALF_REL + SHOWN_REL) + 1e-7, (label, c, v, value, got["readout"])
+
+
+@pytest.mark.slow
+def test_exposure_recovers_highlights(run):
+    """A pixel above 1 (white patch at +2 EV made brighter still) is shown unclipped at -3 EV:
+    the canvas pixel is the sRGB encoding of value * 2^-3."""
+    from spectral_bench.batch import exr
+    entry = next(r for r in metrics(run)["runs"] if r["scene"] == "macbeth_chart_D65")
+    img = exr.read_rgb(run / entry["image"])
+    y, x = np.unravel_index(np.argmax(img[..., 1]), img.shape[:2])
+    script = f"""
+    v.ev = 3; v.draw(); var hot = v.picture('render').getContext('2d').getImageData({x}, {y}, 1, 1).data[1];
+    v.ev = -3; v.draw(); var cool = v.picture('render').getContext('2d').getImageData({x}, {y}, 1, 1).data[1];
+    return {{hot: hot, cool: cool, value: v.render.G[{y} * v.w + {x}]}};"""
+    got = probe_page(run, "macbeth_chart_D65--mitsuba-box", script)
+    value = got["value"]
+    assert value * 8 > 1  # clipped at +3 EV
+    enc = lambda t: 255 * (12.92 * t if t <= 0.0031308 else 1.055 * t ** (1 / 2.4) - 0.055)
+    assert got["hot"] == 255 and abs(got["cool"] - enc(min(value / 8, 1))) <= 1.01, got
+
+
+@pytest.mark.slow
+def test_stokes_views(run):
+    from spectral_bench.batch import exr
+    entry = next(r for r in metrics(run)["runs"] if r["scene"] == "polarizing_spheres")
+    names, img, _ = exr.read_image_and_stderr(run / entry["image"])
+    ch = {n: img[..., i] for i, n in enumerate(names)}
+    dop = np.sqrt(ch["S1.G"] ** 2 + ch["S2.G"] ** 2 + ch["S3.G"] ** 2) / np.maximum(ch["S0.G"], 1e-12)
+    y, x = np.unravel_index(np.argmax(np.where(ch["S0.G"] > 0.05 * ch["S0.G"].max(), dop, 0)), dop.shape)
+    script = HOVER.replace("__X__", str(x)).replace("__Y__", str(y)).replace("return {", """
+    var tabs=[].map.call(box.querySelectorAll('.tabs button'), function(b){return b.dataset.view;});
+    var drawn={}; tabs.forEach(function(t){ v.show(t); var d=box.querySelector('canvas.pane-a').getContext('2d')
+      .getImageData(0, 0, 40, 40).data, s=0; for(var k=0;k<d.length;k++) s+=d[k];
+      drawn[t]={caption: box.querySelector('.colourbar .caption').textContent, sum: s}; });
+    return {tabs: tabs, drawn: drawn, """)
+    got = probe_page(run, "polarizing_spheres--mitsuba-box", script)
+    assert got["tabs"][-6:] == ["S0", "S1", "S2", "S3", "DoP", "AoP"], got["tabs"]
+    assert "angle of polarisation" in got["drawn"]["AoP"]["caption"] and "0 horizontal" in got["drawn"]["AoP"]["caption"]
+    assert "degree of polarisation" in got["drawn"]["DoP"]["caption"]
+    assert "+1 horizontal" in got["drawn"]["S1"]["caption"]
+    aop = np.degrees(0.5 * np.arctan2(ch["S2.G"][y, x], ch["S1.G"][y, x]))
+    shown_aop = shown(got["readout"].replace("   AoP (deg)", "\nAoP (deg)"), "AoP (deg)")["G"]
+    shown_dop = shown(got["readout"].replace("   AoP (deg)", "\nAoP (deg)"), "DoP")["G"]
+    assert dop[y, x] > 0.05
+    assert abs(shown_aop - aop) < 0.1 and abs(shown_dop - dop[y, x]) < 2e-3 * max(dop[y, x], 1), (got["readout"], aop, dop[y, x])
+    for k in range(4):
+        assert shown(got["readout"], f"S{k}")[f"S{k}.G"] == pytest.approx(ch[f"S{k}.G"][y, x], rel=HALF_REL + SHOWN_REL, abs=1e-7)
+
+
+@pytest.mark.slow
+def test_colorchecker_patches_outlined_with_their_de00(run):
+    entry = next(r for r in metrics(run)["runs"] if r["scene"] == "macbeth_chart_D65")
+    patches = {p["name"]: p for p in entry["probes"] if p["name"].startswith("lambert patch")}
+    script = """
+    var regions = JSON.parse(box.dataset.regions), c = box.querySelector('canvas.pane-a'), ctx = c.getContext('2d');
+    v.show('render');
+    var edges = regions.map(function(g){ var x = Math.floor(v.ox + g.box[0] * v.scale) , y = Math.floor(v.oy + (g.box[1] + g.box[3]) / 2 * v.scale);
+      return [].slice.call(ctx.getImageData(x, y, 1, 1).data); });
+    return {regions: regions, edges: edges};"""
+    got = probe_page(run, "macbeth_chart_D65--mitsuba-box", script)
+    regions = got["regions"]
+    assert len(regions) == len(patches) == 24
+    w, h = entry["resolution"]
+    labels = sorted(g["label"] for g in regions)
+    assert labels == sorted(f"{p['error']:.2f}" for p in patches.values())
+    for g, edge in zip(regions, got["edges"]):
+        x0, y0, x1, y1 = g["box"]
+        assert 0 <= x0 < x1 <= w and 0 <= y0 < y1 <= h and (x1 - x0) * (y1 - y0) >= 4
+        colour = [0x20, 0xff, 0x60] if g["pass"] else [0xff, 0x20, 0x20]
+        assert edge[:3] == colour, (g, edge)  # the outline is drawn on the image at the region's edge
+    # the regions are disjoint and ordered like a 6 x 4 chart
+    boxes = np.array([g["box"] for g in regions])
+    assert len({(b[0] // 4, b[1] // 4) for b in boxes}) == 24
+
+
+@pytest.mark.slow
+def test_view_links_scroll_to_their_viewer(run):
+    """#view=ID:VIEW opens that view and scrolls its heading into the window's top half."""
+    page = (run / "report.html").read_text()
+    probe = ("<script>window.addEventListener('load', function(){setTimeout(function(){"
+             "document.body.dataset.top=Math.round(document.getElementById('polarizing_spheres--mitsuba').getBoundingClientRect().top);"
+             "document.body.dataset.sy=Math.round(window.scrollY);}, 2000);});</script>")
+    copy = run / "scroll.html"
+    copy.write_text(page.replace("</body>", probe + "</body>"))
+    dom = chromium("--dump-dom", copy.as_uri() + "#view=polarizing_spheres--mitsuba-box:AoP")
+    assert re.search(r'id="polarizing_spheres--mitsuba-box"[^>]*data-active="AoP"', dom)
+    top, sy = int(re.search(r'data-top="(-?\d+)"', dom).group(1)), int(re.search(r'data-sy="(\d+)"', dom).group(1))
+    assert sy > 500 and 0 <= top < 400, (top, sy)  # at the top, or as far as the page's end allows
+
+
+@pytest.mark.slow
+def test_a_screenshot_of_every_view(run, tmp_path):
+    """Every view of every viewer, alone on the page (headless Chromium paints a scrolled page
+    blank), written under tmp_path for a person to look at."""
+    page = (run / "report.html").read_text()
+    boxes = re.findall(r"<div class='viewer' id='([^']+)'", page)
+    assert len(boxes) == 2
+    shots = []
+    for box in boxes:
+        section = page[page.index(f"id='{box}'"):]
+        views = re.findall(r"<button data-view='([^']+)'", section.split("class='tabs'>", 1)[1].split("</div>", 1)[0])
+        for view in dict.fromkeys(views):
+            alone = ("<script>window.addEventListener('load', function(){var box=document.getElementById(%s);"
+                     "[].forEach.call(document.body.children, function(e){ if(e!==box && e.id+'-box'!==box.id) e.style.display='none'; });"
+                     "var v=spectralBench.viewer(box.id); v.start(); v.show(%s); "
+                     "var c=box.querySelector('canvas.pane-a'); c.dispatchEvent(new MouseEvent('mousemove', {clientX: "
+                     "c.getBoundingClientRect().left+c.width/2, clientY: c.getBoundingClientRect().top+c.height/2}));});"
+                     "</script>") % (json.dumps(box), json.dumps(view))
+            copy = run / f"shot-{box}-{view}.html"
+            copy.write_text(page.replace("</body>", alone + "</body>"))
+            png = tmp_path / f"{box}-{view}.png"
+            chromium(f"--screenshot={png}", copy.as_uri())
+            assert png.is_file() and png.stat().st_size > 10000, png
+            shots.append(png)
+    assert len(shots) >= 5 + 11
+    print("screenshots in", tmp_path)
+
+
+def test_a_backend_skipped_on_every_scene_is_one_line(tmp_path):
+    """27 identical skipped rows become one; a backend skipped on some scenes only keeps its rows."""
+    from spectral_bench.batch.report import grouping, html
+    runs = [{"scene": f"s{i}", "backend": "art", "mode": "spectral46", "status": "skipped", "reason": "artist not found"}
+            for i in range(27)]
+    runs += [{"scene": "s0", "backend": "mitsuba", "mode": "m", "status": "ok", "reason": ""},
+             {"scene": "s1", "backend": "mitsuba", "mode": "m", "status": "skipped", "reason": "no reference"}]
+    left, groups = grouping.not_run_everywhere(runs)
+    assert groups == [{"backend": "art", "mode": "spectral46", "status": "skipped", "reason": "artist not found", "scenes": 27}]
+    assert [r["backend"] for r in left] == ["mitsuba", "mitsuba"]
+    (tmp_path / "metrics.json").write_text(json.dumps({"started": "now", "runs": runs}))
+    page = html.render(tmp_path)
+    assert page.count("artist not found") == 1 and "every scene (27)" in page
+    assert page.count("<tr class='skipped'>") == 2  # the group's row and mitsuba's one skipped scene
+
+
+def test_checks_one_line_each_failures_first_with_the_recorded_observer(tmp_path):
+    """A known run: the failing probe first, its statistic and threshold, and its verdict under
+    the recorded observer; the noise test with its p and threshold; a tev line."""
+    from spectral_bench.batch.report import html
+    stat = lambda z, p: {"z": z, "p": p, "threshold": 1e-4, "pass": p >= 1e-4}
+    run = {"scene": "chart", "backend": "mitsuba", "mode": "spectral", "status": "known", "known": ["dev-1"],
+           "test": {"name": "block test", "tests": 12, "block": 8, "noise": "own", "alpha": 0.01, "p_min": 0.2,
+                    "threshold": 8e-4, "z_max": 1.2, "pass": True},
+           "probes": [{"name": "lambert a", "error": 0.01, "unit": "dE00", "pass": True, "stat": stat(1.0, 0.3)},
+                      {"name": "lambert b", "error": 0.07, "unit": "dE00", "pass": False, "resolvable_dE00": 0.05,
+                       "stat": stat(6.0, 2e-9), "alternatives": {"mitsuba3": stat(1.5, 0.13)}}]}
+    lines = html._checks(run)
+    assert [l["verdict"] for l in lines] == ["FAIL", "pass", "pass"]
+    assert lines[0]["text"] == ("lambert b: 0.07 dE00 (the test resolves 0.05 dE00); |z| 6, p 2e-09 < threshold 0.0001")
+    assert lines[0]["under"] == ["under the mitsuba3 observer (recorded: dev-1): |z| 1.5, p 0.13 >= threshold 0.0001 -> pass"]
+    assert "smallest p 0.2 >= threshold 0.0008" in lines[1]["text"]
+    run["detectable"] = {"scale": 0.0031, "alpha": 0.01, "power": 0.9, "method": "noise test", "patch_de00": 0.2}
+    assert html._extras(run) == ["could have detected: a uniform radiance scale error of 0.31 % with 0.9 power at "
+                                 "alpha 0.01 (noise test); a ColorChecker patch shift of 0.2 dE00"]
+    folder = PurePosixPath("chart/results/mitsuba")
+    assert html._tev(run, folder, "chart/results/reference_4x4.exr") == (
+        "tev chart/results/mitsuba/render.exr chart/results/reference_4x4.exr chart/results/mitsuba/zscore.exr "
+        "chart/results/mitsuba/flip.exr")
+
+
+@pytest.mark.slow
+def test_the_panel_finds_the_shared_reference_and_makes_differences(run, tmp_path):
+    """What the Blender panel's image buttons load (batch/report/results.py, no Blender needed):
+    the reference is the scene's shared half-float one, the differences are written when asked
+    for and equal |render - reference| (and over |reference| + 0.01) to half precision."""
+    from spectral_bench.batch import exr
+    from spectral_bench.batch.report import results
+    out = tmp_path / "copy"
+    shutil.copytree(run, out)
+    ref = results.image_path(out, "macbeth_chart_D65", "mitsuba", "reference")
+    assert ref == out / "macbeth_chart_D65" / "results" / "reference_155x105.exr"
+    diff = results.image_path(out, "macbeth_chart_D65", "mitsuba", "diff_abs")
+    assert diff is not None and not diff.exists()  # listed (it can be made), not written by listing
+    for kind in ("diff_abs", "diff_rel"):
+        path = results.image_path(out, "macbeth_chart_D65", "mitsuba", kind, make=True)
+        render, reference = exr.read_rgb(out / "macbeth_chart_D65/results/mitsuba/render.exr"), exr.read_rgb(ref)
+        d = np.abs(render.astype(np.float64) - reference)
+        want = d if kind == "diff_abs" else d / (np.abs(reference) + 0.01)
+        assert np.allclose(exr.read_rgb(path), want, rtol=HALF_REL, atol=1e-7), kind
+    names = exr.read(out / "macbeth_chart_D65/results/mitsuba/render.exr")
+    assert set(names) == {"R", "G", "B", "stderr.R", "stderr.G", "stderr.B"}
+    import OpenEXR
+    with OpenEXR.File(str(out / "macbeth_chart_D65/results/mitsuba/render.exr")) as f:
+        kinds = {n: c.pixels.dtype for n, c in f.channels().items()}
+    assert kinds == {"RGB": np.float32, "stderr": np.float16}, kinds  # the mean stays float32
