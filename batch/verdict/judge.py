@@ -7,7 +7,7 @@ import numpy as np
 
 from .. import exr
 from ..report import previews
-from . import compare, flip_isolated, known, probes, references, status
+from . import compare, flip_isolated, known, probes, references, stats, status
 
 
 def find_reference(name, scene, directories, shape=None, names=None):
@@ -62,10 +62,47 @@ def render_verdict(entry, scene, rendered, image, res_dir, settings, deviations)
     if unusable and not any(p["pass"] is not None for p in entry["probes"]):
         entry["unjudged_because"] = unusable + ("" if entry["probes"] else "; no analytic probe applies")
     status.decide(entry, deviations, ztest)
+    det = detectable(ztest, entry["probes"], settings.get("alpha"))
+    if det is not None:
+        entry["detectable"] = det
     if unusable and entry["status"] != "unjudged" and not entry["reason"].startswith(PROBES_ALONE):
         # judged, but without the reference: the reason says so whatever the status
         entry["reason"] = f"{PROBES_ALONE}: {unusable}" + (f"; {entry['reason']}" if entry["reason"] else "")
     return entry
+
+
+def detectable(ztest, probe_records, alpha=None):
+    """The run's power (metrics.json ``detectable``): the smallest relative uniform radiance scale
+    error the noise test detects with 90 % power (batch/verdict/compare.py ``ZTest.detectable``),
+    each probe's own figure (the smallest relative change of what it measures that its best test
+    detects with 90 % power: batch/verdict/stats.py ``detectable_scale``) and, for the charts, the
+    dE00 of the largest of the patches' figures applied as a brightness change to that patch
+    (``patch_de00``: any single patch changed that much in brightness is detected with 90 % power).
+    None when nothing could be judged."""
+    out = ztest.detectable() if ztest is not None else None
+    figures, patches = {}, []
+    for p in probe_records or []:
+        if not p.get("stat") or p.get("pass") is None:
+            continue
+        eps = stats.detectable_scale(p["stat"])
+        figures[p["name"]] = eps
+        if eps is not None and p["name"].startswith("lambert patch") and p.get("unit") == "dE00":
+            patches.append((eps, p["stat"]["expected"]))
+    if out is None and not figures:
+        return None
+    if out is None:
+        out = {"scale": None, "alpha": alpha, "power": compare.POWER,
+               "method": "no noise test (no usable reference): the probes' own figures only"}
+    if figures:
+        out["probes"] = figures
+    if patches and all(e is not None for e, _ in patches):
+        from ...exporters import colorimetry
+        eps, expected = max(patches, key=lambda t: t[0])
+        e = np.asarray(expected, dtype=np.float64)
+        white = colorimetry.srgb_to_xyz(np.ones(3))
+        out["patch_de00"] = float(colorimetry.delta_e_2000(colorimetry.lab(colorimetry.srgb_to_xyz(e * (1 + eps)), white),
+                                                           colorimetry.lab(colorimetry.srgb_to_xyz(e), white)))
+    return out
 
 
 def noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings):
