@@ -117,3 +117,20 @@ def test_planted_errors_of_the_detectable_size_are_detected_90_percent(scene, sp
           f"half of it {half}/100, false alarms {fa}/{trials}")
     assert half < 60, half
     assert clopper_pearson(fa, trials)[0] <= 0.01, fa
+
+
+def test_run_scale_counts_radiance_probes_only():
+    """A probe of radiance (a patch) counts towards detectable.scale; band positions, which a
+    uniform scale does not move, keep their own figure only."""
+    from spectral_bench.batch.verdict import judge, stats
+    patch = {"name": "lambert patch_white", "unit": "dE00", "pass": True,
+             "stat": stats.compare_means([0.9, 0.9, 0.9], [0.9, 0.9, 0.9], [0.0009, 0.0009, 0.0009], dof=500, tests=3)}
+    bands = {"name": "prism band positions, beam on screen", "unit": "sigma", "pass": True,
+             "stat": stats.compare_means([10.0], [10.0], [1e-6], tests=1)}
+    det = judge.detectable(None, [patch, bands], alpha=0.01)
+    assert det["by"] == "lambert patch_white"
+    # closed form: (t* + z_0.9) standard errors of the patch, relative (normal at 500 dof, nearly)
+    t_star = st.t.isf(stats.sidak_threshold(0.01, 3) / 2, 500)
+    assert det["scale"] == pytest.approx((t_star + st.t.isf(0.1, 500)) * 0.001, rel=0.02)
+    assert det["probes"]["prism band positions, beam on screen"] < 1e-5
+    assert det["patch_de00"] > 0

@@ -71,6 +71,14 @@ def render_verdict(entry, scene, rendered, image, res_dir, settings, deviations)
     return entry
 
 
+# Probes whose expected values are radiances (or a ratio to them, expected 1): a uniform radiance
+# scale error 1 + eps multiplies what they expect, so they count towards ``detectable.scale``.
+# Band positions, degrees of polarisation and a film relative to its environment do not change
+# under a uniform scale: they keep their own figure only.
+RADIANCE_PROBES = ("lambert ", "ggx ", "beckmann ", "brewster ", "reflection ", "prism energy", "lone ",
+                   "environment seen directly")
+
+
 def detectable(ztest, probe_records, alpha=None):
     """The run's power (metrics.json ``detectable``): the smallest relative uniform radiance scale
     error the noise test detects with 90 % power (batch/verdict/compare.py ``ZTest.detectable``),
@@ -91,8 +99,14 @@ def detectable(ztest, probe_records, alpha=None):
     if out is None and not figures:
         return None
     if out is None:
-        out = {"scale": None, "alpha": alpha, "power": compare.POWER,
-               "method": "no noise test (no usable reference): the probes' own figures only"}
+        out = {"scale": None, "alpha": alpha, "power": compare.POWER, "by": None, "tests": {},
+               "method": "no noise test (no usable reference): the radiance probes' own figures"}
+    radiance = {k: v for k, v in figures.items() if v is not None and k.startswith(RADIANCE_PROBES)}
+    if radiance:
+        best = min(radiance, key=radiance.get)
+        if out["scale"] is None or radiance[best] < out["scale"]:
+            out.update(scale=radiance[best], by=best)
+        out["method"] += "; or a probe of radiance, its best test (whichever check needs the least)"
     if figures:
         out["probes"] = figures
     if patches and all(e is not None for e, _ in patches):
