@@ -73,7 +73,7 @@ def judge(args):
     from spectral_bench.batch.verdict import compare, references
     cache = Path(args.cache)
     rows = []
-    for folder in sorted(p for p in cache.iterdir() if p.is_dir()):
+    for folder in sorted(p for p in cache.iterdir() if p.is_dir() and any(p.glob("seed*/done.json"))):
         name = folder.name.rsplit("_s", 1)[0]
         ref = references.load(name)
         outcome = {"block": [], "scale": [], "any": [], "z_scale": [], "time": [], "detectable": [], "block_only": []}
@@ -90,6 +90,7 @@ def judge(args):
             outcome["scale"].append(not nt.scale["pass"])
             outcome["any"].append(not nt.passed)
             outcome["z_scale"].append(nt.scale["z_max"])
+            outcome.setdefault("z_all", []).extend(nt.scale["z"])
             outcome["time"].append(info["time_s"])
             outcome["detectable"].append(nt.detectable()["scale"])
         n = len(outcome["any"])
@@ -101,12 +102,14 @@ def judge(args):
             lo, hi = clopper_pearson(k, n)
             cells.append(f"{k}/{n} [{100 * lo:.1f}, {100 * hi:.1f}] %")
         rows.append(f"| {folder.name} | {img.shape[1]}x{img.shape[0]} | {nt.blocks} | {' | '.join(cells)} | "
-                    f"{np.median(outcome['z_scale']):.2f} | {np.median(outcome['detectable']):.4f} | "
+                    f"{np.median(outcome['z_scale']):.2f} | {np.std(outcome['z_all']):.2f} | "
+                    f"{np.mean(np.abs(outcome['z_all']) > 2.576):.3f} | {np.median(outcome['detectable']):.4f} | "
                     f"{np.median(outcome['time']):.1f} |")
     print("| scene (scale) | resolution | block tests | block test alone at alpha (before) [95 % CI] | "
           "block test at alpha/2 [95 % CI] | scale test at alpha/2 [95 % CI] | noise test (both) [95 % CI] | "
-          "median max abs z (scale test) | median detectable.scale | median render s |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+          "median max abs z (scale test) | sd of scale z (every channel) | fraction abs z > 2.576 (0.010 if normal) | "
+          "median detectable.scale | median render s |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     print("\n".join(rows))
 
 

@@ -181,7 +181,7 @@ class ZTest:
     finite: bool = True
 
     def as_dict(self):
-        out = {"name": "block test, Sidak-corrected, and scale test (Bonferroni split of alpha)",
+        out = {"name": "block test, Sidak-corrected",
                "alpha": self.alpha, "block": self.block,
                "samples_per_block": self.samples_per_block, "noise": self.noise,
                "tests": self.blocks, "p_min": self.p_min, "threshold": self.threshold,
