@@ -7,7 +7,9 @@ seeds: the scenes whose caustic paths are heavy-tailed (issue 20, item 3).
 ``render`` keeps every render (mean and per-pixel standard error from 2 passes, the scene's own spp)
 in DIR, so the judging can be re-run with any version of the tests without rendering again; a render
 already in DIR is not redone. ``judge`` applies batch/verdict/compare.py's noise test (block test and
-scale test, each at its share of alpha) against the committed reference downsampled to the render's
+scale test, each at its share of alpha; samples per block as the runner chooses them,
+compare.min_samples_for; the column "before" is the block test alone at the whole alpha, with
+65536 samples per block, as before issue 20) against the committed reference downsampled to the render's
 resolution, and prints the false-alarm counts with Clopper-Pearson 95 % intervals.
 
 Reduced resolution (--scale 0.25: 128x128 instead of 512x512) keeps what the heavy tail depends on:
@@ -82,7 +84,8 @@ def judge(args):
             names, img, se = exr.read_image_and_stderr(info["image"])
             at = compare.reference_at(ref.mean, ref.stderr, ref.spp, img.shape, ref.provenance.get("passes", 8))
             own = se.astype(np.float64) ** 2
-            nt = compare.z_test(img, at, info["spp"], own_var_of_mean=own, own_passes=info["passes"], alpha=0.01)
+            nt = compare.z_test(img, at, info["spp"], own_var_of_mean=own, own_passes=info["passes"], alpha=0.01,
+                                min_samples=compare.min_samples_for(name, args.min_samples))
             old = compare.z_test(img, at, info["spp"], own_var_of_mean=own, own_passes=info["passes"], alpha=0.01,
                                  scale_test=False)  # the block test alone at the whole alpha (before issue 20)
             outcome["block_only"].append(not old.passed)
@@ -101,15 +104,15 @@ def judge(args):
             k = int(sum(outcome[key]))
             lo, hi = clopper_pearson(k, n)
             cells.append(f"{k}/{n} [{100 * lo:.1f}, {100 * hi:.1f}] %")
-        rows.append(f"| {folder.name} | {img.shape[1]}x{img.shape[0]} | {nt.blocks} | {' | '.join(cells)} | "
+        rows.append(f"| {folder.name} | {img.shape[1]}x{img.shape[0]} | {nt.samples_per_block} | {nt.blocks} | {' | '.join(cells)} | "
                     f"{np.median(outcome['z_scale']):.2f} | {np.std(outcome['z_all']):.2f} | "
                     f"{np.mean(np.abs(outcome['z_all']) > 2.576):.3f} | {np.median(outcome['detectable']):.4f} | "
                     f"{np.median(outcome['time']):.1f} |")
-    print("| scene (scale) | resolution | block tests | block test alone at alpha (before) [95 % CI] | "
+    print("| scene (scale) | resolution | samples per block | block tests | block test alone at alpha (before) [95 % CI] | "
           "block test at alpha/2 [95 % CI] | scale test at alpha/2 [95 % CI] | noise test (both) [95 % CI] | "
           "median max abs z (scale test) | sd of scale z (every channel) | fraction abs z > 2.576 (0.010 if normal) | "
           "median detectable.scale | median render s |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     print("\n".join(rows))
 
 
@@ -120,6 +123,8 @@ def main():
     ap.add_argument("--scale", type=float, default=0.25)
     ap.add_argument("-s", "--scene", action="append")
     ap.add_argument("--cache", required=True)
+    ap.add_argument("--min-samples", type=int, default=65536,
+                    help="--min-samples of the judged noise test (the scene's own larger figure wins: compare.SCENE_MIN_SAMPLES)")
     args = ap.parse_args()
     {"render": render, "judge": judge}[args.what](args)
 

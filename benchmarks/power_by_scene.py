@@ -43,7 +43,8 @@ def main():
         mean, var = (passes[0] + passes[1]) / 2, (passes[0] - passes[1]) ** 2 / 4
         ref_draw = compare.ReferenceAt(at.mean + np.sqrt(at.var_of_mean) * rng.standard_normal(at.mean.shape),
                                        at.var_of_mean, at.sigma2, at.dof)
-        zt = compare.z_test(mean, ref_draw, spp, own_var_of_mean=var, own_passes=2)
+        zt = compare.z_test(mean, ref_draw, spp, own_var_of_mean=var, own_passes=2,
+                            min_samples=compare.min_samples_for(name))
         det = zt.detectable() or {}
         tests = det.get("tests", {})
         cell = (lambda v: f"{v:.4f}" if v is not None else "> 1")  # noqa: E731

@@ -134,3 +134,10 @@ def test_run_scale_counts_radiance_probes_only():
     assert det["scale"] == pytest.approx((t_star + st.t.isf(0.1, 500)) * 0.001, rel=0.02)
     assert det["probes"]["prism band positions, beam on screen"] < 1e-5
     assert det["patch_de00"] > 0
+
+
+def test_rough_glass_blocks_pool_more_samples_never_fewer():
+    assert compare.min_samples_for("ggx_glass", 65536) == compare.min_samples_for("beckmann_glass", 65536) == 262144
+    assert compare.min_samples_for("ggx_glass", 1 << 20) == 1 << 20  # a larger --min-samples wins
+    assert compare.min_samples_for("ggx_copper_50", 65536) == 65536
+    assert compare.block_size(256, (512, 512), compare.min_samples_for("ggx_glass")) == 32

@@ -157,7 +157,8 @@ def noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings):
         # every channel is judged: R, G, B and, for Stokes output, S0..S3
         own = None if stderr is None else stderr.astype(np.float64) ** 2
         zt = compare.z_test(test_all, at, entry["spp"], own_var_of_mean=own, own_passes=entry["passes"],
-                            alpha=settings["alpha"], block=settings.get("block"), min_samples=settings["min_samples"])
+                            alpha=settings["alpha"], block=settings.get("block"),
+                            min_samples=compare.min_samples_for(entry["scene"], settings["min_samples"]))
         entry["test"] = zt.as_dict()
         if not zt.passed:
             entry["test"]["reason"] = (
@@ -202,6 +203,6 @@ def sweep_point(job, record):
     if stderr is not None and names == ref.names:
         zt = compare.z_test(img, at, record["spp"], own_var_of_mean=stderr.astype(np.float64) ** 2,
                             own_passes=record["passes"], alpha=job["verdict"]["alpha"],
-                            min_samples=job["verdict"]["min_samples"])
+                            min_samples=compare.min_samples_for(job["scene_name"], job["verdict"]["min_samples"]))
         point["test"] = zt.as_dict()
     return point
