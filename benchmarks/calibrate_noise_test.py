@@ -42,11 +42,19 @@ def variants():
         for o in _objects(sc, lambda o: (o.get("bsdf") or {}).get("roughness")):
             o["bsdf"]["roughness"]["alpha"] = a
 
+    def brighter(radiance, f):
+        # a constant spectrum is its value (its exporters ignore "scale"): before 2026-12-01 the
+        # variant left polarizing_spheres' constant environment unchanged and "missed" nothing
+        if radiance.get("type") == "constant":
+            radiance["value"] *= f
+        else:
+            radiance["scale"] = radiance.get("scale", 1.0) * f
+
     def light(sc, f):
         for o in _objects(sc, lambda o: o.get("emitter")):
-            o["emitter"]["radiance"]["scale"] = o["emitter"]["radiance"].get("scale", 1.0) * f
+            brighter(o["emitter"].get("radiance") or o["emitter"]["irradiance"], f)
         if sc.get("environment"):
-            sc["environment"]["radiance"]["scale"] = sc["environment"]["radiance"].get("scale", 1.0) * f
+            brighter(sc["environment"]["radiance"], f)
 
     def illuminant(sc, name):
         sc["environment"]["radiance"]["name"] = name
@@ -71,7 +79,8 @@ def variants():
         "polarizing_plane_0": [("polariser +5 deg", lambda s: polariser(s, 5.0)), ("light +1 %", lambda s: light(s, 1.01))],
         "polarizing_spheres": [("light +1 %", lambda s: light(s, 1.01))],
         "iridescent_sphere_smooth": [("film 10 nm thinner", lambda s: film(s, -10.0))],
-        "dispersion_prism": [("fused silica for N-BK7", lambda s: glass(s, "fused_silica"))],
+        "dispersion_prism": [("fused silica for N-BK7", lambda s: glass(s, "fused_silica")),
+                             ("beam +1 %", lambda s: light(s, 1.01))],
     }
 
 

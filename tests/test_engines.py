@@ -12,7 +12,7 @@ import pytest
 from conftest import ROOT, metrics, run_batch
 from spectral_bench.batch import exr
 
-SMALL = ["-s", "ggx_copper_50_isolated", "-s", "macbeth_chart_D65", "-r", "mitsuba", "--scale", 0.125, "--spp", 16,
+SMALL = ["-s", "ggx_copper_50_isolated", "-s", "macbeth_chart_D65", "-r", "mitsuba", "--scale", 0.25, "--spp", 16,
          "--no-flip"]
 
 

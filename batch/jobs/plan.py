@@ -38,6 +38,48 @@ def for_run(scene, opts):
                                  if opts.get("spp") or opts.get("scale", 1.0) != 1.0 else "")
 
 
+def scaled_size(width, height, scale):
+    """The render resolution (w, h) of a scene of width x height at --scale (as ``for_run``)."""
+    return max(1, round(width * scale)), max(1, round(height * scale))
+
+
+def scale_fits(width, height, scale):
+    """True when --scale gives an integer fraction of width x height in each axis: the resolution
+    at which the scene's reference (rendered at its own resolution) is box-filtered exactly
+    (batch/verdict/compare.py ``reference_at``; the two factors may differ)."""
+    w, h = scaled_size(width, height, scale)
+    return width % w == 0 and height % h == 0
+
+
+def valid_scales(sizes):
+    """Every scale <= 1 that gives an integer fraction of each (width, height) in ``sizes``, as
+    exact fractions d / width of the first sizes' divisors, sorted."""
+    candidates = {d / n for width, height in sizes for n in (width, height) for d in range(1, n + 1) if n % d == 0}
+    return sorted(c for c in candidates if c <= 1 and all(scale_fits(w, h, c) for w, h in sizes))
+
+
+def scale_problem(scenes, scale):
+    """None, or why --scale cannot be judged on the selected ``scenes`` [(name, IR or error)]:
+    the scenes whose render at that scale is no integer fraction of their reference's
+    resolution, and the nearest scales that are one for every selected scene (a usage error:
+    the noise test could not judge them)."""
+    if not scale or scale == 1.0:
+        return None
+    sizes = {n: (sc["render"]["width"], sc["render"]["height"]) for n, sc in scenes if isinstance(sc, dict)}
+    bad = [n for n, (w, h) in sizes.items() if not scale_fits(w, h, scale)]
+    if not bad:
+        return None
+    shown = "; ".join(f"{n}: {sizes[n][0]}x{sizes[n][1]} -> {'x'.join(map(str, scaled_size(*sizes[n], scale)))}"
+                      for n in bad[:5]) + (f"; and {len(bad) - 5} more" if len(bad) > 5 else "")
+    ok = valid_scales(sorted(set(sizes.values())))
+    below = [c for c in ok if c < scale][-2:]
+    above = [c for c in ok if c > scale][:2]
+    near = ", ".join(f"{c:.6g}" for c in below + above) or "1"
+    return (f"--scale {scale:g} gives no integer fraction of the reference's resolution for {shown} "
+            f"(the reference is box-filtered by an integer factor in each axis); nearest scales valid for "
+            f"every selected scene: {near}")
+
+
 def main_jobs(scenes, made, opts, out, settings):
     """(render jobs, entries decided without rendering) for every scene on every backend. Whatever
     goes wrong while planning one scene on one backend (a mesh that cannot be read, a scene a

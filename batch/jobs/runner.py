@@ -400,6 +400,8 @@ def run(opts):
 
 def _run(opts, out, deviations, t0):
     _jobs, scenes = plan(opts)
+    if not opts["export_only"] and (why := planning.scale_problem(scenes, opts.get("scale"))):
+        raise UsageError(why)  # exit 2: renders the noise test could not judge
     batch = Run(opts, out, deviations)
     log.info("writing to %s", batch.out)
     if not scenes:

@@ -22,7 +22,7 @@ def table(runs):
                     f"| | | | | | | | | {_cell(g['reason'] or '')[:300]} |")
     for r in sorted(runs, key=lambda r: (rank(r["status"]), r["scene"], r["backend"])):
         m = r.get("metrics") or {}
-        test = _cell(noise_test_text(r.get("test")))
+        test = _cell(noise_test_text(r.get("test")) + detectable_cell(r))
         res = "x".join(map(str, r["resolution"])) if r.get("resolution") else ""
         reason = _cell(r.get("reason") or "")
         shown = f"{r['status']} (without reference)" if judged_without_reference(r) else r["status"]
@@ -30,6 +30,14 @@ def table(runs):
                     f"| {res} | {_num(r.get('time_s'), '{:.2f}')} | {_num(m.get('rmse'))} | {_num(m.get('relmse'))} "
                     f"| {_num(m.get('mape'))} | {_num(m.get('flip'))} | {test} | {reason[:300]} |")
     return "\n".join(rows)
+
+
+def detectable_cell(run):
+    """Issue 20 (power helper): the run's power in the noise test cell, "; detects 0.12 %": the
+    smallest uniform radiance scale error its checks detect with 90 % power (metrics.json
+    ``detectable.scale``); empty when not stated."""
+    d = run.get("detectable") or {}
+    return f"; detects {100 * d['scale']:.2g} %" if isinstance(d.get("scale"), (int, float)) else ""
 
 
 def _cell(text):

@@ -9,7 +9,7 @@ import numpy as np
 
 from .. import exr
 from ..report import previews
-from . import compare, flip_isolated, known, probes, references, status
+from . import compare, flip_isolated, known, probes, references, stats, status
 
 
 def find_reference(name, scene, directories, shape=None, names=None):
@@ -63,10 +63,61 @@ def render_verdict(entry, scene, rendered, image, res_dir, settings, deviations)
     if unusable and not any(p["pass"] is not None for p in entry["probes"]):
         entry["unjudged_because"] = unusable + ("" if entry["probes"] else "; no analytic probe applies")
     status.decide(entry, deviations, ztest)
+    det = detectable(ztest, entry["probes"], settings.get("alpha"))
+    if det is not None:
+        entry["detectable"] = det
     if unusable and entry["status"] != "unjudged" and not entry["reason"].startswith(PROBES_ALONE):
         # judged, but without the reference: the reason says so whatever the status
         entry["reason"] = f"{PROBES_ALONE}: {unusable}" + (f"; {entry['reason']}" if entry["reason"] else "")
     return entry
+
+
+# Probes whose expected values are radiances (or a ratio to them, expected 1): a uniform radiance
+# scale error 1 + eps multiplies what they expect, so they count towards ``detectable.scale``.
+# Band positions, degrees of polarisation and a film relative to its environment do not change
+# under a uniform scale: they keep their own figure only.
+RADIANCE_PROBES = ("lambert ", "ggx ", "beckmann ", "brewster ", "reflection ", "prism energy", "lone ",
+                   "environment seen directly")
+
+
+def detectable(ztest, probe_records, alpha=None):
+    """The run's power (metrics.json ``detectable``): the smallest relative uniform radiance scale
+    error the noise test detects with 90 % power (batch/verdict/compare.py ``ZTest.detectable``),
+    each probe's own figure (the smallest relative change of what it measures that its best test
+    detects with 90 % power: batch/verdict/stats.py ``detectable_scale``) and, for the charts, the
+    dE00 of the largest of the patches' figures applied as a brightness change to that patch
+    (``patch_de00``: any single patch changed that much in brightness is detected with 90 % power).
+    None when nothing could be judged."""
+    out = ztest.detectable() if ztest is not None else None
+    figures, patches = {}, []
+    for p in probe_records or []:
+        if not p.get("stat") or p.get("pass") is None:
+            continue
+        eps = stats.detectable_scale(p["stat"])
+        figures[p["name"]] = eps
+        if eps is not None and p["name"].startswith("lambert patch") and p.get("unit") == "dE00":
+            patches.append((eps, p["stat"]["expected"]))
+    if out is None and not figures:
+        return None
+    if out is None:
+        out = {"scale": None, "alpha": alpha, "power": compare.POWER, "by": None, "tests": {},
+               "method": "no noise test (no usable reference): the radiance probes' own figures"}
+    radiance = {k: v for k, v in figures.items() if v is not None and k.startswith(RADIANCE_PROBES)}
+    if radiance:
+        best = min(radiance, key=radiance.get)
+        if out["scale"] is None or radiance[best] < out["scale"]:
+            out.update(scale=radiance[best], by=best)
+        out["method"] += "; or a probe of radiance, its best test (whichever check needs the least)"
+    if figures:
+        out["probes"] = figures
+    if patches and all(e is not None for e, _ in patches):
+        from ...exporters import colorimetry
+        eps, expected = max(patches, key=lambda t: t[0])
+        e = np.asarray(expected, dtype=np.float64)
+        white = colorimetry.srgb_to_xyz(np.ones(3))
+        out["patch_de00"] = float(colorimetry.delta_e_2000(colorimetry.lab(colorimetry.srgb_to_xyz(e * (1 + eps)), white),
+                                                           colorimetry.lab(colorimetry.srgb_to_xyz(e), white)))
+    return out
 
 
 def noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings):
@@ -107,7 +158,8 @@ def noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings):
         # every channel is judged: R, G, B and, for Stokes output, S0..S3
         own = None if stderr is None else stderr.astype(np.float64) ** 2
         zt = compare.z_test(test_all, at, entry["spp"], own_var_of_mean=own, own_passes=entry["passes"],
-                            alpha=settings["alpha"], block=settings.get("block"), min_samples=settings["min_samples"])
+                            alpha=settings["alpha"], block=settings.get("block"),
+                            min_samples=compare.min_samples_for(entry["scene"], settings["min_samples"]))
         entry["test"] = zt.as_dict()
         if not zt.passed:
             entry["test"]["reason"] = (
@@ -150,6 +202,6 @@ def sweep_point(job, record):
     if stderr is not None and names == ref.names:
         zt = compare.z_test(img, at, record["spp"], own_var_of_mean=stderr.astype(np.float64) ** 2,
                             own_passes=record["passes"], alpha=job["verdict"]["alpha"],
-                            min_samples=job["verdict"]["min_samples"])
+                            min_samples=compare.min_samples_for(job["scene_name"], job["verdict"]["min_samples"]))
         point["test"] = zt.as_dict()
     return point

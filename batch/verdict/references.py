@@ -145,7 +145,7 @@ def usable_for(ref, shape=None, names=None):
     """None if the reference's image can judge a render of ``shape`` (H, W, ...) with channels
     ``names`` (either may be None: not checked), else why not. What batch/verdict/compare.py
     ``reference_at`` and the noise test can use: colour channels R, G, B shared with the render,
-    and a resolution that is the render's times an integer (the same factor on both axes)."""
+    and a resolution that is the render's times an integer in each axis (the factors may differ)."""
     shared = [n for n in ref.names if names is None or n in names]
     if shared[:3] != ["R", "G", "B"]:
         return (f"its channels {ref.names} lack the colour channels R, G, B"
@@ -153,9 +153,9 @@ def usable_for(ref, shape=None, names=None):
     H, W = ref.mean.shape[:2]
     if shape is not None:
         h, w = shape[:2]
-        if h <= 0 or w <= 0 or H % h or W % w or H // h != W // w:
+        if h <= 0 or w <= 0 or H % h or W % w:
             return (f"its resolution {W}x{H} cannot judge a {w}x{h} render (the reference must be the "
-                    "render's resolution times an integer)")
+                    "render's resolution times an integer in each axis)")
     return None
 
 

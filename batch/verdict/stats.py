@@ -105,3 +105,43 @@ def rejudge(stat, scale=1.0, scale_se=0.0):
     se = np.sqrt(s**2 + (scale_se * e) ** 2)
     p = np.atleast_1d(two_sided_p((m - scale * e) / np.maximum(se, 1e-300), stat.get("dof")))
     return bool(np.all(p >= stat["threshold"]))
+
+
+def shifted_power(shift, threshold, dof=None):
+    """Power of the two-sided test at per-test p ``threshold`` when the statistic (Student's t with
+    ``dof``, normal where None or infinite) is shifted by ``shift`` standard errors:
+    P(|T + shift| > t*) = 1 - F(t* - shift) + F(-t* - shift) (the location-shift approximation of
+    the noncentral t; exact for the normal)."""
+    shift = np.asarray(shift, dtype=np.float64)
+    d = np.broadcast_to(np.asarray(np.inf if dof is None else dof, dtype=np.float64), shift.shape)
+    small = np.isfinite(d) & (d < 1e7)
+    dd = np.where(small, np.maximum(d, 1.0), 1e7)
+    tcrit = np.where(small, _st.t.isf(threshold / 2.0, dd), _st.norm.isf(threshold / 2.0))
+    cdf = (lambda x: np.where(small, _st.t.cdf(x, dd), _st.norm.cdf(x)))
+    return 1.0 - cdf(tcrit - shift) + cdf(-tcrit - shift)
+
+
+def smallest_detectable(power_of, power=0.9, hi=1.0, steps=50):
+    """The smallest eps in (0, hi] with power_of(eps) >= power (power_of grows with eps), by
+    bisection; None when even ``hi`` is not detected with that power."""
+    if power_of(hi) < power:
+        return None
+    lo = 0.0
+    for _ in range(steps):
+        mid = (lo + hi) / 2
+        lo, hi = (lo, mid) if power_of(mid) >= power else (mid, hi)
+    return hi
+
+
+def detectable_scale(stat, power=0.9):
+    """The smallest relative change eps of a compare_means family's expected values (expected x
+    (1 + eps)) that its best single test detects with ``power``: a lower bound on the family's
+    power, as it fails when any test does. None when not even eps = 1 would be."""
+    e = np.atleast_1d(np.asarray(stat["expected"], dtype=np.float64))
+    s = np.atleast_1d(np.asarray(stat["se"], dtype=np.float64))
+    e, s = np.broadcast_arrays(e, s)
+    dof = stat.get("dof")
+    sens = np.abs(e) / np.maximum(s, 1e-300)
+    if not sens.size or not np.isfinite(sens).any():
+        return None
+    return smallest_detectable(lambda eps: float(np.max(shifted_power(eps * sens, stat["threshold"], dof))), power)
