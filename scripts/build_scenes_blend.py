@@ -261,7 +261,7 @@ def build_dispersion(square, sphere):
     # spawned ray by 8.9e-5 x (1 + |p|) along the normal, which moves a refracted beam sideways;
     # at this size that is ~0.002 px (at 1x, measured: ~0.01 px, as large as the noise at 64 spp)
     u = 10.0
-    scene = new_scene("dispersion_prism", "dispersion", 64,
+    scene = new_scene("dispersion_prism", "dispersion", 128,  # 128 spp: 1 % detectable (benchmarks/CALIBRATION.md)
                       f"A collimated D65 beam (0.08 x 0.5) through a {apex:g} degree N-BK7 prism (sides 5) at minimum "
                       f"deviation for {lam0:g} nm, fanned out on a white screen 40 away; light tracing (ptracer)",
                       resolution=(256, 128))
