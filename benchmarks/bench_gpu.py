@@ -110,6 +110,11 @@ def not_measured(why, args):
             f"about 10 minutes on one H200) to record the table.")
 
 
+def ratio(a, b):
+    """a / b as "1.23x", or "-" where b is nothing (no job rendered)."""
+    return f"{a / b:.2f}x" if b > 0 else "-"
+
+
 def table(gpu, rows, refs, args):
     text = [f"GPU: {gpu}. CPU: {machine()}; Python {platform.python_version()}; suite scale {args.scale:g}"
             + (f", --spp {args.spp}" if args.spp else ", each scene's default spp") + ".", "",
@@ -118,11 +123,11 @@ def table(gpu, rows, refs, args):
     for label, r in rows:
         st = ", ".join(f"{k} {v}" for k, v in sorted(r["statuses"].items(), key=lambda kv: str(kv[0])))
         text.append(f"| {label} | {' '.join(r['modes']) or '-'} | {r['jobs']} | {r['wall_s']:.1f} | {r['renders_s']:.1f} | "
-                    f"{r['wall_s'] / max(r['renders_s'], 1e-9):.2f}x | {st or '-'} | {r['exit']} |")
+                    f"{ratio(r['wall_s'], r['renders_s'])} | {st or '-'} | {r['exit']} |")
     (g_label, g), (c_label, c) = rows
     text += ["", f"Default suite: GPU {g['wall_s']:.1f} s wall against CPU {c['wall_s']:.1f} s "
-             f"({c['wall_s'] / max(g['wall_s'], 1e-9):.2f}x); renders {g['renders_s']:.1f} s against "
-             f"{c['renders_s']:.1f} s ({c['renders_s'] / max(g['renders_s'], 1e-9):.1f}x).", "",
+             f"(CPU / GPU {ratio(c['wall_s'], g['wall_s'])}); renders {g['renders_s']:.1f} s against "
+             f"{c['renders_s']:.1f} s (CPU / GPU {ratio(c['renders_s'], g['renders_s'])}).", "",
              f"| device | reference maker: {', '.join(args.ref_scene)} at {args.ref_spp} spp (8 passes) | wall s | exit |",
              "|---|---|---|---|"]
     for label, r in refs:
