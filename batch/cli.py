@@ -19,6 +19,7 @@ from pathlib import Path
 from ..exporters import names as scene_names, validate
 from .backends import BACKENDS, DEFAULT, GROUPS, command, expand, known_names
 
+DEVICES = ("cpu", "gpu", "auto")  # --device (batch/backends/cuda.py)
 FORMATS = ("mitsuba", "art", "json", "cycles", "luxcore")
 # Bounds of the options (documented in --help and the README's option table)
 MAX_SPP = validate.render_limit("spp")[1]  # samples per pixel: the scene IR's own bound
@@ -31,7 +32,7 @@ DEFAULT_CLUSTER_TIMEOUT = 60.0
 DEFAULTS = {
     "input": None, "case": None, "scene": None, "renderer": None, "exec": None, "spp": None, "scale": 1.0,
     "out": None, "export_only": False, "format": None, "log": None, "visualize": False, "settings": None,
-    "variant": None, "alpha": 0.01, "block": None, "min_samples": 65536, "timeout": 1800, "passes": 2, "seed": 0, "flip": True,
+    "variant": None, "device": "auto", "alpha": 0.01, "block": None, "min_samples": 65536, "timeout": 1800, "passes": 2, "seed": 0, "flip": True,
     "references": None, "known": None, "list": False, "art_ggx": False, "sweep": False, "ladder": None, "sweep_modes": None, "stability": False,
     "approximate": False, "renderers": None, "cluster": None, "cluster_timeout": DEFAULT_CLUSTER_TIMEOUT, "dashboard": None, "resume": None,
     "junit": None,
@@ -234,12 +235,18 @@ def _mode(v):
 
 
 _MODE = text_kind(_mode, "mode")
+
+
+def _device(v):
+    if v not in DEVICES:
+        raise ValueError(f"is not a device: one of {', '.join(DEVICES)}")
+    return v
 TYPES = {
     "input": text_kind(_nonempty, "path"), "case": text_kind(_nonempty, "name"), "scene": text_kind(_nonempty, "name"),
     "renderer": text_kind(_renderer, "backend"), "exec": text_kind(_exec, "[BACKEND=]PATH"), "spp": SPP,
     "scale": number(0, MAX_SCALE, lo_open=True), "out": text_kind(_nonempty, "path"), "format": text_kind(_format, "format"),
     "log": text_kind(_nonempty, "path"), "settings": text_kind(_nonempty, "path"), "variant": text_kind(_nonempty, "variant"),
-    "alpha": number(0, 1, lo_open=True, hi_open=True), "block": int_in(1, 1 << 16), "min_samples": int_in(1, 1 << 40),
+    "device": text_kind(_device, "device"), "alpha": number(0, 1, lo_open=True, hi_open=True), "block": int_in(1, 1 << 16), "min_samples": int_in(1, 1 << 40),
     "timeout": number(0, None, lo_open=True), "passes": int_in(1, MAX_PASSES), "seed": int_in(0, MAX_SEED),
     "references": text_kind(_nonempty, "path"), "known": text_kind(_nonempty, "path"),
     "ladder": _comma_list(SPP, "N,N,..."), "sweep_modes": _comma_list(_MODE, "MODE,..."),
@@ -285,6 +292,9 @@ def parser():
                     help="declare renderers that run as a command ([renderers.NAME] tables in a TOML file; repeatable; "
                          "README: Add your renderer); select them with -r NAME")
     ap.add_argument("--variant", type=T["variant"], help="force a Mitsuba variant (default: cheapest that models the scene)")
+    ap.add_argument("--device", type=T["device"], metavar="cpu|gpu|auto",
+                    help="where Mitsuba renders: gpu picks its cuda_ad_* variants (an error where CUDA does not render), "
+                         "cpu its llvm_ad_*/scalar_* ones, auto the GPU where a CUDA probe renders (default auto)")
     ap.add_argument("--alpha", type=T["alpha"], help="significance level of the noise test, 0 < ALPHA < 1 (default 0.01)")
     ap.add_argument("--block", type=T["block"], help="block side in pixels of the noise test, >= 1 (default: from --min-samples)")
     ap.add_argument("--min-samples", type=T["min_samples"], help="samples pooled per block of the noise test, >= 1 (default 65536)")

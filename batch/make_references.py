@@ -1,6 +1,6 @@
 """Render reference images (an explicit request: this is the only thing that changes references/).
 
-    .venv/bin/python batch/make_references.py [-s SCENE ...] [-r NAME] [-e [NAME=]PATH] [--variant V]
+    .venv/bin/python batch/make_references.py [-s SCENE ...] [-r NAME] [-e [NAME=]PATH] [--variant V] [--device D]
                                               [--renderers FILE ...] [--art-ggx] [--scale F]
                                               [--spp 4096 | --factor F] [--passes 8]
                                               [--cluster ADDRESS | local:N] [--replace [--accept]]
@@ -13,7 +13,7 @@ another maker is skipped and named (exit status 1).
 
 Any one backend renders it: ``-r NAME`` (default mitsuba) is a built-in backend or a renderer
 declared with ``--renderers FILE`` (README, "Add your renderer"); ``-e [NAME=]PATH``, ``--variant``
-(Mitsuba) and ``--art-ggx`` (ART) mean what they mean to the runner and go through the runner's
+and ``--device cpu|gpu|auto`` (Mitsuba) and ``--art-ggx`` (ART) mean what they mean to the runner and go through the runner's
 own option types and declaration loading (batch/cli.py); a bad value is a usage error (exit 2)
 naming the option. Each reference is rendered at the scene's resolution (times ``--scale F``, as
 the runner scales it: such a reference judges renders at that resolution or an integer fraction
@@ -120,6 +120,9 @@ def parser():
     ap.add_argument("-e", "--exec", action="append", type=T["exec"], metavar="[NAME=]PATH",
                     help="the renderer's executable, e.g. mitsuba=/opt/mitsuba/mitsuba (a bare PATH is -r's)")
     ap.add_argument("--variant", type=T["variant"], help="force a Mitsuba variant (-r mitsuba; default: cheapest that models the scene)")
+    ap.add_argument("--device", type=T["device"], default="auto", metavar="cpu|gpu|auto",
+                    help="-r mitsuba: render on the GPU (cuda_ad_* variants; an error where CUDA does not render), the "
+                         "CPU, or the GPU where a CUDA probe renders (default auto)")
     ap.add_argument("--renderers", action="append", type=T["renderers"], metavar="FILE",
                     help="declare renderers that run as a command ([renderers.NAME] tables; repeatable); select one with -r NAME")
     ap.add_argument("--art-ggx", action="store_true",
@@ -179,7 +182,9 @@ def chosen_backend(args):
         raise Usage(f"--art-ggx: an ART option, but -r {name} renders the references")
     if args.accept and not args.replace:
         raise Usage("--accept: only with --replace (it lets a reference be replaced by one that differs beyond noise)")
-    opts = {"renderer": [name], "exec": execs, "variant": args.variant, "art_ggx": args.art_ggx,
+    if args.device == "gpu" and name != "mitsuba":
+        raise Usage(f"--device gpu: Mitsuba's CUDA variants, but -r {name} renders the references")
+    opts = {"renderer": [name], "exec": execs, "variant": args.variant, "device": args.device, "art_ggx": args.art_ggx,
             "approximate": False, "renderers": declared or None}
     return runner.make_backend(name, opts), name
 
@@ -200,6 +205,10 @@ def main(argv=None):
         return 2
     args.input = args.input or [str(scene_sources.DEFAULT_BLEND)]
     if backend.name == "mitsuba":
+        problem = backend.device_problem()
+        if problem:
+            print(f"batch/make_references.py: error: {problem}", file=sys.stderr, flush=True)
+            return 2
         print(backend.llvm_message(), flush=True)
     out = Path(args.out)
     with contextlib.ExitStack() as held:  # the scenes' locks, released however this ends

@@ -1,6 +1,7 @@
 """The engines' overhead, measured side by side in one run (issue 10's benchmark).
 
     .venv/bin/python benchmarks/bench_engines.py [--scale 1.0] [--reference-scene ggx_copper_50] [--write]
+    .venv/bin/python benchmarks/bench_engines.py --smoke   # seconds: one scene, tiny settings
 
 1. The full default suite (every scene, the Mitsuba backend, the product's default settings) on
    the default engine: total wall time against the sum of its renders' wall times (each render's
@@ -28,8 +29,12 @@ from record import machine  # noqa: E402
 
 
 
-def suite(out, scale, cluster=None):
-    args = [sys.executable, str(ROOT / "batch" / "run.py"), "-r", "mitsuba", "-o", str(out)]
+SMOKE_SUITE = ["-s", "ggx_copper_50", "--spp", "4"]  # --smoke: tiny settings, checks the script runs
+SMOKE_REFERENCE = ["--spp", "16", "--passes", "2", "--scale", "0.125"]
+
+
+def suite(out, scale, cluster=None, extra=()):
+    args = [sys.executable, str(ROOT / "batch" / "run.py"), "-r", "mitsuba", "-o", str(out), *extra]
     if scale != 1.0:
         args += ["--scale", str(scale)]
     if cluster:
@@ -43,9 +48,9 @@ def suite(out, scale, cluster=None):
             "exit": proc.returncode}
 
 
-def reference(scene, workers, out):
+def reference(scene, workers, out, extra=()):
     args = [sys.executable, str(ROOT / "batch" / "make_references.py"), "-s", scene, "--out", str(out),
-            "--cluster", f"local:{workers}"]
+            "--cluster", f"local:{workers}", *extra]
     t0 = time.perf_counter()
     subprocess.run(args, capture_output=True, text=True, cwd=ROOT, check=True)
     return time.perf_counter() - t0
@@ -55,17 +60,21 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--scale", type=float, default=1.0)
     ap.add_argument("--reference-scene", default="ggx_copper_50")
+    ap.add_argument("--smoke", action="store_true", help="one scene at scale 0.125 and 4 spp; a 16-spp reference")
     ap.add_argument("--write", action="store_true")
     args = ap.parse_args()
+    if args.smoke:
+        args.scale, args.write = 0.125, False
+    extra, ref_extra = (SMOKE_SUITE, SMOKE_REFERENCE) if args.smoke else ((), ())
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for label, cluster in (("default engine (this machine)", None), ("--cluster local:1", "local:1"),
                                ("--cluster local:2", "local:2")):
-            r = suite(Path(tmp) / label.replace(" ", "_").replace(":", ""), args.scale, cluster)
+            r = suite(Path(tmp) / label.replace(" ", "_").replace(":", ""), args.scale, cluster, extra)
             r["label"] = label
             rows.append(r)
             print(label, r, flush=True)
-        refs = {w: reference(args.reference_scene, w, Path(tmp) / f"ref{w}") for w in (1, 2)}
+        refs = {w: reference(args.reference_scene, w, Path(tmp) / f"ref{w}", ref_extra) for w in (1, 2)}
     text = [f"Machine: {machine()}; "
             f"Python {platform.python_version()}; scale {args.scale}.", "",
             "| suite on | jobs | wall s | sum of render wall s | wall / renders | overhead per job s | exit |",

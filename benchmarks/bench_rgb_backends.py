@@ -1,6 +1,7 @@
 """One full run of the RGB backends next to the spectral ones, recorded in benchmarks/RGB.md.
 
     .venv/bin/python benchmarks/bench_rgb_backends.py [--scale 0.5] [--passes 4] [--repeats 3] [--write]
+    .venv/bin/python benchmarks/bench_rgb_backends.py --smoke --scale 0.05 --passes 2 --repeats 1   # a minute: 3 scenes, 4 spp
 
 1. The batch (batch/run.py) on every scene with -r mitsuba -r art -r cycles -r luxcore (ART where
    an artist is installed), and the polarisation scenes again with --approximate for the RGB ones.
@@ -31,6 +32,7 @@ import pkg_bootstrap  # noqa: E402
 
 BACKENDS = ["mitsuba", "art", "cycles", "luxcore"]
 POLARISATION = ["polarizing_plane_0", "polarizing_plane_90", "polarizing_spheres"]
+SMOKE_SCENES = ["ggx_copper_50", "macbeth_chart_D50", "macbeth_chart_D65"]  # --smoke: what every table reads, at 4 spp
 
 
 def run_batch(out, args, extra):
@@ -109,7 +111,7 @@ def interleaved(args):
     rows = ["| scene | resolution, spp | " + " | ".join(f"{b} median (s)" for b in ("mitsuba", "cycles", "luxcore"))
             + " | cycles / mitsuba | luxcore / mitsuba |", "|---|---|---|---|---|---|---|"]
     for name in ("ggx_copper_50", "macbeth_chart_D50"):
-        sc = for_run(golden[name], {"spp": None, "scale": args.scale})
+        sc = for_run(golden[name], {"spp": 4 if args.smoke else None, "scale": args.scale})
         times = {b: [] for b in ("mitsuba", "cycles", "luxcore")}
         with tempfile.TemporaryDirectory() as tmp:
             made = {b: backends.get(b) for b in times}
@@ -141,12 +143,16 @@ def main(argv=None):
     ap.add_argument("--passes", type=int, default=4)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--out", default=None)
+    ap.add_argument("--smoke", action="store_true", help=f"seconds: {', '.join(SMOKE_SCENES)} and one polarisation "
+                    "scene at 4 spp; not recorded")
     ap.add_argument("--write", action="store_true")
     args = ap.parse_args(argv)
     out = Path(args.out or tempfile.mkdtemp(prefix="rgb-bench-"))
-    data = run_batch(out / "main", args, sum((["-r", b] for b in BACKENDS), []))
+    smoke = ["--spp", "4", *sum((["-s", s] for s in SMOKE_SCENES), [])] if args.smoke else []
+    data = run_batch(out / "main", args, sum((["-r", b] for b in BACKENDS), []) + smoke)
     approx = run_batch(out / "approx", args, ["-r", "cycles", "-r", "luxcore", "--approximate"]
-                       + sum((["-s", s] for s in POLARISATION), []))
+                       + sum((["-s", s] for s in (POLARISATION[:1] if args.smoke else POLARISATION)), [])
+                       + (["--spp", "4"] if args.smoke else []))
     runs = data["runs"]
     versions = {}
     for r in runs:
@@ -167,7 +173,7 @@ def main(argv=None):
     body = "\n".join(text)
     print(body)
     print(f"outputs: {out}")
-    if args.write:
+    if args.write and not args.smoke:
         sys.path.insert(0, str(ROOT / "benchmarks"))
         from record import replace_section
         replace_section(ROOT / "benchmarks" / "RGB.md", "Recorded run",

@@ -1,6 +1,7 @@
 """The GGX quadrature probe's own accuracy and its power (batch/verdict/probes/ggx.py).
 
     .venv/bin/python benchmarks/calibrate_ggx_probe.py [--write]
+    .venv/bin/python benchmarks/calibrate_ggx_probe.py --smoke   # seconds: one scene at 32x32, 4 spp
 
 1. Accuracy: the expected image at the product's settings (LIGHT_NODES per light axis, nodes every
    min(w, h) / NODES_ACROSS pixels, FOOTPRINT^2 points per pixel) against a converged one (48 light
@@ -28,6 +29,13 @@ SCENES = ["ggx_copper_50_isolated", "ggx_copper_60_isolated", "ggx_copper_70_iso
           "ggx_copper_grazing"]
 
 
+def shrink(sc, size, spp):
+    """The scene at ``size`` x ``size`` pixels and ``spp`` samples (--smoke)."""
+    sc = copy.deepcopy(sc)
+    sc["render"].update(width=size, height=size, spp=spp)
+    return sc
+
+
 def accuracy(ggx, sc, res=128):
     plate = next(i for i, o in enumerate(sc["objects"]) if o["name"].startswith("copper_plate"))
     lights = [i for i, o in enumerate(sc["objects"]) if o.get("emitter")]
@@ -53,12 +61,16 @@ def main():
     from spectral_bench.exporters import ir_json
 
     ap = argparse.ArgumentParser()
+    ap.add_argument("--smoke", action="store_true", help="one scene at 32x32 and 4 spp, one power row (not recorded)")
     ap.add_argument("--write", action="store_true")
     args = ap.parse_args()
-    golden = {n: ir_json.load(Path(__file__).resolve().parents[1] / "golden" / "ir" / f"{n}.json") for n in SCENES}
+    names = SCENES[:1] if args.smoke else SCENES
+    golden = {n: ir_json.load(Path(__file__).resolve().parents[1] / "golden" / "ir" / f"{n}.json") for n in names}
+    if args.smoke:
+        golden = {n: shrink(sc, 32, 4) for n, sc in golden.items()}
     rows = []
     for name, sc in golden.items():
-        px, blk, tot = accuracy(ggx, sc)
+        px, blk, tot = accuracy(ggx, sc, 32 if args.smoke else 128)
         rows.append(f"| {name} | {px:.1e} | {blk:.1e} | {tot:.1e} |")
         print(rows[-1], flush=True)
 
@@ -91,7 +103,8 @@ def main():
             ("ggx_copper_50_isolated", "light +1 %", light, "separable"),
             ("ggx_copper_grazing", "light +1 %", light, "separable"),
             ("ggx_copper_50_isolated", "probe assumes height-correlated Smith", lambda s: None, "height-correlated"),
-            ("ggx_copper_grazing", "probe assumes height-correlated Smith", lambda s: None, "height-correlated")]:
+            ("ggx_copper_grazing", "probe assumes height-correlated Smith", lambda s: None, "height-correlated")][
+            :1 if args.smoke else None]:
         v = verdict(name, change, form)
         cells = " | ".join(f"{'pass' if v[k][0] else 'FAIL'} (z {v[k][2]:.1f}); mitsuba3: {'pass' if v[k][1] else 'FAIL'}"
                            for k in ("blocks", "scale"))
@@ -111,7 +124,7 @@ def main():
         "The Smith forms differ by < 0.1 % unless both directions are grazing (Lambda products), hence "
         "ggx_copper_grazing (80 degrees from the normal both ways), where they differ by 4 %.", ""])
     print(text)
-    if args.write:
+    if args.write and not args.smoke:
         from record import prepend
         prepend(Path(__file__).resolve().parent / "CALIBRATION.md", "# Calibration\n\n", text)
 

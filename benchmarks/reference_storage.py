@@ -1,6 +1,7 @@
 """How small can the shipped references be without changing a verdict?
 
-    .venv/bin/python benchmarks/reference_storage.py [--repeat 3] [--write]
+    .venv/bin/python benchmarks/reference_storage.py [--repeat 3] [--scene S ...] [--write]
+    .venv/bin/python benchmarks/reference_storage.py --smoke   # seconds: checks the script runs
 
 1. Size: every reference in references/ is rewritten with each lossless OpenEXR compression,
    the noise channels (stderr.*) kept as float32 or stored as half; the mean channels always stay
@@ -11,7 +12,7 @@
 2. Verdicts: every scene is rendered once by the runner (Mitsuba, at 1/4 of the reference's
    resolution with 1 pass, and at 1/8 (1/10 where 8 does not divide it) with 2 passes) and judged
    against the original references; the same render is then judged
-   again by the runner's own code (Run.render_one with a backend that replays the render) against
+   again by the runner's own verdict (the job's own judge, batch/jobs/job.py) against
    the converted references (the chosen storage), and so are deliberately wrong copies of it
    (radiance x 1.01, x 1.03, x 0.97: near and beyond what the noise test can see). Every status,
    noise-test p value and probe result is compared.
@@ -142,32 +143,6 @@ def sizes(ref_dir, repeat):
     return rows, committed, committed_zipped, len(files), noise_values
 
 
-class ReplayBackend:
-    """The Mitsuba backend, except that render() hands back an existing render (times ``factor``)."""
-
-    def __init__(self, real, source_exr, info, factor=1.0):
-        self.real, self.source, self.info, self.factor = real, Path(source_exr), info, factor
-        self.name, self.formats = real.name, real.formats
-
-    def availability(self):
-        return True, ""
-
-    def mode_for(self, scene):
-        return self.real.mode_for(scene)
-
-    def export(self, scene, out_dir):
-        return self.real.export(scene, out_dir)
-
-    def render(self, xml_path, mode, spp, out_exr, passes=1, seed=0, timeout=1800, log_path=None):
-        from spectral_bench.batch import exr
-        ch = exr.read(self.source)
-        ch = {n: a * self.factor for n, a in ch.items()}  # a brighter render has proportionally more noise
-        header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-        with OpenEXR.File(header, {n: np.ascontiguousarray(a, dtype=np.float32) for n, a in ch.items()}) as f:
-            f.write(str(out_exr))
-        return dict(self.info)
-
-
 def verdict_key(entry):
     test = entry.get("test") or {}
     return (entry["status"], test.get("pass"), [(p["name"], p["pass"]) for p in entry.get("probes", [])])
@@ -183,35 +158,56 @@ def integer_factor(scene, wanted):
     return f
 
 
-def verdicts(ref_dir, converted_dir, work):
-    from spectral_bench.batch import backends, cli, scene_sources
-    from spectral_bench.batch.jobs import runner
+def scaled_copy(source, target, factor):
+    """The render ``source`` times ``factor`` (every channel: a brighter render has proportionally
+    more noise), written to ``target``."""
+    from spectral_bench.batch import exr
+    ch = exr.read(source)
+    exr.write_channels(target, {n: np.ascontiguousarray(a * factor, dtype=np.float32) for n, a in ch.items()})
+
+
+def verdicts(ref_dir, converted_dir, work, scene_names=None, configs=((4, 1), (8, 2))):
+    """Render each scene once as a runner's job (batch/jobs/plan.py, job.py: the product's own
+    planning and execution) and judge that render, and scaled copies of it, by the job's own
+    verdict (job.judge) against the original and against the converted references."""
+    import copy
+    from spectral_bench.batch import cli, scene_sources
+    from spectral_bench.batch.jobs import job as jobs, plan, runner
     scenes = [(n, s) for n, s in scene_sources.load([str(scene_sources.DEFAULT_BLEND)])
-              if isinstance(s, dict) and (ref_dir / f"{n}.exr").is_file()]
-    real = backends.get("mitsuba")
+              if isinstance(s, dict) and (ref_dir / f"{n}.exr").is_file() and (not scene_names or n in scene_names)]
     rows = []
-    for factor_wanted, passes in ((4, 1), (8, 2)):
+    for factor_wanted, passes in configs:
         for name, scene in scenes:
             factor = integer_factor(scene, factor_wanted)
             tag = f"1/{factor}, {passes} pass{'es' if passes > 1 else ''}"
-            base = ["--scale", repr(1 / factor), "--passes", str(passes), "--no-flip"]
-            orig = runner.Run(cli.parse(base + ["-o", str(work / f"{factor}-{passes}" / f"{name}-orig"),
-                                                "--references", str(ref_dir)]))
-            entry = orig.render_one(name, scene, real)
-            render = orig.out / entry["image"]
-            info = {"time_s": entry["time_s"], "wall_s": entry.get("wall_s"), "spp": entry["spp"],
-                    "versions": entry.get("versions")}
+            out = work / f"{factor}-{passes}"
+            opts = cli.parse(["--scale", repr(1 / factor), "--passes", str(passes), "--no-flip",
+                              "--references", str(ref_dir), "-r", "mitsuba"])
+            real = runner.make_backend("mitsuba", opts)
+            job, decided = plan._main_job(name, scene, "mitsuba", real, opts, out, plan.verdict_settings(opts))
+            if job is None:
+                rows.append({"scene": name, "config": tag, "factor": 1.0, "status_orig": decided["status"],
+                             "status_conv": decided["status"], "same": True, "p_orig": None, "p_conv": None,
+                             "threshold": None, "z_orig": None, "z_conv": None, "probe_rel": 0.0})
+                continue
+            record = jobs.execute(job)
+            if record["status"] != "rendered":
+                raise RuntimeError(f"{name} ({tag}): {record['reason']}")
             for k in (1.0,) + FACTORS:
+                image = Path(job["folder"]) / f"render-x{k}.exr"
+                scaled_copy(out / record["image"], out / image, k)
                 judged = {}
                 for label, folder in (("orig", ref_dir), ("conv", converted_dir)):
-                    run = runner.Run(cli.parse(base + ["-o", str(work / f"{factor}-{passes}" / f"{name}-{k}-{label}"),
-                                                       "--references", str(folder)]))
-                    judged[label] = run.render_one(name, scene, ReplayBackend(real, render, info, k))
+                    j = copy.deepcopy(job)
+                    j["verdict"]["references"] = [str(Path(folder).resolve())]
+                    j["folder"] = str(Path(job["folder"]) / f"x{k}-{label}")
+                    (out / j["folder"]).mkdir(parents=True, exist_ok=True)
+                    judged[label] = jobs.judge(j, dict(record, image=str(image)))
                 a, b = judged["orig"], judged["conv"]
                 ta, tb = a.get("test") or {}, b.get("test") or {}
-                pa = {p["name"]: p for p in a["probes"]}
+                pa = {p["name"]: p for p in a.get("probes", [])}
                 dprobe = max((abs(p["error"] - pa[p["name"]]["error"]) / max(abs(pa[p["name"]]["error"]), 1e-12)
-                              for p in b["probes"] if p.get("error") is not None
+                              for p in b.get("probes", []) if p.get("error") is not None
                               and pa.get(p["name"], {}).get("error") is not None), default=0.0)
                 rows.append({"scene": name, "config": tag, "factor": k, "status_orig": a["status"],
                              "status_conv": b["status"], "same": verdict_key(a) == verdict_key(b),
@@ -231,9 +227,25 @@ def main():
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--references", default=str(references.REFERENCE_DIR))
     ap.add_argument("--no-verdicts", action="store_true", help="sizes only")
+    ap.add_argument("--scene", action="append", help="only these references (repeatable; default: all)")
+    ap.add_argument("--smoke", action="store_true",
+                    help="seconds: one reference (ggx_copper_50), two compressions, one render at 1/8 with 2 passes")
     ap.add_argument("--write", action="store_true")
     args = ap.parse_args()
     ref_dir = Path(args.references)
+    global LOSSLESS
+    configs = ((4, 1), (8, 2))
+    if args.smoke:
+        args.scene, args.repeat, configs = args.scene or ["ggx_copper_50"], 1, ((8, 2),)
+        LOSSLESS = ["NO", CHOSEN[0]]
+    if args.scene:  # a folder of just those references (sizes and verdicts alike)
+        picked = Path(tempfile.mkdtemp(prefix="reference_storage-"))
+        for name in args.scene:
+            for suffix in (".exr", ".json"):
+                if not (ref_dir / f"{name}{suffix}").is_file():
+                    ap.error(f"--scene {name}: no {name}{suffix} in {ref_dir}")
+                shutil.copy(ref_dir / f"{name}{suffix}", picked / f"{name}{suffix}")
+        ref_dir = picked
 
     rows, committed, committed_zipped, n, noise_values = sizes(ref_dir, args.repeat)
     out = [f"## Reference storage, {dt.date.today().isoformat()}",
@@ -271,7 +283,7 @@ def main():
             for p in sorted(ref_dir.glob("*.exr")):
                 write_variant(read_channels(p), conv / p.name, *CHOSEN)
                 shutil.copy(p.with_suffix(".json"), conv / p.with_suffix(".json").name)
-            vrows = verdicts(ref_dir, conv, Path(tmp) / "work")
+            vrows = verdicts(ref_dir, conv, Path(tmp) / "work", args.scene, configs)
         same = sum(r["same"] for r in vrows)
         judged = [r for r in vrows if r["z_orig"] is not None]
         dz = max((abs(r["z_conv"] - r["z_orig"]) for r in judged), default=0.0)
@@ -293,7 +305,9 @@ def main():
                        f"{'' if r['same'] else ' **CHANGED**'} | {p} | {th} | {z} | {r['probe_rel']:.1e} |")
     text = "\n".join(out) + "\n"
     print(text)
-    if args.write:
+    if args.scene and ref_dir.name.startswith("reference_storage-"):
+        shutil.rmtree(ref_dir, ignore_errors=True)
+    if args.write and not args.smoke:
         from record import prepend
         prepend(HERE / "REFERENCES.md", "# Reference storage\n\nRecorded by `benchmarks/reference_storage.py "
                 "--write`; newest first.\n\n", text)

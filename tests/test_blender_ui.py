@@ -98,6 +98,7 @@ def _write_outputs(out):
     return statuses
 
 
+@pytest.mark.slow
 def test_every_panel_draws_with_real_data(tmp_path):
     """poll() and draw() of every registered panel, the preferences and the File > Export entries,
     over every scene, object and material of scenes.blend, every value of the enums that steer the
@@ -212,6 +213,7 @@ def test_every_panel_draws_with_real_data(tmp_path):
     assert out["menu"] == ["spectral_bench.export_json", "spectral_bench.export_mitsuba", "spectral_bench.export_art"]
 
 
+@pytest.mark.slow
 def test_draw_check_catches_broken_panels():
     """The check's power: each deliberately broken panel fails with a message naming the culprit,
     among them the benchmark panel's old backend loop (it drew ``use_art``, which never existed)."""
@@ -266,6 +268,7 @@ def test_draw_check_catches_broken_panels():
 
 
 # -- canonical scenes ----------------------------------------------------------------------------
+@pytest.mark.slow
 def test_canonical_scenes_open_append_and_extract_unchanged(golden):
     out = run_bpy("""
         from spectral_bench.addon import canonical
@@ -305,6 +308,7 @@ def test_canonical_scenes_open_append_and_extract_unchanged(golden):
 
 
 # -- running -------------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_run_from_blender_then_load_images_and_open_report(tmp_path):
     opened = tmp_path / "opened.txt"
     browser = tmp_path / "browser.py"
@@ -363,6 +367,7 @@ def test_run_from_blender_then_load_images_and_open_report(tmp_path):
     assert opened.read_text() == (Path(out["out"]) / "report.html").resolve().as_uri()
 
 
+@pytest.mark.slow
 def test_cancel_stops_the_run_and_keeps_finished_results(tmp_path):
     out = run_bpy(f"""
         import time
@@ -457,6 +462,7 @@ def test_register_unregister_leaves_no_trace():
     assert out["back"]
 
 
+@pytest.mark.slow
 def test_file_export_operators_write_loadable_folders(tmp_path):
     out = run_bpy(f"""
         res = {{}}

@@ -22,6 +22,7 @@ def test_blender_and_python_argv_give_the_same_jobs():
     assert jobs_a == jobs_b == [("ggx_copper_60", "reflectance", "mitsuba"), ("ggx_glass", "reflectance", "mitsuba")]
 
 
+@pytest.mark.slow
 def test_list_through_real_processes_with_and_without_separator():
     with_sep = run_batch("--", *ARGS, "--list")
     without = run_batch(*ARGS, "--list")

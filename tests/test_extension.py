@@ -234,6 +234,7 @@ def test_install_enable_export_unregister(extension_zip, tmp_path):
     assert not any(out["gone"].values()) and out["gone_ops"] == []
 
 
+@pytest.mark.slow
 def test_installed_extension_opens_scenes_runs_one_against_a_shipped_reference_and_draws(extension_zip, tmp_path,
                                                                                           golden):
     out = run_bpy(script(install(extension_zip), f"""
@@ -266,6 +267,7 @@ def test_installed_extension_opens_scenes_runs_one_against_a_shipped_reference_a
     assert any(t and t.startswith("reference (extension): mitsuba") for t in out["labels"]), out["labels"]
 
 
+@pytest.mark.slow
 def test_references_folder_preference_persists_and_each_reference_names_its_origin(extension_zip, tmp_path):
     """The folder chosen in the preferences is saved with Blender's preferences (read back in a new
     process); with "folder, then extension" a scene whose reference is in the folder is judged

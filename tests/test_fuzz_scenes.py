@@ -22,6 +22,7 @@ def _one(scene):
         return scene_fuzz.check(scene_fuzz.scene_text(scene), d)
 
 
+@pytest.mark.slow
 @fuzz(150)
 @given(scene_fuzz.mutated_scenes())
 def test_mutated_golden_scenes_fail_by_name_or_export_safely(scene):

@@ -110,6 +110,7 @@ def test_repeated_input_options_accumulate(golden, tmp_path):
     assert sorted(r["scene"] for r in metrics(out)["runs"]) == ["ggx_copper_50_isolated", "ggx_copper_60_isolated"]
 
 
+@pytest.mark.slow
 def test_a_mesh_that_is_no_mesh_fails_its_scene_alone(tmp_path):
     """Planning (job ids read every mesh) or validation refuses the scene; the good one renders."""
     sc = _golden("dispersion_prism")
@@ -145,6 +146,7 @@ def test_a_run_whose_every_scene_failed_writes_its_results_and_exits_1(tmp_path)
     assert "failed" in (out / "summary.md").read_text()
 
 
+@pytest.mark.slow
 def test_a_scene_named_like_the_runs_own_files_cannot_take_them_over(golden, tmp_path):
     """A scene named metrics.json used to crash the run (its folder took metrics.json's place)."""
     sc = copy.deepcopy(golden[GOOD])
@@ -173,6 +175,7 @@ def test_a_blend_file_that_is_no_blend_fails_alone(tmp_path):
     assert runs["broken"]["status"] == "failed" and str(bad) in runs["broken"]["reason"], runs["broken"]
 
 
+@pytest.mark.slow
 def test_a_scene_folder_that_cannot_be_written_fails_that_scene_naming_the_path(tmp_path):
     """OUT/<scene> taken by a file (as an unwritable scene folder would be): that scene's job fails
     naming the path, the other scene is judged."""

@@ -151,6 +151,7 @@ def test_default_folders_never_collide(tmp_path, monkeypatch):
 
 
 # -- resume -----------------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_resume_with_a_corrupt_metrics_file_is_named(tmp_path):
     out = tmp_path / "o"
     out.mkdir()
@@ -161,6 +162,7 @@ def test_resume_with_a_corrupt_metrics_file_is_named(tmp_path):
         assert "Traceback" not in proc.stderr, proc.stderr[-2000:]
 
 
+@pytest.mark.slow
 def test_resume_restores_exec_and_keeps_finished_renders(tmp_path):
     """-e is part of a job's id: a resumed run without -e used to plan other jobs and render the
     finished ones again, over their files. Now it takes -e from the run, keeps what finished, and

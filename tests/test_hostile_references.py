@@ -125,6 +125,7 @@ def test_a_run_uses_the_next_folder_and_names_every_problem(tmp_path):
         assert f"{bad_file}: {problem}" in proc.stdout + proc.stderr  # the console, one line per problem
 
 
+@pytest.mark.slow
 def test_with_no_usable_reference_the_reason_says_judged_without_it(tmp_path):
     """Every reference bad: the renders are judged by their probes, and the reason, the summary
     and metrics.json say that they were judged without a reference and why."""

@@ -8,6 +8,12 @@ pass loop (batch/backends/passes.py) and the same conversion of the film's chann
 (``film_to_ir``: monochrome variants, the camera polariser); the executable's version is read from
 its banner, so the known deviations of that Mitsuba version apply to it. Scenes that need this
 project's Python plugins are unsupported on the executable route, with the reason.
+
+Device (``--device cpu|gpu|auto``, batch/backends/cuda.py): on the GPU the same "cheapest variant
+that models the scene" rule picks from Mitsuba's cuda_ad_* variants instead of llvm_ad_*/scalar_*;
+auto uses the GPU where the CUDA probe renders. The executable route (-e mitsuba=PATH) is asked for
+the cuda_ad_* variant the same way (the probe is the Python package's; an executable built without
+CUDA fails the job with its own message).
 """
 import atexit
 import importlib.util
@@ -25,7 +31,7 @@ import numpy as np
 
 from ...exporters import camera_filter, colorimetry, mitsuba_writer
 from .. import exr
-from . import child, llvm
+from . import child, cuda, llvm
 from . import passes as passes_mod
 from .passes import BackendFailure
 
@@ -39,9 +45,9 @@ INTEGRATORS = ("path", "ptracer")  # the IR's render.integrator values Mitsuba r
 
 
 def scalar_twin(variant):
-    """The scalar variant that models the same as an llvm_ad_* one (Mitsuba ships no scalar_mono*:
-    its spectral twin is exact for the constant spectra a mono variant is chosen for)."""
-    kind = variant.split("_", 2)[-1] if variant.startswith("llvm_ad_") else variant.split("_", 1)[-1]
+    """The scalar variant that models the same as an llvm_ad_* or cuda_ad_* one (Mitsuba ships no
+    scalar_mono*: its spectral twin is exact for the constant spectra a mono variant is chosen for)."""
+    kind = variant.split("_ad_", 1)[-1] if "_ad_" in variant else variant.split("_", 1)[-1]
     return "scalar_" + kind.replace("mono", "spectral")
 
 
@@ -49,10 +55,14 @@ class MitsubaBackend:
     name = "mitsuba"
     formats = ("mitsuba",)
 
-    def __init__(self, executable=None, force_variant=None):
+    def __init__(self, executable=None, force_variant=None, device="auto"):
+        if device not in cuda.DEVICES:
+            raise ValueError(f"device {device!r}: one of {', '.join(cuda.DEVICES)}")
         self.executable = executable
         self.force_variant = force_variant
-        self.options = {"executable": executable, "force_variant": force_variant}  # what rebuilds this backend
+        self.device = device
+        # what rebuilds this backend (jobs are data; a job rebuilt elsewhere probes its own CUDA)
+        self.options = {"executable": executable, "force_variant": force_variant, "device": device}
 
     def availability(self):
         """(available, reason)."""
@@ -63,7 +73,14 @@ class MitsubaBackend:
         return True, ""
 
     def llvm_message(self):
-        return llvm.find()[1]
+        """The log line of where the variants render: the device, and LLVM's state on the CPU."""
+        if cuda.use_gpu(self.device):
+            return cuda.message(self.device)
+        return f"{llvm.find()[1]}; {cuda.message(self.device)}"
+
+    def device_problem(self):
+        """None, or why this backend's --device cannot be honoured here (a usage error)."""
+        return cuda.refusal(self.device)
 
     def mode_for(self, scene):
         """(variant, None) or (None, reason the scene is unsupported)."""
@@ -89,19 +106,26 @@ class MitsubaBackend:
                 return None, ("fluorescence needs an unpolarised spectral JIT variant (llvm_ad_spectral), "
                               f"not {self.force_variant}")
             return self.force_variant, None
+        if cuda.use_gpu(self.device):
+            return self._cheapest(needs, "cuda_ad_", True), None
         llvm_ok = llvm.find()[0] is not None
         if "fluorescence" in needs and not llvm_ok:
             return None, ("fluorescence: sb_fluorescent_path is a Python integrator that Mitsuba's scalar "
                           "variants would call once per sample; it needs llvm_ad_spectral: "
                           + llvm.find()[1])
-        prefix = "llvm_ad_" if llvm_ok else "scalar_"
+        return self._cheapest(needs, "llvm_ad_" if llvm_ok else "scalar_", llvm_ok), None
+
+    @staticmethod
+    def _cheapest(needs, prefix, has_mono):
+        """The cheapest variant of ``prefix`` (llvm_ad_, cuda_ad_, scalar_) that models ``needs``;
+        ``has_mono``: the family ships *_mono_polarized (the JIT ones do, scalar does not)."""
         if "polarization" in needs:
-            if "spectral" in needs or not llvm_ok:  # Mitsuba ships no scalar_mono_polarized
-                return prefix + "spectral_polarized", None
-            return "llvm_ad_mono_polarized", None  # every spectrum is constant: one wavelength is exact
-        if "spectral" in needs or "dispersion" in needs:
-            return prefix + "spectral", None
-        return prefix + "rgb", None
+            if "spectral" in needs or not has_mono:  # Mitsuba ships no scalar_mono_polarized
+                return prefix + "spectral_polarized"
+            return prefix + "mono_polarized"  # every spectrum is constant: one wavelength is exact
+        if "spectral" in needs or "dispersion" in needs or "fluorescence" in needs:
+            return prefix + "spectral"
+        return prefix + "rgb"
 
     def export(self, scene, out_dir):
         return mitsuba_writer.write(scene, out_dir)

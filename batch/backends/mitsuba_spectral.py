@@ -55,7 +55,7 @@ def spectral_variant(variant):
     if variant.endswith("_polarized"):
         raise SpectralRenderError(f"variant {variant}: specfilm records unpolarised radiance only "
                                   "(Film::prepare_sample takes an UnpolarizedSpectrum); a polarised scene has no spectral output here")
-    prefix = "llvm_ad_" if variant.startswith("llvm_ad_") else "scalar_"
+    prefix = variant.split("_ad_", 1)[0] + "_ad_" if "_ad_" in variant else "scalar_"  # llvm_ad_, cuda_ad_
     return prefix + "spectral"
 
 
@@ -141,7 +141,7 @@ def main(argv=None):
     scene = mi.load_string(spectral_xml(xml.read_text(), band_list, str(xml)))
     film = scene.sensors()[0].film()
     width, height = film.size()
-    chunks = max(1, math.ceil(args.spp * width * height / MAX_WAVEFRONT)) if args.variant.startswith("llvm") else 1
+    chunks = max(1, math.ceil(args.spp * width * height / MAX_WAVEFRONT)) if "_ad_" in args.variant else 1
     while args.spp % chunks:
         chunks += 1
     acc, render_s = None, 0.0

@@ -153,6 +153,7 @@ def make_backend(name, opts):
         return backends.get(name, declaration=declared[name], **kwargs)
     if name == "mitsuba":
         kwargs["force_variant"] = opts["variant"]
+        kwargs["device"] = opts.get("device") or "auto"
     if name == "art":
         kwargs["ggx"] = bool(opts["art_ggx"])
     if name in ("cycles", "luxcore"):
@@ -369,6 +370,15 @@ def write_junit(path, batch):
         log.error("--junit %s: cannot write it: %s", path, exc.strerror or exc)
 
 
+def check_device(opts):
+    """UsageError where --device gpu cannot be honoured (Mitsuba runs and CUDA does not render here:
+    batch/backends/cuda.py's probe says why); other devices and backends need nothing."""
+    if opts.get("device") == "gpu" and "mitsuba" in backend_names(opts) and not opts.get("export_only"):
+        problem = make_backend("mitsuba", opts).device_problem()
+        if problem:
+            raise UsageError(problem)
+
+
 def run(opts):
     """Run the batch; returns the exit status (batch/verdict/status.py: 0 when every judged job
     is ok, known or fixed and nothing was left unjudged, 3 when something was unjudged, 4 when
@@ -382,6 +392,8 @@ def run(opts):
         check_junit(opts["junit"])
     if opts.get("baseline") and not opts.get("resume"):
         open_baseline(opts, opts.get("out"))  # checked before any folder is made
+    if not opts.get("resume"):
+        check_device(opts)
     out, lock = claim(opts)
     opts["out"] = str(out)
     try:
@@ -391,6 +403,7 @@ def run(opts):
             except planning.ResumeError as exc:
                 raise UsageError(str(exc)) from None
             deviations = load_known(opts.get("known"))
+            check_device(opts)
             if opts.get("baseline"):
                 open_baseline(opts, out)
         return _run(opts, out, deviations, t0)

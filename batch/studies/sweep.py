@@ -158,7 +158,7 @@ def chart(path_stem, scene, lines, floor=None):
 
 def sweep_modes(backend, scene, requested=None):
     """The modes a sweep compares for one backend: the chosen one and, for Mitsuba's LLVM
-    variants, the scalar variant of the same kind (unless ``requested`` lists them)."""
+    (or CUDA) variants, the scalar variant of the same kind (unless ``requested`` lists them)."""
     mode, why = backend.mode_for(scene)
     if mode is None:
         return [], why
@@ -167,7 +167,7 @@ def sweep_modes(backend, scene, requested=None):
     if requested:
         return list(requested), None
     modes = [mode]
-    if mode.startswith("llvm_ad_") and "fluorescence" not in scene.get("needs", []):
+    if "_ad_" in mode and "fluorescence" not in scene.get("needs", []):
         # (fluorescent scenes render through a Python integrator, which needs a JIT variant)
         from ..backends.mitsuba_backend import scalar_twin
         modes.append(scalar_twin(mode))
