@@ -161,6 +161,8 @@ TARGETS = {bpy.types.Material: MaterialProps, bpy.types.Light: LightProps, bpy.t
 
 
 def register():
+    if getattr(bpy.types.Scene, "spectral_bench", None) is not None and SceneProps.is_registered:
+        return  # already registered (batch/blend_input.py registers these alone to read a .blend)
     for cls in CLASSES:
         bpy.utils.register_class(cls)
     for target, group in TARGETS.items():

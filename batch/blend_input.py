@@ -74,8 +74,10 @@ def load_blend(path, names=None):
     already_open = bool(bpy.data.filepath) and Path(bpy.data.filepath).resolve() == path
     if not already_open:
         open_blend(path)
-    from .. import register
     if not hasattr(bpy.types.Scene, "spectral_bench"):
-        register()
+        # only the annotation properties the extraction reads: no operator, panel or preference
+        # of the extension is registered to read a .blend
+        from ..addon import properties
+        properties.register()
     from ..exporters import extract_blender
     return extract_blender.extract(names)

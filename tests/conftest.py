@@ -141,7 +141,8 @@ def run_bpy(body, timeout=600, env=None):
         import pkg_bootstrap; pkg_bootstrap.package()
         import bpy
         from spectral_bench.batch import blend_input
-        blend_input.load_blend({str(ROOT / 'scenes.blend')!r})
+        blend_input.load_blend({str(ROOT / 'scenes.blend')!r})  # registers the annotation properties only
+        import spectral_bench; spectral_bench.register()  # the whole extension: operators, panels, preferences
     """) + textwrap.dedent(body)
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=timeout,
                           env=dict(os.environ, **(env or {})))

@@ -177,3 +177,20 @@ def test_the_extension_lists_runs_appends_and_opens_a_hostile_canonical_file_wit
     assert result["appended"] == ["FINISHED"] and result["left"] == []
     assert result["opened"] == ["FINISHED"] and result["scene"] == SCENE
     assert set(result["control"]) == {"driver_import", "driver_node_tree"}
+
+
+def test_reading_a_blend_registers_only_the_annotation_properties():
+    """batch/blend_input.py registers what the extraction reads, nothing of the UI: no operator,
+    panel or preference of the extension exists after reading scenes.blend headless."""
+    from pathlib import Path
+    root = Path(__file__).resolve().parents[1]
+    code = (f"import sys, json; sys.path.insert(0, {str(root)!r}); import pkg_bootstrap; pkg_bootstrap.package(); "
+            "import bpy; from spectral_bench.batch import blend_input; "
+            f"n = len(blend_input.load_blend({str(root / 'scenes.blend')!r})); "
+            "print(json.dumps({'scenes': n, 'props': hasattr(bpy.types.Scene, 'spectral_bench'), "
+            "'ops': [n for n in dir(bpy.types) if n.startswith('SPECTRAL_BENCH_OT')], "
+            "'panels': [n for n in dir(bpy.types) if n.startswith('SPECTRAL_BENCH_PT')]}))")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert out["scenes"] == 27 and out["props"] is True
+    assert out["ops"] == [] and out["panels"] == []

@@ -81,7 +81,7 @@ def shared_reference(out_dir, scene, backend):
 def derived_image(out_dir, scene, backend, kind):
     """Write (once) and return diff_abs.exr or diff_rel.exr beside the render."""
     from .. import exr
-    from . import previews
+    from .. import previews
     folder = Path(out_dir) / scene / "results" / backend
     path = folder / IMAGE_KINDS[kind]
     if not path.is_file():

@@ -256,7 +256,7 @@ def check(strip, value, scene, names, img, stderr=None, tests=1):
 
 def strip_image(path, images):
     """The strip's renders side by side (sRGB previews), labelled by order."""
-    from ..report.previews import srgb_encode
+    from ..previews import srgb_encode
     from PIL import Image
     h = max(i.shape[0] for _, i in images)
     tiles = [np.pad(srgb_encode(i[..., :3]), ((0, h - i.shape[0]), (0, 2), (0, 0))) for _, i in images]

@@ -324,7 +324,7 @@ def judge_pair(new_entry, new_folder, old_entry, old_folder, settings, zmap_path
     ``old_entry`` (the matching job of the run in ``old_folder``). ``settings``: alpha, min_samples,
     block (the noise test's, default the runner's). The z-map is written to ``zmap_path`` and
     recorded as ``zmap_rel``; ``run_label``: the baseline folder as the user gave it."""
-    from ..report import previews
+    from .. import previews
     from . import references, stats
     alpha = settings.get("alpha") or stats.ALPHA
     tc = time_change(old_entry, new_entry, alpha)

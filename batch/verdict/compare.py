@@ -57,9 +57,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..previews import REL_EPS  # noqa: F401 - the regulariser of the relative metrics, shared with the previews
 from . import stats
 
-REL_EPS = 0.01  # regulariser of the relative metrics (as in Mitsuba's and Blender's tests)
 MIN_SAMPLES = 65536  # samples pooled per block of the noise test (see above)
 # Scenes whose noise test pools more samples per block than --min-samples asks (never fewer): the
 # rough glass spheres' caustic paths are so skewed at 65536 samples per block that a block missing
