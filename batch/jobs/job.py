@@ -13,11 +13,15 @@ Kinds:
 """
 import copy
 import hashlib
+import importlib
 import json
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
-KINDS = ("render", "sweep", "stability", "reference")
+
+
+KINDS = ("render", "sweep", "stability", "reference")  # KINDS_TABLE below says what each does
 
 
 class RenderCrashed(RuntimeError):
@@ -86,31 +90,54 @@ def execute(job):
     return record
 
 
+def _judge_render(job, record, deviations):
+    """A render job's metrics.json entry (batch/verdict/judge.py), failed when the render was."""
+    from ..verdict import judge as verdicts, known
+    entry = new_entry(job)
+    if record["status"] != "rendered":
+        entry.update(status="failed", reason=record["reason"])
+        return entry
+    entry.update({k: record[k] for k in ("time_s", "wall_s", "spp", "passes", "pass_times", "image", "versions",
+                                         "approximated", "retried")
+                  if k in record})
+    if deviations is None:
+        deviations = known.load(job["verdict"].get("known"))
+    out = Path(job["out"])
+    return verdicts.render_verdict(entry, job["source_scene"], job["scene"], out / record["image"],
+                                   out / job["folder"], job["verdict"], deviations)
+
+
+@dataclass(frozen=True)
+class Kind:
+    """What a kind of job does with its render record: ``judge`` (a function, or "module:function"
+    imported when first needed, so that this module imports no study: the studies import jobs,
+    never the other way) and the key under which its result sits in the record (``result``)."""
+    judge: object = None
+    result: str = None
+
+    def judged(self, job, record, deviations):
+        if callable(self.judge):
+            return self.judge(job, record, deviations)
+        if record["status"] != "rendered" or self.judge is None:
+            return dict(record)
+        module, _, name = self.judge.partition(":")
+        fn = getattr(importlib.import_module(module, __package__), name)
+        return dict(record, **{self.result: fn(job, record)})
+
+
+# the job kinds: one table (the runner, the engines and resume dispatch through it)
+KINDS_TABLE = {
+    "render": Kind(_judge_render),
+    "sweep": Kind("..verdict.judge:sweep_point", "point"),  # one rung of a speed/accuracy ladder
+    "stability": Kind("..studies.stability:judge_value", "row"),  # one value of a stability strip
+    "reference": Kind(None),  # one pass of a reference (batch/make_references.py merges them)
+}
+
+
 def judge(job, record, deviations=None):
     """The kind's verdict on a render record: the job's result (a metrics.json entry, a sweep
-    point, a stability row or a reference pass)."""
-    from ..verdict import judge as verdicts, known
-    if job["kind"] == "render":
-        entry = new_entry(job)
-        if record["status"] != "rendered":
-            entry.update(status="failed", reason=record["reason"])
-            return entry
-        entry.update({k: record[k] for k in ("time_s", "wall_s", "spp", "passes", "pass_times", "image", "versions",
-                                             "approximated", "retried")
-                      if k in record})
-        if deviations is None:
-            deviations = known.load(job["verdict"].get("known"))
-        out = Path(job["out"])
-        return verdicts.render_verdict(entry, job["source_scene"], job["scene"], out / record["image"],
-                                       out / job["folder"], job["verdict"], deviations)
-    if record["status"] != "rendered":
-        return dict(record)
-    if job["kind"] == "sweep":
-        return dict(record, point=verdicts.sweep_point(job, record))
-    if job["kind"] == "stability":
-        from ..studies import stability
-        return dict(record, row=stability.judge_value(job, record))
-    return dict(record)
+    point, a stability row or a reference pass), through KINDS_TABLE."""
+    return KINDS_TABLE[job["kind"]].judged(job, record, deviations)
 
 
 def run(job, deviations=None):

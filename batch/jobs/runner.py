@@ -151,14 +151,17 @@ def make_backend(name, opts):
     declared = opts.get("renderers") or {}
     if name in declared:
         return backends.get(name, declaration=declared[name], **kwargs)
-    if name == "mitsuba":
-        kwargs["force_variant"] = opts["variant"]
-        kwargs["device"] = opts.get("device") or "auto"
-    if name == "art":
-        kwargs["ggx"] = bool(opts["art_ggx"])
-    if name in ("cycles", "luxcore"):
-        kwargs["approximate"] = bool(opts.get("approximate"))
+    kwargs.update(BACKEND_OPTIONS.get(name, lambda o: {})(opts))
     return backends.get(name, **kwargs)
+
+
+# the run's options each built-in backend takes beyond its executable
+BACKEND_OPTIONS = {
+    "mitsuba": lambda o: {"force_variant": o["variant"], "device": o.get("device") or "auto"},
+    "art": lambda o: {"ggx": bool(o["art_ggx"])},
+    "cycles": lambda o: {"approximate": bool(o.get("approximate"))},
+    "luxcore": lambda o: {"approximate": bool(o.get("approximate"))},
+}
 
 
 def plan(opts):
