@@ -67,6 +67,19 @@ class Accumulation:
     retried: list = field(default_factory=list)
     wall_s: float = 0.0
 
+    def add(self, img):
+        """One more pass's image into the running mean and sum of squared deviations (Welford 1962)."""
+        if self.mean is None:
+            self.shape, self.mean, self.m2 = img.shape, np.zeros(img.shape), np.zeros(img.shape)
+        self.count += 1
+        delta = img - self.mean
+        self.mean += delta / self.count
+        self.m2 += delta * (img - self.mean)
+
+    def var_of_mean(self):
+        """Per pixel: the variance of the mean estimated from the passes' spread (two or more passes)."""
+        return self.m2 / (self.count - 1) / self.count
+
 
 def render(backend, path, mode, spp, out_exr, passes=1, seed=0, timeout=1800, log_path=None, accumulation=None):
     """Render ``spp`` samples per pixel in ``passes`` independent passes of ``backend`` and write
@@ -93,24 +106,20 @@ def render(backend, path, mode, spp, out_exr, passes=1, seed=0, timeout=1800, lo
                 result = _one_pass(session, k, passes, per_pass, s, work / f"pass{k}.exr", timeout, log, retried)
                 img = np.asarray(result["image"], dtype=np.float64)
                 if acc.names is None:
-                    acc.names, acc.shape = list(result["names"]), img.shape
+                    acc.names = list(result["names"])
                     info.update(result.get("info") or {})
-                    acc.mean, acc.m2 = np.zeros(acc.shape), np.zeros(acc.shape)
                 elif list(result["names"]) != acc.names or img.shape != acc.shape:
                     raise BackendFailure(f"pass {k + 1}/{passes} (seed {s}) wrote channels {result['names']} of "
                                          f"shape {img.shape}, the first pass {acc.names} of shape {acc.shape}")
-                delta = img - acc.mean
-                acc.mean += delta / (k + 1)
-                acc.m2 += delta * (img - acc.mean)
-                acc.count = k + 1
+                acc.add(img)
                 times.append(float(result["time_s"]))
                 taken.append(result.get("spp", per_pass))  # a renderer may take other than it was asked
     shutil.rmtree(work, ignore_errors=True)
     acc.wall_s += time.perf_counter() - t0
-    names, shape, mean, m2, passes = acc.names, acc.shape, acc.mean, acc.m2, acc.count
+    names, shape, mean, passes = acc.names, acc.shape, acc.mean, acc.count
     extra = {}
     if passes > 1:
-        stderr = np.sqrt(m2 / (passes - 1) / passes)
+        stderr = np.sqrt(acc.var_of_mean())
         # issue 21: the standard error as half floats (float32 where one does not fit), as references store it
         # (batch/verdict/references.py _noise_channel: no verdict changed): a quarter smaller run folder
         from ..verdict.references import _noise_channel
