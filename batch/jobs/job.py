@@ -107,7 +107,7 @@ def render_until_decided(job, backend, path, image, folder):
                                       timeout=job["timeout"], log_path=folder / "render.log", accumulation=acc))
 
     def look(alpha):
-        return verdicts.look(job["scene_name"], job["source_scene"], job["backend"], job["mode"], last["spp"],
+        return verdicts.look(job["scene_name"], job["source_scene"], job["scene"], job["backend"], job["mode"], last["spp"],
                              last["passes"], image, folder, v, alpha)
 
     seq = sequential.run(render_to, look, job["passes"], v.get("max_passes") or sequential.MAX_PASSES,

@@ -20,8 +20,14 @@ for power (detectable <= S) never raises the false-alarm rate: it only removes l
 The final verdict is the last look's, at alpha / K (the alpha spent per look), so its
 ``detectable`` is stated at that alpha too.
 
-The probes are evaluated once, on the final image, at their own alpha; the loop is driven by the
-noise test alone (a render without a noise test, e.g. no reference, renders its --passes only).
+What a look decides: the noise test's pass or fail (at alpha / K) and the run's detectable scale
+(batch/verdict/judge.py ``look``: the noise test's or a radiance probe's figure, the smaller). The
+probes' own pass or fail is the final image's only, at their own alpha: one look, but at a
+stopping time that depends on the noise test (correlated with the probes) and the probes' noise
+estimates; a probe never stops the loop on its own fail, and the union bound over the K possible
+stopping points bounds its false alarms by K times its alpha at worst. Not spent here and not
+simulated: the guarantee above is the noise test's. A render the noise test does not judge
+(no usable reference, one pass of another backend) renders its --passes only.
 """
 MAX_PASSES = 16  # default --max-passes
 
