@@ -135,3 +135,22 @@ def test_repeated_looks_false_alarm_at_most_alpha_by_simulation():
           f"alpha per look {naive} ([{nlo:.3f}, {nhi:.3f}])")
     assert lo <= alpha, (spent, trials)
     assert hi < nlo, (spent, naive, trials)  # the spending is what keeps it down
+
+
+@pytest.mark.slow
+def test_resume_keeps_a_detect_run_and_refuses_another_target(tmp_path):
+    """--detect and --max-passes are options of the run like the others: a resumed run takes them
+    from metrics.json and keeps the finished render; a different target is refused (exit 2)."""
+    out = tmp_path / "o"
+    proc = run_batch("-i", GOLDEN / "ggx_copper_50_isolated.json", "-r", "mitsuba", "--scale", 0.0625, "--spp", 4,
+                     "--detect", 0.2, "--max-passes", 4, "--no-flip", "-o", out)
+    assert proc.returncode in (0, 1), proc.stderr[-2000:]
+    run = metrics(out)["runs"][0]
+    assert run["sequential"]["target"] == 0.2 and run["sequential"]["max_passes"] == 4, run
+    stamp = (out / run["image"]).read_bytes()
+    proc = run_batch("--resume", out)
+    assert "1 jobs kept, 0 to run" in proc.stderr, proc.stderr[-2000:]
+    assert metrics(out)["options"]["detect"] == 0.2 and (out / run["image"]).read_bytes() == stamp
+    for args, option in ((["--detect", "0.1"], "--detect"), (["--max-passes", "8"], "--max-passes")):
+        proc = run_batch("--resume", out, *args)
+        assert proc.returncode == 2 and option in proc.stderr and "Traceback" not in proc.stderr, proc.stderr[-2000:]
