@@ -33,6 +33,7 @@ DEFAULTS = {
     "input": None, "case": None, "scene": None, "renderer": None, "exec": None, "spp": None, "scale": 1.0,
     "out": None, "export_only": False, "format": None, "log": None, "visualize": False, "settings": None,
     "variant": None, "device": "auto", "alpha": 0.01, "block": None, "min_samples": 65536, "timeout": 1800, "passes": 2, "seed": 0, "flip": True,
+    "detect": None, "max_passes": 16,
     "references": None, "known": None, "list": False, "art_ggx": False, "sweep": False, "ladder": None, "sweep_modes": None, "stability": False,
     "approximate": False, "renderers": None, "cluster": None, "cluster_timeout": DEFAULT_CLUSTER_TIMEOUT, "dashboard": None, "resume": None,
     "junit": None,
@@ -248,6 +249,7 @@ TYPES = {
     "log": text_kind(_nonempty, "path"), "settings": text_kind(_nonempty, "path"), "variant": text_kind(_nonempty, "variant"),
     "device": text_kind(_device, "device"), "alpha": number(0, 1, lo_open=True, hi_open=True), "block": int_in(1, 1 << 16), "min_samples": int_in(1, 1 << 40),
     "timeout": number(0, None, lo_open=True), "passes": int_in(1, MAX_PASSES), "seed": int_in(0, MAX_SEED),
+    "detect": number(0, 1, lo_open=True, hi_open=True), "max_passes": int_in(1, MAX_PASSES),
     "references": text_kind(_nonempty, "path"), "known": text_kind(_nonempty, "path"),
     "ladder": _comma_list(SPP, "N,N,..."), "sweep_modes": _comma_list(_MODE, "MODE,..."),
     "cluster": text_kind(_cluster, "address"), "cluster_timeout": number(0, 3600, lo_open=True),
@@ -302,6 +304,13 @@ def parser():
     ap.add_argument("--passes", type=T["passes"],
                     help=f"independent passes per render, 1 to {MAX_PASSES}: its own per-pixel noise for the verdict (default 2; "
                          "with 1, only the reference's own backend is judged against the reference)")
+    ap.add_argument("--detect", type=T["detect"], metavar="S",
+                    help="render until decided, 0 < S < 1: after --passes passes, double them (no pass rendered twice) "
+                         "until the noise test's detectable scale error is <= S (e.g. 0.01), it fails, or --max-passes; "
+                         "each of the K planned looks tests at alpha / K (Bonferroni), so the whole procedure false-alarms "
+                         "at most at --alpha (default: off)")
+    ap.add_argument("--max-passes", type=T["max_passes"], metavar="N",
+                    help=f"cap on the passes of --detect, 1 to {MAX_PASSES} (default 16)")
     ap.add_argument("--seed", type=T["seed"], help=f"first sampler seed, 0 to {MAX_SEED} (default 0)")
     ap.add_argument("--no-flip", dest="flip", action="store_false", help="skip HDR-FLIP")
     ap.add_argument("--references", action="append", type=T["references"], metavar="DIR",

@@ -28,6 +28,9 @@ SMOKE = {  # script -> (arguments that make it run in seconds, what its output m
     "bench_rgb_backends.py": (["--smoke", "--scale", "0.05", "--passes", "2", "--repeats", "1", "--out", "{tmp}"], TABLE),
     "bench_thin_film.py": (["--scale", "0.05", "--spp", "4", "--repeat", "1"], TABLE),
     "calibrate_fluorescence.py": (["--size", "16", "--spp", "4", "--seeds", "2"], TABLE),
+    # its render half (the judge half reads what render cached: CALIBRATION.md has both commands)
+    "calibrate_glass_false_alarms.py": (["render", "--seeds", "1", "--scale", "0.25", "-s", "ggx_glass", "--cache", "{tmp}"],
+                                        r"ggx_glass seed 0: [0-9.]+ s"),
     "calibrate_ggx_probe.py": (["--smoke"], TABLE),
     "calibrate_noise_test.py": (["--seeds", "1", "-s", "ggx_copper_50"], TABLE),
     "calibrate_prism_probe.py": (["--seeds", "1"], TABLE),
@@ -36,6 +39,7 @@ SMOKE = {  # script -> (arguments that make it run in seconds, what its output m
     "crosscheck_fluorescence.py": (["--size", "16", "--spp", "4", "--passes", "2", "-s", "fluorescent_sphere_lone"], TABLE),
     "fuzz_scenes.py": (["--count", "40", "--schema-count", "4", "--chunk", "20", "--workers", "1"], TABLE),
     "plugin_lane_estimators.py": ([], r"variance one-lane / mixture"),
+    "power_by_scene.py": (["-s", "ggx_copper_50"], TABLE),
     "reference_storage.py": (["--smoke"], TABLE),
     "rgb_microfacet_check.py": (["--smoke", "--spp", "4", "--passes", "2"], TABLE),
 }

@@ -17,11 +17,16 @@ error and the tail of its output; every pass must have the same channels and siz
 the standard error of the mean per pixel (the pass-to-pass spread, Welford's online update:
 B. P. Welford, Technometrics 4(3), 1962) are written as the render's EXR (R, G, B, further channels,
 then ``stderr.<channel>`` with two or more passes), and the render record lists each pass's time.
+
+``accumulation`` (an Accumulation, issue 20 ``--detect``): passes are added to those already
+rendered into it (its Welford sums), so a render continued to more passes renders no pass twice:
+pass k keeps seed ``seed + k * SEED_STRIDE`` and the samples per pixel of the first call.
 """
 import math
 import os
 import shutil
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -46,43 +51,75 @@ def tail(text, lines=3, chars=600):
     return " | ".join(errors or all_lines[-lines:])[-chars:]
 
 
-def render(backend, path, mode, spp, out_exr, passes=1, seed=0, timeout=1800, log_path=None):
+@dataclass
+class Accumulation:
+    """The passes rendered so far (plain data): samples per pixel per pass, Welford's running mean
+    and sum of squared deviations per pixel, and each pass's record."""
+    per_pass: int
+    count: int = 0
+    names: list = None
+    shape: tuple = None
+    mean: np.ndarray = field(default=None, repr=False)
+    m2: np.ndarray = field(default=None, repr=False)
+    info: dict = field(default_factory=dict)
+    times: list = field(default_factory=list)
+    taken: list = field(default_factory=list)
+    retried: list = field(default_factory=list)
+    wall_s: float = 0.0
+
+    def add(self, img):
+        """One more pass's image into the running mean and sum of squared deviations (Welford 1962)."""
+        if self.mean is None:
+            self.shape, self.mean, self.m2 = img.shape, np.zeros(img.shape), np.zeros(img.shape)
+        self.count += 1
+        delta = img - self.mean
+        self.mean += delta / self.count
+        self.m2 += delta * (img - self.mean)
+
+    def var_of_mean(self):
+        """Per pixel: the variance of the mean estimated from the passes' spread (two or more passes)."""
+        return self.m2 / (self.count - 1) / self.count
+
+
+def render(backend, path, mode, spp, out_exr, passes=1, seed=0, timeout=1800, log_path=None, accumulation=None):
     """Render ``spp`` samples per pixel in ``passes`` independent passes of ``backend`` and write
     their mean (and standard error) to ``out_exr``; returns the render record (variant, spp,
     passes, seed, time_s: the passes' render time, wall_s, resolution, channels, versions,
-    pass_times, retried). Raises BackendFailure naming the pass that failed twice."""
+    pass_times, retried). Raises BackendFailure naming the pass that failed twice.
+    ``accumulation``: continue it up to ``passes`` passes in all (module docstring); its
+    ``per_pass`` samples per pixel are kept, ``spp`` is then unused."""
     passes = max(1, int(passes))
-    per_pass = math.ceil(spp / passes)
+    acc = accumulation if accumulation is not None else Accumulation(per_pass=math.ceil(spp / passes))
+    per_pass = acc.per_pass
     out_exr = Path(out_exr)
     work = out_exr.parent / f".{out_exr.stem}.passes"
     shutil.rmtree(work, ignore_errors=True)
     work.mkdir(parents=True)
     t0 = time.perf_counter()
-    names = shape = mean = m2 = None
-    times, taken, retried, info = [], [], [], {}
-    if log_path:
+    times, taken, retried, info = acc.times, acc.taken, acc.retried, acc.info
+    if log_path and acc.count == 0:
         Path(log_path).write_text("")  # this render's log; children append to it (a warm worker too)
     with open(log_path or os.devnull, "a", encoding="utf-8") as log:
         with backend.session(path, mode, log) as session:
-            for k in range(passes):
+            for k in range(acc.count, passes):
                 s = seed + k * SEED_STRIDE
                 result = _one_pass(session, k, passes, per_pass, s, work / f"pass{k}.exr", timeout, log, retried)
                 img = np.asarray(result["image"], dtype=np.float64)
-                if names is None:
-                    names, shape, info = list(result["names"]), img.shape, dict(result.get("info") or {})
-                    mean, m2 = np.zeros(shape), np.zeros(shape)
-                elif list(result["names"]) != names or img.shape != shape:
+                if acc.names is None:
+                    acc.names = list(result["names"])
+                    info.update(result.get("info") or {})
+                elif list(result["names"]) != acc.names or img.shape != acc.shape:
                     raise BackendFailure(f"pass {k + 1}/{passes} (seed {s}) wrote channels {result['names']} of "
-                                         f"shape {img.shape}, the first pass {names} of shape {shape}")
-                delta = img - mean
-                mean += delta / (k + 1)
-                m2 += delta * (img - mean)
+                                         f"shape {img.shape}, the first pass {acc.names} of shape {acc.shape}")
+                acc.add(img)
                 times.append(float(result["time_s"]))
                 taken.append(result.get("spp", per_pass))  # a renderer may take other than it was asked
     shutil.rmtree(work, ignore_errors=True)
+    acc.wall_s += time.perf_counter() - t0
+    names, shape, mean, passes = acc.names, acc.shape, acc.mean, acc.count
     extra = {}
     if passes > 1:
-        stderr = np.sqrt(m2 / (passes - 1) / passes)
+        stderr = np.sqrt(acc.var_of_mean())
         # issue 21: the standard error as half floats (float32 where one does not fit), as references store it
         # (batch/verdict/references.py _noise_channel: no verdict changed): a quarter smaller run folder
         from ..verdict.references import _noise_channel
@@ -90,12 +127,12 @@ def render(backend, path, mode, spp, out_exr, passes=1, seed=0, timeout=1800, lo
     exr.write_image(out_exr, names, mean, extra)
     record = dict(info)
     record.update({"variant": mode, "spp": int(round(sum(taken))), "passes": passes, "seed": seed,
-                   "time_s": sum(times), "wall_s": time.perf_counter() - t0, "pass_times": times,
+                   "time_s": sum(times), "wall_s": acc.wall_s, "pass_times": list(times),
                    "resolution": [int(shape[1]), int(shape[0])], "channels": names})
     if any(t != per_pass for t in taken):
         record.update(spp_asked=per_pass * passes, samples_per_pixel_per_pass=[round(float(t), 3) for t in taken])
     if retried:
-        record["retried"] = retried
+        record["retried"] = list(retried)
     return record
 
 

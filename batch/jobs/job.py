@@ -76,8 +76,12 @@ def execute(job):
     path = backend.export(job["scene"], export)
     image = folder / "render.exr"
     try:
-        info = backend.render(path, job["mode"], job["spp"], image, passes=job["passes"], seed=job["seed"],
-                              timeout=job["timeout"], log_path=folder / "render.log")
+        if job["kind"] == "render" and job["verdict"].get("detect"):
+            info = render_until_decided(job, backend, path, image, folder)
+            record["sequential"] = info.pop("sequential")
+        else:
+            info = backend.render(path, job["mode"], job["spp"], image, passes=job["passes"], seed=job["seed"],
+                                  timeout=job["timeout"], log_path=folder / "render.log")
     except backends.BackendFailure as exc:  # a pass that failed twice or timed out (batch/backends/passes.py)
         record.update(status="failed", reason=f"render failed: {exc}")
         return record
@@ -90,6 +94,31 @@ def execute(job):
     return record
 
 
+def render_until_decided(job, backend, path, image, folder):
+    """``--detect S`` (batch/verdict/sequential.py): the job's passes, then doubled (no pass
+    rendered twice: batch/backends/passes.py Accumulation) until the noise test's detectable scale
+    error is <= S, it fails at the alpha spent per look, or ``max_passes``. Returns the last
+    render record with ``sequential`` (the looks)."""
+    import math
+    from ..backends import passes as passes_mod
+    from ..verdict import judge as verdicts, sequential
+    v = job["verdict"]
+    acc = passes_mod.Accumulation(per_pass=math.ceil(job["spp"] / job["passes"]))
+    last = {}
+
+    def render_to(n):
+        last.update(passes_mod.render(backend, path, job["mode"], job["spp"], image, passes=n, seed=job["seed"],
+                                      timeout=job["timeout"], log_path=folder / "render.log", accumulation=acc))
+
+    def look(alpha):
+        return verdicts.look(job["scene_name"], job["source_scene"], job["scene"], job["backend"], job["mode"], last["spp"],
+                             last["passes"], image, folder, v, alpha)
+
+    seq = sequential.run(render_to, look, job["passes"], v.get("max_passes") or sequential.MAX_PASSES,
+                         v["detect"], v["alpha"])
+    return dict(last, sequential=seq)
+
+
 def _judge_render(job, record, deviations):
     """A render job's metrics.json entry (batch/verdict/judge.py), failed when the render was."""
     from ..verdict import judge as verdicts, known
@@ -98,13 +127,16 @@ def _judge_render(job, record, deviations):
         entry.update(status="failed", reason=record["reason"])
         return entry
     entry.update({k: record[k] for k in ("time_s", "wall_s", "spp", "passes", "pass_times", "image", "versions",
-                                         "approximated", "retried")
+                                         "approximated", "retried", "sequential")
                   if k in record})
     if deviations is None:
         deviations = known.load(job["verdict"].get("known"))
     out = Path(job["out"])
+    settings = job["verdict"]
+    if "sequential" in record:  # --detect: the final verdict at the alpha spent per look (sequential.py)
+        settings = dict(settings, alpha=record["sequential"]["alpha_per_look"])
     return verdicts.render_verdict(entry, job["source_scene"], job["scene"], out / record["image"],
-                                   out / job["folder"], job["verdict"], deviations)
+                                   out / job["folder"], settings, deviations)
 
 
 @dataclass(frozen=True)

@@ -14,7 +14,7 @@ job_id = jobs.job_id
 # options a resumed run takes from this command; every other option comes from the run being resumed
 ENGINE_KEYS = ("resume", "out", "cluster", "cluster_timeout", "dashboard", "log", "visualize", "list", "settings",
                "junit")
-VERDICT_KEYS = ("alpha", "min_samples", "block", "flip", "references", "known")
+VERDICT_KEYS = ("alpha", "min_samples", "block", "flip", "references", "known", "detect", "max_passes")
 
 
 def verdict_settings(opts):
@@ -23,6 +23,8 @@ def verdict_settings(opts):
     refs = settings["references"]
     settings["references"] = [str(Path(r).resolve()) for r in refs] if isinstance(refs, list) else (
         str(Path(refs).resolve()) if refs else None)
+    if not settings["detect"]:  # without --detect, the job ids of earlier runs stay (resume keeps their jobs)
+        del settings["detect"], settings["max_passes"]
     return settings
 
 

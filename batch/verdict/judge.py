@@ -182,6 +182,26 @@ def noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings):
     return zt
 
 
+def look(scene_name, scene, rendered, backend, mode, spp, passes, image, res_dir, settings, alpha):
+    """One look of ``--detect`` (batch/verdict/sequential.py): the noise test of the render
+    ``image`` at ``alpha``, judged as the final verdict judges it (``noise_test``, without FLIP),
+    and the run's detectable scale error (``detectable``: the noise test's or a radiance probe's,
+    whichever is smaller; the probes count for power only, their verdict is the final image's).
+    Returns (passed, or None when the render is not judged by the noise test; detectable or None)."""
+    names, img, stderr = exr.read_image_and_stderr(image)
+    ref, unusable, _problems = find_reference(scene_name, scene, settings.get("references"), shape=img.shape, names=names)
+    if unusable:
+        return None, None
+    entry = {"scene": scene_name, "backend": backend, "mode": mode, "spp": spp, "passes": passes, "metrics": {},
+             "image": None}
+    zt = noise_test(entry, ref, names, img, stderr, res_dir, image, dict(settings, alpha=alpha, flip=False))
+    if zt is None:
+        return None, None
+    found = probes.evaluate(rendered, names, img, reference=ref, stderr=stderr, passes=passes)
+    det = detectable(zt, found, alpha)
+    return bool(zt.passed), None if det is None else det["scale"]
+
+
 def sweep_point(job, record):
     """One rung of a sweep: time, error against the reference and the noise test on the rung's
     own noise (two passes)."""
