@@ -25,7 +25,7 @@ import math
 import os
 import subprocess
 import tomllib
-from pathlib import Path
+from pathlib import Path, PurePosixPath, PureWindowsPath
 
 ROOT = Path(__file__).resolve().parents[1]
 SCHEMA_FILE = ROOT / "schemas" / "metrics.schema.json"
@@ -312,3 +312,22 @@ def noise_test_text(test):
         line = f"{word}: p_min {test['p_min']:.3g} (threshold {test['threshold']:.3g})"
         return line + (f", z_max {test['z_max']:.2f}" if _number(test.get("z_max")) else "")
     return f"{word}: {reason}" if reason else word
+
+
+def inside_parts(folder, rel):
+    """The parts of ``rel`` (a path from a metrics.json: anyone's text) if it is a relative path to
+    a file that exists inside ``folder`` (no absolute path, no drive, no '.' or '..', no link out);
+    else None. Shared by every reader that opens or links a file a metrics.json names."""
+    text = str(rel) if isinstance(rel, (str, PurePosixPath, PureWindowsPath)) else ""
+    if not text or "\0" in text or PurePosixPath(text).is_absolute() or PureWindowsPath(text).anchor:
+        return None
+    parts = PureWindowsPath(text).parts if "\\" in text else PurePosixPath(text).parts
+    if not parts or any(p in ("", ".", "..") for p in parts):
+        return None
+    try:
+        path = (Path(folder) / Path(*parts)).resolve()
+        if not path.is_file() or not path.is_relative_to(Path(folder).resolve()):
+            return None
+    except (OSError, ValueError):
+        return None
+    return parts

@@ -65,17 +65,21 @@ class Clock:
         return max(1.0, self.end - time.monotonic())
 
 
+def timed(args, clock):
+    """(exit status or "timed out", wall seconds) of one command within the clock's budget."""
+    t0 = time.perf_counter()
+    try:
+        code = subprocess.run(args, capture_output=True, text=True, cwd=ROOT, timeout=clock.left()).returncode
+    except subprocess.TimeoutExpired:
+        code = "timed out"
+    return code, time.perf_counter() - t0
+
+
 def suite(out, device, scale, spp, clock):
     args = [sys.executable, str(ROOT / "batch" / "run.py"), "-r", "mitsuba", "--device", device, "-o", str(out)]
     args += ["--scale", str(scale)] if scale != 1.0 else []
     args += ["--spp", str(spp)] if spp else []
-    t0 = time.perf_counter()
-    try:
-        proc = subprocess.run(args, capture_output=True, text=True, cwd=ROOT, timeout=clock.left())
-        code = proc.returncode
-    except subprocess.TimeoutExpired:
-        code = "timed out"
-    wall = time.perf_counter() - t0
+    code, wall = timed(args, clock)
     try:
         runs = json.loads((Path(out) / "metrics.json").read_text())["runs"]
     except (OSError, ValueError, KeyError):
@@ -95,13 +99,8 @@ def references(out, device, scenes, spp, scale, clock):
     args += ["--scale", str(scale)] if scale != 1.0 else []
     for s in scenes:
         args += ["-s", s]
-    t0 = time.perf_counter()
-    try:
-        proc = subprocess.run(args, capture_output=True, text=True, cwd=ROOT, timeout=clock.left())
-        code = proc.returncode
-    except subprocess.TimeoutExpired:
-        code = "timed out"
-    return {"wall_s": time.perf_counter() - t0, "exit": code}
+    code, wall = timed(args, clock)
+    return {"wall_s": wall, "exit": code}
 
 
 def not_measured(why, args):

@@ -83,19 +83,8 @@ def _css(status):
 
 def _local_url(out, rel):
     """``rel`` as a relative, percent-encoded URL if it names a file inside ``out``; else None."""
-    text = str(rel) if isinstance(rel, (str, PurePosixPath, PureWindowsPath)) else ""
-    if not text or "\0" in text or PurePosixPath(text).is_absolute() or PureWindowsPath(text).anchor:
-        return None
-    parts = PureWindowsPath(text).parts if "\\" in text else PurePosixPath(text).parts
-    if not parts or any(p in ("", ".", "..") for p in parts):
-        return None
-    try:
-        path = (out / Path(*parts)).resolve()
-        if not path.is_file() or not path.is_relative_to(out.resolve()):
-            return None
-    except (OSError, ValueError):
-        return None
-    return "/".join(quote(p, safe="") for p in parts)
+    parts = records.inside_parts(out, rel)
+    return "/".join(quote(p, safe="") for p in parts) if parts else None
 
 
 def _reference_problems(run):

@@ -107,20 +107,10 @@ class Run:
 
 def inside(folder, rel):
     """``folder``/``rel`` if ``rel`` (from a metrics.json: anyone's text) is a relative path to a
-    file inside ``folder``; else None."""
-    text = rel if isinstance(rel, str) else ""
-    if not text or "\0" in text or PurePosixPath(text).is_absolute() or PureWindowsPath(text).anchor:
-        return None
-    parts = PureWindowsPath(text).parts if "\\" in text else PurePosixPath(text).parts
-    if not parts or any(p in ("", ".", "..") for p in parts):
-        return None
-    try:
-        path = (Path(folder) / Path(*parts)).resolve()
-        if not path.is_file() or not path.is_relative_to(Path(folder).resolve()):
-            return None
-    except (OSError, ValueError):
-        return None
-    return Path(folder) / Path(*parts)
+    file inside ``folder``; else None (batch/records.py ``inside_parts``)."""
+    from .. import records
+    parts = records.inside_parts(folder, rel)
+    return Path(folder) / Path(*parts) if parts else None
 
 
 def _rel_parent(rel):
