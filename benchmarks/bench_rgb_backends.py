@@ -1,7 +1,7 @@
 """One full run of the RGB backends next to the spectral ones, recorded in benchmarks/RGB.md.
 
     .venv/bin/python benchmarks/bench_rgb_backends.py [--scale 0.5] [--passes 4] [--repeats 3] [--write]
-    .venv/bin/python benchmarks/bench_rgb_backends.py --smoke --scale 0.05 --passes 2 --repeats 1   # a minute: 3 scenes, 4 spp
+    .venv/bin/python benchmarks/bench_rgb_backends.py --smoke --scale 0.25 --passes 2 --repeats 1   # a minute: 3 scenes, 4 spp (0.25: an integer fraction of every scene)
 
 1. The batch (batch/run.py) on every scene with -r mitsuba -r art -r cycles -r luxcore (ART where
    an artist is installed), and the polarisation scenes again with --approximate for the RGB ones.
