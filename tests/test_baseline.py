@@ -55,9 +55,11 @@ def _noisy(rng, truth, passes, sigma):
 
 @pytest.mark.slow
 def test_detectable_scale_is_detected_nine_times_in_ten():
-    """``detectable`` claims 90 % power: two images with their own noise, the new one scaled by
-    exactly that much, are found different by the two-sample test in 90 % of independent trials
-    (400 trials: 0.9 +- 0.015), and a change half that size far less often."""
+    """``detectable`` claims at least 90 % power: two images with their own noise, the new one
+    scaled by exactly that much, are found different by the two-sample test (block and scale test)
+    in at least 90 % of independent trials (400 trials: 0.9 +- 0.015; the figure is the best single
+    channel's and test's, a lower bound when the three channels' noise is independent, as here),
+    and a change half that size far less often."""
     rng = np.random.default_rng(24)
     truth = np.broadcast_to(np.linspace(0.2, 1.0, 32)[None, :, None], (32, 32, 3)).copy()
     names = ["R", "G", "B"]
@@ -70,10 +72,11 @@ def test_detectable_scale_is_detected_nine_times_in_ten():
         return references.judge_replacement(old, new, alpha=0.01, block=4, keep=True)
 
     first = pair(1.0)
-    s = baseline.detectable_scale(first["_ztest"])
+    s = first["_ztest"].detectable()["scale"]
     assert 0.005 < s < 0.5
     hits = [not pair(1.0 + s)["same"] for _ in range(400)]
-    assert abs(np.mean(hits) - 0.9) < 0.05, (s, np.mean(hits))
+    print("detectable", s, "hit rate", np.mean(hits))
+    assert 0.85 < np.mean(hits) < 0.995, (s, np.mean(hits))
     half = [not pair(1.0 + s / 2)["same"] for _ in range(200)]
     assert np.mean(half) < 0.6
 

@@ -171,6 +171,20 @@ def detectable_scale(ztest, var=None, power=POWER):
     return hi
 
 
+def detectable_pair(ztest, exact_var):
+    """(what the two-sample test detects with POWER, what it would against an exact reference).
+    The first is the noise test's own figure (compare.ZTest.detectable: its block and scale tests
+    at their shares of alpha); the second scales it by how much less the block test alone sees
+    with both noises than with the new image's alone (``detectable_scale`` with ``exact_var``)."""
+    own = ztest.detectable() if hasattr(ztest, "detectable") else None
+    block_both, block_exact = detectable_scale(ztest), detectable_scale(ztest, var=exact_var)
+    det = own["scale"] if own else block_both
+    if det is None:
+        return None, None
+    ratio = block_exact / block_both if block_both and block_exact else None
+    return det, (det * ratio if ratio else None)
+
+
 def _own_block_var(result, new_var_of_mean):
     """Per-block variance of the new image's own block mean at the test's resolution and blocks
     (for the figure against an exact reference), in the layout of the test's ``var``."""
@@ -355,8 +369,7 @@ def judge_pair(new_entry, new_folder, old_entry, old_folder, settings, zmap_path
     zt = res["_ztest"]
     judge_probes(rows, share)
     n_var = n_se.astype(np.float64) ** 2
-    det = detectable_scale(zt)
-    det_exact = detectable_scale(zt, var=_own_block_var(res, n_var))
+    det, det_exact = detectable_pair(zt, _own_block_var(res, n_var))
     zmap_path = Path(zmap_path)
     zmap_path.parent.mkdir(parents=True, exist_ok=True)
     exr.write(zmap_path, zt.zmap[..., :3])
