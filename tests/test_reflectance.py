@@ -38,8 +38,9 @@ def test_every_reflectance_scene_agrees_with_its_reference(batch_run):
         assert run["test"]["pass"] and run["test"]["noise"] == "own" and run["passes"] == 2
         assert run["resolution"] == [512, 512] and run["spp"] == run["spp"] > 0
         assert run["sanity"]["nan"] == 0 and run["sanity"]["inf"] == 0
-        for f in ("render.exr", "zscore.exr", "flip.exr"):
+        for f in ("render.exr", "zscore.exr", "view.js"):
             assert (out / name / "results" / "mitsuba" / f).is_file(), (name, f)
+        assert not (out / name / "results" / "mitsuba" / "flip.exr").exists()  # --no-flip
         assert run["reference"]["image"] == f"{name}/results/reference_512x512.exr" and (out / run["reference"]["image"]).is_file()
     assert proc.returncode == 0, proc.stderr[-2000:]
 
