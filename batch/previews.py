@@ -4,10 +4,10 @@ looks at is stored as half floats (11 significant bits: 4.9e-4 relative rounding
 noise of any render judged here):
 
 - ``zscore.exr``: the noise test's z per block and colour channel (half);
-- ``flip.exr``: the HDR-FLIP map (half);
+- ``flip.exr``: the HDR-FLIP map (one channel Y, half, 5 significant bits: ``FLIP_BITS``);
 - ``<scene>/results/reference_<W>x<H>.exr``: the scene's reference at the render's resolution,
   once per scene and resolution, shared by every backend of the scene (half, or float32 where a
-  value does not fit in half);
+  value does not fit in half; no bits below a quarter of its standard error);
 - differences are not stored: the page computes them from the render and the reference, and
   the Blender panel writes ``diff_abs.exr`` / ``diff_rel.exr`` when its buttons are pressed
   (``differences``).
@@ -55,18 +55,21 @@ def fits_half(values):
     return bool(np.all(np.isfinite(values)) and float(np.max(np.abs(values), initial=0.0)) < HALF_MAX)
 
 
-def write_half(path, rgb):
+def write_half(path, rgb, channels="RGB"):
     """An HxWx3 image as R, G, B half floats (float32 if a value would not fit), written to a
     temporary name and renamed: a reader, or another job writing the same file, never sees half
-    a file."""
+    a file. ``channels="Y"``: an HxW (or HxWx1) grey image as one channel Y (tev and Blender show
+    it grey; batch/exr.py ``read_rgb`` reads it as three equal channels)."""
     rgb = np.asarray(rgb)
+    if channels == "Y" and rgb.ndim == 2:
+        rgb = rgb[..., None]
     dtype = np.float16 if fits_half(rgb) else np.float32
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(suffix=".exr", prefix=".tmp-", dir=path.parent)
     os.close(fd)
     try:
-        exr.write_channels(tmp, {c: rgb[..., i].astype(dtype) for i, c in enumerate("RGB")})
+        exr.write_channels(tmp, {c: rgb[..., i].astype(dtype) for i, c in enumerate(channels)})
         umask = os.umask(0o022)
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)
@@ -81,11 +84,14 @@ def shared_reference_name(shape):
     return f"reference_{int(shape[1])}x{int(shape[0])}.exr"
 
 
-def shared_reference(res_dir, mean):
+def shared_reference(res_dir, mean, stderr=None):
     """Write the reference at the render's resolution once per scene: ``res_dir`` is
-    <scene>/results/<backend>; returns the file's path (<scene>/results/reference_WxH.exr)."""
+    <scene>/results/<backend>; returns the file's path (<scene>/results/reference_WxH.exr).
+    With its ``stderr``, no bits below a quarter of it are kept (batch/exr.py ``noise_rounded``:
+    a copy for the eye, the verdict reads the reference itself)."""
     path = Path(res_dir).parent / shared_reference_name(np.shape(mean))
-    return write_half(path, mean[..., :3])
+    rgb = mean[..., :3] if stderr is None else exr.noise_rounded(mean[..., :3], stderr[..., :3])
+    return write_half(path, rgb)
 
 
 @contextlib.contextmanager
@@ -102,9 +108,20 @@ def float_reference(res_dir, mean):
             os.unlink(tmp)
 
 
-def to_half(path):
-    """Rewrite an RGB EXR (the FLIP map) as half floats in place."""
-    return write_half(path, exr.read_rgb(path))
+FLIP_BITS = 4  # mantissa bits kept of the FLIP map's halves (5 significant: 1.6 % at most)
+
+
+def to_half(path, keep_bits=10):
+    """Rewrite the FLIP map (an RGB EXR of three equal channels) in place as one half-float
+    channel Y, rounded to the nearest value with
+    ``keep_bits`` mantissa bits: FLIP is a perceptual index in [0, 1] read to two digits, and the
+    bits below carry nothing (its mean, the metric, is taken before)."""
+    grey = exr.read_rgb(path)[..., 0]  # HDR-FLIP writes its map three times, as R = G = B
+    if keep_bits < 10 and fits_half(grey):
+        drop = 10 - keep_bits
+        u = grey.astype(np.float16).view(np.uint16).astype(np.uint32)
+        grey = (((u + (1 << (drop - 1))) >> drop) << drop).astype(np.uint16).view(np.float16)
+    return write_half(path, grey, channels="Y")
 
 
 def differences(render, reference):

@@ -16,7 +16,8 @@ not retried: it would time out again), and a second failure fails the render wit
 error and the tail of its output; every pass must have the same channels and size; the mean and
 the standard error of the mean per pixel (the pass-to-pass spread, Welford's online update:
 B. P. Welford, Technometrics 4(3), 1962) are written as the render's EXR (R, G, B, further channels,
-then ``stderr.<channel>`` with two or more passes), and the render record lists each pass's time.
+then ``stderr.<channel>`` with two or more passes; half floats as batch/exr.py ``stored_render``
+rounds them), and the render record lists each pass's time.
 
 ``accumulation`` (an Accumulation, issue 20 ``--detect``): passes are added to those already
 rendered into it (its Welford sums), so a render continued to more passes renders no pass twice:
@@ -118,12 +119,12 @@ def render(backend, path, mode, spp, out_exr, passes=1, seed=0, timeout=1800, lo
     acc.wall_s += time.perf_counter() - t0
     names, shape, mean, passes = acc.names, acc.shape, acc.mean, acc.count
     extra = {}
-    if passes > 1:
-        stderr = np.sqrt(acc.var_of_mean())
-        # issue 21: the standard error as half floats (float32 where one does not fit), as references store it
-        # (batch/verdict/references.py _noise_channel: no verdict changed): a quarter smaller run folder
-        from ..verdict.references import _noise_channel
-        extra = {f"stderr.{n}": _noise_channel(stderr[..., i]) for i, n in enumerate(names)}
+    # issue 21: mean and standard error stored as half floats, the mean rounded stochastically with
+    # its rounding variance in the standard error (batch/exr.py stored_render): a run folder of a
+    # reasonable size, every reader judging an unbiased mean with its whole uncertainty
+    mean, stderr = exr.stored_render(mean, np.sqrt(acc.var_of_mean()) if passes > 1 else None, seed)
+    if stderr is not None:
+        extra = {f"stderr.{n}": stderr[..., i] for i, n in enumerate(names)}
     exr.write_image(out_exr, names, mean, extra)
     record = dict(info)
     record.update({"variant": mode, "spp": int(round(sum(taken))), "passes": passes, "seed": seed,

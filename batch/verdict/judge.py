@@ -168,7 +168,7 @@ def noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings):
         previews.write_half(res_dir / "zscore.exr", zt.zmap[..., :3])
     # issue 21: the reader's images kept small (batch/previews.py): one half-float reference per
     # scene and resolution, shared by its backends; no difference images (the page and the panel compute them)
-    shared = previews.shared_reference(res_dir, mean)
+    shared = previews.shared_reference(res_dir, mean, np.sqrt(at.var_of_mean[..., :3]))
     entry["reference"]["image"] = str(PurePosixPath(entry["image"]).parent.parent / shared.name) \
         if isinstance(entry.get("image"), str) else None
     if settings.get("flip", True):
@@ -178,7 +178,7 @@ def noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings):
         if err:
             entry["flip_error"] = err
         elif (res_dir / "flip.exr").exists():
-            previews.to_half(res_dir / "flip.exr")
+            previews.to_half(res_dir / "flip.exr", previews.FLIP_BITS)
     return zt
 
 

@@ -3,9 +3,11 @@
    tags load from file://, fetch does not), inflated with the browser's DecompressionStream.
 
    Data file: spectralBench.data(document.currentScript, {w, h, layers: {NAME: {channels: [..],
-   data: base64}}}): each layer's values are IEEE 754 binary16, channel after channel, row-major
-   from the top-left pixel, their low bytes then their high bytes, zlib-deflated (batch/report/
-   html.py writes them). Half floats carry 11 significant bits (relative rounding 2^-11 = 4.9e-4).
+   data: bytes}}}): each layer's values are IEEE 754 binary16, channel after channel, row-major
+   from the top-left pixel, their low bytes then their high bytes, zlib-deflated, the bytes as the
+   characters of a string that the file's charset x-user-defined gives them (WHATWG Encoding
+   Standard; batch/report/html.py writes them). Half floats carry 11 significant bits (relative
+   rounding 2^-11 = 4.9e-4).
 
    Formulas: sRGB transfer function IEC 61966-2-1; Stokes degree of polarisation
    sqrt(S1^2 + S2^2 + S3^2) / S0 and angle 0.5 atan2(S2, S1) (Goldstein, Polarized Light, 3rd ed.,
@@ -45,9 +47,10 @@ var spectralBench = (function () {
   }
   var Z_RANGE = 5;  // z maps saturate at |z| = 5
 
-  function inflate(b64) {
-    var bin = atob(b64), bytes = new Uint8Array(bin.length);
-    for (var i = 0; i < bin.length; i++) bytes[i] = bin.charCodeAt(i);
+  function inflate(text) {
+    // the data file is decoded as x-user-defined: U+0000..U+007F are bytes 0..127, U+F780..U+F7FF 128..255
+    var bytes = new Uint8Array(text.length);
+    for (var i = 0; i < text.length; i++) { var c = text.charCodeAt(i); bytes[i] = c < 0x80 ? c : c - 0xF700; }
     var stream = new Blob([bytes]).stream().pipeThrough(new DecompressionStream('deflate'));
     return new Response(stream).arrayBuffer().then(function (buf) { return new Uint8Array(buf); });
   }
@@ -66,7 +69,7 @@ var spectralBench = (function () {
   function load(url) {
     if (!files[url]) files[url] = new Promise(function (resolve, reject) {
       var s = document.createElement('script');
-      s.src = url; s.spectralBenchResolve = resolve;
+      s.charset = 'x-user-defined'; s.src = url; s.spectralBenchResolve = resolve;
       s.onerror = function () { reject(new Error('cannot load ' + url)); };
       document.head.appendChild(s);
     }).then(function (obj) {
