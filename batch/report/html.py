@@ -357,6 +357,25 @@ def _prism_marks(run):
     return None
 
 
+def _prism_line(run):
+    """The prism's band positions in words beside the marks: each channel's centroid expected and
+    measured (px along the fan from 550 nm's band centre, with its standard error), the colour
+    order expected and measured; None without a positions record."""
+    for p in _list(run.get("probes")):
+        if not (isinstance(p, dict) and _text(p.get("name")).startswith(PRISM_POSITIONS)):
+            continue
+        exp, meas, se = _list(p.get("expected")), _list(p.get("measured")), _list(p.get("standard_error_px"))
+        if len(exp) != 3:
+            return None
+        parts = []
+        for c, e, m, s in zip("RGB", exp, meas + [None] * 3, se + [None] * 3):
+            parts.append(f"{c} {_fmt(e, '{:.2f}')} expected, {_fmt(m, '{:.2f}') or '?'} measured"
+                         + (f" +- {s:.2g}" if _num(s) else ""))
+        return (f"band positions (px along the fan from 550 nm's band centre; marked on the image): " + "; ".join(parts)
+                + f"; colour order {_text(p.get('order_expected'))} expected, {_text(p.get('order_measured'))} measured")
+    return None
+
+
 def _probe_views(out, folder):
     """The views of a render's probe images: "probe residual" (render - the GGX probe's expected
     image, per pixel) and "probe z" (its blocks' z) when probe_residual.exr is there."""
@@ -446,7 +465,7 @@ def _viewer(out, run, deviations=None):
             "src": data, "ref": ref_data or "", "checks": lines, "extras": _extras(run),
             "reason": _text(run.get("reason")), "known": _known_lines(run, deviations or {}),
             "tev": _tev(run, folder, ref if ref_url else None), "regions": json.dumps(regions),
-            "marks": json.dumps(_prism_marks(run)), "baseline": _baseline(out, run),
+            "marks": json.dumps(_prism_marks(run)), "prism": _prism_line(run), "baseline": _baseline(out, run),
             "numbers": [f"{_text(k)}: {_fmt(v)}" for k, v in _dict(run.get("metrics")).items()],
             "reference_problems": _reference_problems(run)}
 

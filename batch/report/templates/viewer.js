@@ -274,9 +274,9 @@ var spectralBench = (function () {
     bar.querySelector('.hi').textContent = fmt(hi);
     bar.querySelector('.caption').textContent = caption;
   };
-  Viewer.prototype.pixelAt = function (canvas, ev) {
-    var r = canvas.getBoundingClientRect(), mx = (ev.clientX - r.left) * canvas.width / r.width,
-      my = (ev.clientY - r.top) * canvas.height / r.height;
+  Viewer.prototype.pixelAt = function (canvas, ev) {  // the canvas's content box: its border is not image
+    var r = canvas.getBoundingClientRect(), mx = (ev.clientX - r.left - canvas.clientLeft) * canvas.width / (canvas.clientWidth || r.width),
+      my = (ev.clientY - r.top - canvas.clientTop) * canvas.height / (canvas.clientHeight || r.height);
     return {mx: mx, my: my, x: Math.floor((mx - this.ox) / this.scale), y: Math.floor((my - this.oy) / this.scale)};
   };
   Viewer.prototype.read = function (x, y) {  // the readout of one pixel: every value is the data's
