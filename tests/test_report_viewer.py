@@ -16,7 +16,7 @@ import subprocess
 import numpy as np
 import pytest
 
-from conftest import metrics, run_batch
+from conftest import metrics, run_batch, write_hand_made_metrics
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 pytestmark = pytest.mark.skipif(not CHROMIUM, reason="no chromium: report not checked in a browser "
@@ -470,3 +470,39 @@ def test_a_screenshot_of_the_overlays(overlays, tmp_path):
         assert png.is_file() and png.stat().st_size > 10000, png
         shots.append(png)
     print("screenshots in", tmp_path)
+
+
+def test_overlay_fields_of_metrics_json_are_text(tmp_path):
+    """The fields the overlays read from metrics.json (a prism record's Fraunhofer line names, a
+    baseline record's run, reason and z-map path) reach the page as text or as JSON in an escaped
+    attribute; a z-map path outside the run folder, or not a file, is not linked; numbers that are
+    not numbers draw no marks."""
+    from spectral_bench.batch import exr
+    from spectral_bench.batch.report import html
+    out = tmp_path / "out"
+    exr.write(out / "s" / "results" / "mitsuba" / "render.exr", np.ones((4, 8, 3), dtype=np.float32))
+    exr.write(out / "s" / "results" / "mitsuba" / "baseline_zscore.exr", np.zeros((4, 8, 3), dtype=np.float32))
+    evil = "<img src=x onerror=alert(1)>'\""
+    prism = {"name": "prism band positions, beam on screen", "pass": True, "expected": [-1.0, 0.0, 2.0],
+             "measured": [-1.0, 0.1, 2.0], "origin_px": [4.0, 2.0], "fan_direction": [1.0, 0.0], "band_height_px": 2.0,
+             "fraunhofer_px": {evil: 1.5, "F": 2.5}}
+    runs = [{"scene": "s", "backend": "mitsuba", "status": "ok", "image": "s/results/mitsuba/render.exr", "resolution": [8, 4],
+             "probes": [prism],
+             "baseline": {"run": evil, "status": "changed", "reason": evil, "p_min": 1e-9, "threshold": 1e-4,
+                          "ratio": [[1.01, 0.001], [1.0, 0.001], [0.99, 0.001]], "zmap": "s/results/mitsuba/baseline_zscore.exr"}},
+            {"scene": "t", "backend": "mitsuba", "status": "ok", "image": "s/results/mitsuba/render.exr", "resolution": [8, 4],
+             "probes": [dict(prism, origin_px=["1", 2], name="prism band positions, x")],
+             "baseline": {"run": "b", "status": "same", "zmap": "../../etc/passwd"}}]
+    write_hand_made_metrics(out, {"started": "now", "runs": runs})
+    page = html.render(out)
+    assert "<img src=x" not in page and evil not in page
+    assert "against baseline &lt;img src=x onerror=alert(1)&gt;&#39;&#34;: changed (smallest p 1e-09 &lt; threshold 0.0001)" in page
+    assert "ratio R 1.0100 +- 0.0010" in page
+    hrefs = re.findall(r"href='([^']*)'", page)
+    assert page.count("z-map (EXR)") == 1 and not any("passwd" in h for h in hrefs)  # outside the run: not linked
+    assert "s/results/mitsuba/baseline_zscore.exr" in hrefs and "baseline_zscore.png" not in page  # no such file
+    marks = [json.loads(__import__("html").unescape(m)) for m in re.findall(r"data-marks='([^']*)'", page)]
+    assert sorted(map(str, marks)).count("None") == 1  # the record whose origin is text draws nothing
+    drawn = next(m for m in marks if m)
+    assert {t["label"] for t in drawn["ticks"] if t["kind"] == "wavelength"} == {"550", evil[:8], "F 486"}
+    assert [t["s"] for t in drawn["ticks"] if t["kind"] == "expected"] == [-1.0, 0.0, 2.0]
