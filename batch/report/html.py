@@ -143,7 +143,7 @@ def _fresh(target, sources):
 
 def _job_data(folder):
     """view.js of a render's folder (written when missing or older than its EXRs): the render's
-    channels, its standard error, the z map and the FLIP map. Returns the channel names, or None
+    channels, its standard error, the z map, the FLIP map and the probes' images (``_probe_layers``). Returns the channel names, or None
     when there is no readable render."""
     render, z, flip, js = (folder / n for n in ("render.exr", "zscore.exr", "flip.exr", DATA_JS))
     if not render.is_file():
@@ -174,7 +174,10 @@ def _probe_layers(folder):
     path = folder / previews.PROBE_RESIDUAL
     if not path.is_file():
         return {}
-    ch = exr.read(path)
+    try:
+        ch = exr.read(path)
+    except Exception:  # noqa: BLE001 - an overlay is an aid: an unreadable one leaves the render's views
+        return {}
     names = [n for n in previews.PROBE_RESIDUAL_CHANNELS if n in ch]
     return {"probe": (names, [ch[n] for n in names], 10)} if names else {}
 
@@ -410,7 +413,8 @@ def _baseline(out, run):
             url = _local_url(out, rel)
             if url:
                 links.append({"label": label, "src": url})
-    return {"text": text, "status": _text(base.get("status")), "links": links}
+    status = base.get("status") if base.get("status") in baseline.STATUSES else ""  # a CSS class: known words only
+    return {"text": text, "status": status, "links": links}
 
 
 def _deviations(options):
