@@ -2,8 +2,10 @@
 decodes and shows under the cursor are the EXRs' (as half floats), exposure acts on the floats
 (a highlight above 1 is not clipped at -3 EV), the Stokes scene has S0..S3, DoP and AoP views
 whose angle is the EXR's in the README's frame, the ColorChecker's patches are outlined where the
-probe measured them with their dE00, and a screenshot of every view is written under the test's
-tmp dir (not committed; look at them).
+probe measured them with their dE00, the GGX probe's residual map is the probe's (its blocks' z)
+and its readout the EXRs', the prism's marks stand at the columns its positions record gives, a
+--baseline run shows its comparison with links to the z-map, and a screenshot of every view is
+written under the test's tmp dir (not committed; look at them).
 
 A copy of the page gets a script that waits for a viewer's data, moves the mouse over a pixel,
 and writes what the page shows into body[data-result] for --dump-dom to carry back."""
