@@ -425,6 +425,11 @@ def test_prism_marks_at_the_expected_columns(overlays):
         want = MARK_RGB[colour]
         assert len(m["at"]) >= 6 and all(px == want for px in m["at"]), m  # the tick, whole, at its column
         assert not any(px == want for px in m["left"] + m["right"]), m  # and not 3 px beside it
+    # the readout says where a pixel lies along the fan, as the record counts positions
+    x, y = int(x0 + pos["expected"][2]), int(y0)
+    got = probe_page(run, f"{PRISM}--mitsuba-box", HOVER.replace("__X__", str(x)).replace("__Y__", str(y)))
+    along = float(re.search(r"prism: pixel centre at (\S+) px along the fan", got["readout"]).group(1))
+    assert along == pytest.approx((x + 0.5 - x0) * u[0] + (y + 0.5 - y0) * u[1], abs=5e-4 * max(1, abs(along)))
 
 
 @pytest.mark.slow

@@ -366,7 +366,12 @@ var spectralBench = (function () {
     out[0] = lut[3 * v]; out[1] = lut[3 * v + 1]; out[2] = lut[3 * v + 2];
   };
   Viewer.prototype.probeLines = function (i, lines) {  // the readout's probe rows, on the plate only
-    var p = this.probe;
+    var p = this.probe, m = this.markData();
+    if (m) {  // the prism: where this pixel's centre lies along the fan, as the marks count
+      var x = i % this.w + 0.5, y = Math.floor(i / this.w) + 0.5;
+      lines.push('prism: pixel centre at ' + fmt((x - m.origin[0]) * m.u[0] + (y - m.origin[1]) * m.u[1])
+        + ' px along the fan from 550 nm\'s band centre');
+    }
     if (!p || !isFinite(p['expected.R'] ? p['expected.R'][i] : NaN)) return;
     var rgb = ['R', 'G', 'B'];
     lines.push('GGX probe expected: ' + rgb.map(function (c) { return c + ' ' + fmt(p['expected.' + c][i]); }).join('  '));
@@ -379,8 +384,11 @@ var spectralBench = (function () {
   // tick next to the band and its measured tick right after it, so that where they agree they
   // make one line.
   var MARK_COLOUR = {R: '#ff4040', G: '#30e030', B: '#4080ff', wavelength: '#ffffff'};
+  Viewer.prototype.markData = function () {
+    return this.marks !== undefined ? this.marks : (this.marks = JSON.parse(this.box.dataset.marks || 'null'));
+  };
   Viewer.prototype.prismMarks = function (ctx) {
-    var m = this.marks !== undefined ? this.marks : (this.marks = JSON.parse(this.box.dataset.marks || 'null'));
+    var m = this.markData();
     var show = this.box.querySelector('.show-probes');
     if (!m || (show && !show.checked)) return;
     var s = this.scale, ox = this.ox, oy = this.oy, u = m.u;
