@@ -5,6 +5,10 @@ noise of any render judged here):
 
 - ``zscore.exr``: the noise test's z per block and colour channel (half);
 - ``flip.exr``: the HDR-FLIP map (one channel Y, half, 5 significant bits: ``FLIP_BITS``);
+- ``probe_residual.exr``: for a scene with a GGX/Beckmann plate probe, what that probe's
+  residual map needs (half, NaN off the plates: batch/verdict/probes/ggx.py ``residual_map``):
+  ``expected.R/G/B`` per plate pixel (the residual is render.exr minus these; the page and tev
+  users subtract) and ``z.R/G/B``, the z of the pixel's block in the probe's test;
 - ``<scene>/results/reference_<W>x<H>.exr``: the scene's reference at the render's resolution,
   once per scene and resolution, shared by every backend of the scene (half, or float32 where a
   value does not fit in half; no bits below a quarter of its standard error);
@@ -70,6 +74,40 @@ def write_half(path, rgb, channels="RGB"):
     os.close(fd)
     try:
         exr.write_channels(tmp, {c: rgb[..., i].astype(dtype) for i, c in enumerate(channels)})
+        umask = os.umask(0o022)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
+        os.replace(tmp, path)
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+    return path
+
+
+PROBE_RESIDUAL = "probe_residual.exr"
+PROBE_RESIDUAL_CHANNELS = ("expected.R", "expected.G", "expected.B", "z.R", "z.G", "z.B")
+
+
+def write_probe_residual(res_dir, maps):
+    """``res_dir``/probe_residual.exr from the probes' residual maps ({record name: H x W x 6},
+    NaN off each probe's region; the regions of a scene's plates do not overlap) as half floats
+    (NaN kept, finite values clipped to the largest half); a file left from an earlier verdict
+    is removed when no probe hands a map over. Returns the path or None."""
+    path = Path(res_dir) / PROBE_RESIDUAL
+    if not maps:
+        with contextlib.suppress(FileNotFoundError):
+            path.unlink()
+        return None
+    merged = None
+    for values in maps.values():
+        values = np.asarray(values, dtype=np.float32)
+        merged = values.copy() if merged is None else np.where(np.isnan(merged), values, merged)
+    merged = np.where(np.isfinite(merged), np.clip(merged, -HALF_MAX, HALF_MAX), merged)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(suffix=".exr", prefix=".tmp-", dir=path.parent)
+    os.close(fd)
+    try:
+        exr.write_channels(tmp, {c: merged[..., i].astype(np.float16) for i, c in enumerate(PROBE_RESIDUAL_CHANNELS)})
         umask = os.umask(0o022)
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)

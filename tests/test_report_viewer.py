@@ -2,8 +2,10 @@
 decodes and shows under the cursor are the EXRs' (as half floats), exposure acts on the floats
 (a highlight above 1 is not clipped at -3 EV), the Stokes scene has S0..S3, DoP and AoP views
 whose angle is the EXR's in the README's frame, the ColorChecker's patches are outlined where the
-probe measured them with their dE00, and a screenshot of every view is written under the test's
-tmp dir (not committed; look at them).
+probe measured them with their dE00, the GGX probe's residual map is the probe's (its blocks' z)
+and its readout the EXRs', the prism's marks stand at the columns its positions record gives, a
+--baseline run shows its comparison with links to the z-map, and a screenshot of every view is
+written under the test's tmp dir (not committed; look at them).
 
 A copy of the page gets a script that waits for a viewer's data, moves the mouse over a pixel,
 and writes what the page shows into body[data-result] for --dump-dom to carry back."""
@@ -16,7 +18,7 @@ import subprocess
 import numpy as np
 import pytest
 
-from conftest import metrics, run_batch
+from conftest import metrics, run_batch, write_hand_made_metrics
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 pytestmark = pytest.mark.skipif(not CHROMIUM, reason="no chromium: report not checked in a browser "
@@ -62,7 +64,8 @@ def probe_page(out, viewer_id, script, name="probe.html"):
 # moves the mouse over pixel (__X__, __Y__) of the first pane and returns the readout and raw values
 HOVER = """
 var c=box.querySelector('canvas.pane-a'), r=c.getBoundingClientRect();
-var cx=r.left+(v.ox+(__X__+0.5)*v.scale)*r.width/c.width, cy=r.top+(v.oy+(__Y__+0.5)*v.scale)*r.height/c.height;
+// the pixel's first whole CSS pixel (a synthetic event's clientX/Y are truncated to whole pixels)
+var cx=Math.ceil(r.left+c.clientLeft+(v.ox+__X__*v.scale)*c.clientWidth/c.width), cy=Math.ceil(r.top+c.clientTop+(v.oy+__Y__*v.scale)*c.clientHeight/c.height);
 c.dispatchEvent(new MouseEvent('mousemove', {clientX: cx, clientY: cy, bubbles: true}));
 var i=__Y__*v.w+__X__, raw={};
 ['R','G','B'].forEach(function(ch){ raw['render.'+ch]=v.render[ch][i]; if(v.ref) raw['reference.'+ch]=v.ref[ch][i];
@@ -289,3 +292,225 @@ def test_the_panel_finds_the_shared_reference_and_makes_differences(run, tmp_pat
         kinds = {n: c.pixels.dtype for n, c in f.channels().items()}
     # the mean as half floats too, rounded stochastically (batch/exr.py stored_render)
     assert kinds == {"RGB": np.float16, "stderr": np.float16}, kinds
+
+
+# ---- probes drawn on the image: the GGX probe's residual map, the prism's band positions, the
+# baseline comparison (issue 21 items 4 and 5) -------------------------------------------------------
+GGX, PRISM = "ggx_copper_50_isolated", "dispersion_prism"
+MARK_RGB = {"R": [0xff, 0x40, 0x40], "G": [0x30, 0xe0, 0x30], "B": [0x40, 0x80, 0xff], "wavelength": [0xff, 0xff, 0xff]}
+
+
+@pytest.fixture(scope="module")
+def overlays(tmp_path_factory):
+    """A lone GGX plate (its probe writes probe_residual.exr) and the prism at the default size,
+    and the prism again, judged against the first run (--baseline)."""
+    root = tmp_path_factory.mktemp("overlays")
+    first = run_batch("-r", "mitsuba", "-s", GGX, "-s", PRISM, "-o", root / "a")
+    assert first.returncode == 0, first.stdout[-2000:] + first.stderr[-2000:]
+    second = run_batch("-r", "mitsuba", "-s", PRISM, "--seed", "1000003", "--baseline", root / "a", "-o", root / "b")
+    assert second.returncode == 0, second.stdout[-2000:] + second.stderr[-2000:]
+    return root / "a", root / "b"
+
+
+def _entry(out, scene):
+    return next(r for r in metrics(out)["runs"] if r["scene"] == scene)
+
+
+@pytest.mark.slow
+def test_ggx_probe_residual_map_is_the_probes_and_its_readout_the_exrs(overlays):
+    """probe_residual.exr holds what the GGX probe judged (its blocks' z are the record's, its
+    expected image averages to the record's expected), and the page's "probe residual" readout at
+    a plate pixel is render - expected, with the block's z, as the EXRs have them."""
+    from spectral_bench.batch import exr
+    run = overlays[0]
+    entry = _entry(run, GGX)
+    folder = (run / entry["image"]).parent
+    ch = exr.read(folder / "probe_residual.exr")
+    assert sorted(ch) == sorted(f"{k}.{c}" for k in ("expected", "z") for c in "RGB")
+    assert all(a.dtype == np.float32 for a in ch.values())
+    names, img, _ = exr.read_image_and_stderr(folder / "render.exr")
+    blocks = next(p for p in entry["probes"] if p["name"].startswith("ggx ") and p["name"].endswith(" blocks"))
+    stat = blocks["stat"]
+    want_z = ((np.array(stat["measured"]) - np.array(stat["expected"])) / np.array(stat["se"])).reshape(-1, 3)
+    plate = np.isfinite(ch["expected.R"])
+    assert plate.sum() == blocks["pixels"]
+    for k, c in enumerate("RGB"):
+        z = ch[f"z.{c}"]
+        # one z per block, each painted over its block's plate pixels: the record's values as halves
+        assert np.array_equal(np.unique(z[np.isfinite(z)]), np.unique(want_z[:, k].astype(np.float16).astype(np.float32)))
+        assert ch[f"expected.{c}"][plate].mean() == pytest.approx(blocks["expected"][k], rel=1e-3)
+    # and each block's z is its own: recomputed here from render.exr and the stored expected image
+    # (mean residual over the standard error of the residuals' mean), to the half rounding of both
+    from spectral_bench.batch.verdict import compare
+    h, w = plate.shape
+    b = compare.block_size(entry["spp"], img.shape)
+    checked = 0
+    for ya, yb in zip(compare.block_edges(h, b)[:-1], compare.block_edges(h, b)[1:]):
+        for xa, xb in zip(compare.block_edges(w, b)[:-1], compare.block_edges(w, b)[1:]):
+            sel = plate[ya:yb, xa:xb]
+            if sel.sum() < 4:
+                continue
+            for c in "RGB":
+                e = ch[f"expected.{c}"][ya:yb, xa:xb][sel].astype(np.float64)
+                r = img[ya:yb, xa:xb, names.index(c)][sel] - e
+                se = r.std(ddof=1) / np.sqrt(len(r))
+                painted = ch[f"z.{c}"][ya:yb, xa:xb][sel]
+                assert np.all(painted == painted[0])
+                assert abs(painted[0] - r.mean() / se) <= np.abs(e).max() * HALF_REL / se + abs(painted[0]) * HALF_REL + 1e-3, (ya, xa, c)
+            checked += 1
+    assert checked == blocks["blocks"]
+    # a plate pixel in the block of largest |z| (G), a random plate pixel, and one off the plate
+    ys, xs = np.nonzero(plate & np.isfinite(ch["z.G"]))
+    worst = int(np.argmax(np.abs(ch["z.G"][ys, xs])))
+    rng = np.random.default_rng(3)
+    pick = int(rng.integers(len(xs)))
+    off_y, off_x = [int(v[0]) for v in np.nonzero(~plate)]
+    script = HOVER.replace("return {", """
+    v.show('probe z'); var pz = [].slice.call(box.querySelector('canvas.pane-a').getContext('2d').getImageData(
+      Math.floor(v.ox + (__X__ + 0.5) * v.scale), Math.floor(v.oy + (__Y__ + 0.5) * v.scale), 1, 1).data);
+    var zcap = box.querySelector('.colourbar .caption').textContent;
+    v.show('probe residual'); var rcap = box.querySelector('.colourbar .caption').textContent;
+    return {pz: pz, zcap: zcap, rcap: rcap, tabs: [].map.call(box.querySelectorAll('.tabs button'), function(b){return b.dataset.view;}), """)
+    for x, y in ((int(xs[worst]), int(ys[worst])), (int(xs[pick]), int(ys[pick])), (off_x, off_y)):
+        got = probe_page(run, f"{GGX}--mitsuba-box", script.replace("__X__", str(x)).replace("__Y__", str(y)))
+        assert got["pixel"] == f"{x},{y}"
+        assert got["tabs"][-2:] == ["probe residual", "probe z"]
+        assert "render - expected" in got["rcap"] and "z of its test per block" in got["zcap"]
+        if not plate[y, x]:
+            assert "GGX probe" not in got["readout"]
+            assert got["pz"][0] == got["pz"][1] == got["pz"][2]  # off the plate: grey
+            continue
+        expected, residual, z = (shown(got["readout"], f"GGX probe {label}") for label in
+                                 ("expected", "residual (render - expected)", "z (its block)"))
+        for c in "RGB":
+            e = float(ch[f"expected.{c}"][y, x])
+            r = img[y, x, names.index(c)] - e  # the render in float32, the expected image as stored
+            assert abs(expected[c] - e) <= abs(e) * SHOWN_REL + 1e-7, (c, expected, e)
+            # the page subtracts the half-float render: its rounding, then 4 digits
+            assert abs(residual[c] - r) <= abs(img[y, x, names.index(c)]) * HALF_REL + abs(r) * SHOWN_REL + 1e-7, (c, residual, r)
+            assert abs(z[c] - ch[f"z.{c}"][y, x]) <= abs(ch[f"z.{c}"][y, x]) * SHOWN_REL + 1e-6, (c, z)
+        zg = float(ch["z.G"][y, x])
+        if abs(zg) > 1:  # the view's colour: red for z > 0, blue for z < 0 (the diverging map)
+            assert (got["pz"][0] > got["pz"][2]) == (zg > 0), (zg, got["pz"])
+
+
+@pytest.mark.slow
+def test_prism_marks_at_the_expected_columns(overlays):
+    """The prism's marks lie where its positions probe's record puts the bands: position s along
+    the fan is at origin_px + s * fan_direction. Below the band, each channel's expected tick (the
+    first 9 px next to the band) and its measured tick (the next 9) in the channel's colour at the
+    column of its position and at no column 3 px beside it; above, the wavelengths' ticks (550 nm
+    and the Fraunhofer lines) in white."""
+    run = overlays[0]
+    pos = next(p for p in _entry(run, PRISM)["probes"] if p["name"].startswith("prism band positions"))
+    (x0, y0), u, half = pos["origin_px"], pos["fan_direction"], pos["band_height_px"] / 2
+    assert abs(u[1]) < 0.05, u  # the scene's fan runs along the image's rows: ticks are columns
+    marks = [("expected", c, s) for c, s in zip("RGB", pos["expected"])] + \
+            [("measured", c, s) for c, s in zip("RGB", pos["measured"])] + \
+            [("wavelength", "wavelength", s) for s in [0.0] + list(pos["fraunhofer_px"].values())]
+    script = """
+    v.show('render'); var c = box.querySelector('canvas.pane-a'), ctx = c.getContext('2d'), out = [];
+    var marks = %s, top = v.oy + (%r - %r) * v.scale - 3, bottom = v.oy + (%r + %r) * v.scale + 3;
+    marks.forEach(function (m) {
+      var x = Math.floor(v.ox + (%r + m[2] * %r) * v.scale);
+      var rows = m[0] === 'wavelength' ? [top - 9, top] : m[0] === 'expected' ? [bottom, bottom + 9] : [bottom + 9, bottom + 18];
+      var col = function (cx) { var d = ctx.getImageData(cx, Math.ceil(rows[0]) + 1, 1, Math.floor(rows[1] - rows[0]) - 2).data, px = [];
+        for (var k = 0; k < d.length; k += 4) px.push([d[k], d[k + 1], d[k + 2]]); return px; };
+      out.push({mark: m, at: col(x), left: col(x - 3), right: col(x + 3)});
+    });
+    return {columns: out, scale: v.scale};""" % (json.dumps(marks), y0, half, y0, half, x0, u[0])
+    got = probe_page(run, f"{PRISM}--mitsuba-box", script)
+    assert got["scale"] >= 1
+    for m in got["columns"]:
+        kind, colour, s = m["mark"]
+        want = MARK_RGB[colour]
+        assert len(m["at"]) >= 6 and all(px == want for px in m["at"]), m  # the tick, whole, at its column
+        assert not any(px == want for px in m["left"] + m["right"]), m  # and not 3 px beside it
+    # the readout says where a pixel lies along the fan, as the record counts positions
+    x, y = int(x0 + pos["expected"][2]), int(y0)
+    got = probe_page(run, f"{PRISM}--mitsuba-box", HOVER.replace("__X__", str(x)).replace("__Y__", str(y)))
+    along = float(re.search(r"prism: pixel centre at (\S+) px along the fan", got["readout"]).group(1))
+    assert along == pytest.approx((x + 0.5 - x0) * u[0] + (y + 0.5 - y0) * u[1], abs=5e-4 * max(1, abs(along)))
+
+
+@pytest.mark.slow
+def test_baseline_comparison_shown_with_its_z_map(overlays):
+    """A run made with --baseline: the job's line gives the status, the smallest p against its
+    threshold, the mean ratio per channel, and links to the z-map files that exist."""
+    first, second = overlays
+    entry = _entry(second, PRISM)
+    base = entry["baseline"]
+    assert base["status"] in ("same", "changed") and base["p_min"] is not None
+    page = (second / "report.html").read_text()
+    line = re.search(r"<li class='baseline [a-z]*'>(.*?)</li>", page, re.S)
+    assert line, "no baseline line in the page"
+    text = line.group(1)
+    assert f"against baseline {first}: {base['status']}" in text.replace("&#39;", "'")
+    assert f"smallest p {base['p_min']:.3g}" in text and f"threshold {base['threshold']:.3g}" in text
+    assert f"R {base['ratio'][0][0]:.4f} +- {base['ratio'][0][1]:.4f}" in text
+    links = re.findall(r"<a href='([^']+)'>z-map \((EXR|PNG)\)</a>", text)
+    assert [k for _, k in links] == ["EXR", "PNG"]
+    for href, _ in links:
+        assert (second / href).is_file() and href.startswith(f"{PRISM}/"), href
+
+
+@pytest.mark.slow
+def test_a_screenshot_of_the_overlays(overlays, tmp_path):
+    """The probe residual and probe z views of the GGX plate and the prism's marks, with the
+    readout of a plate pixel, written under tmp_path for a person to look at."""
+    run = overlays[0]
+    page = (run / "report.html").read_text()
+    shots = []
+    for box, view, (x, y) in ((f"{GGX}--mitsuba-box", "probe residual", (256, 200)), (f"{GGX}--mitsuba-box", "probe z", (256, 200)),
+                              (f"{PRISM}--mitsuba-box", "render", (170, 64))):
+        alone = ("<script>window.addEventListener('load', function(){var box=document.getElementById(%s);"
+                 "[].forEach.call(document.body.children, function(e){ if(e!==box && e.id+'-box'!==box.id) e.style.display='none'; });"
+                 "var v=spectralBench.viewer(box.id); v.start(); v.show(%s);"
+                 "(function wait(){ if(!box.dataset.ready){ setTimeout(wait, 50); return; } v.show(%s);"
+                 "var c=box.querySelector('canvas.pane-a'), r=c.getBoundingClientRect();"
+                 "c.dispatchEvent(new MouseEvent('mousemove', {clientX: Math.ceil(r.left+c.clientLeft+(v.ox+%d*v.scale)*c.clientWidth/c.width),"
+                 " clientY: Math.ceil(r.top+c.clientTop+(v.oy+%d*v.scale)*c.clientHeight/c.height)})); })();});</script>"
+                 ) % (json.dumps(box), json.dumps(view), json.dumps(view), x, y)
+        copy = run / f"shot-{box}-{view.replace(' ', '_')}.html"
+        copy.write_text(page.replace("</body>", alone + "</body>"))
+        png = tmp_path / f"{box}-{view.replace(' ', '_')}.png"
+        chromium(f"--screenshot={png}", copy.as_uri())
+        assert png.is_file() and png.stat().st_size > 10000, png
+        shots.append(png)
+    print("screenshots in", tmp_path)
+
+
+def test_overlay_fields_of_metrics_json_are_text(tmp_path):
+    """The fields the overlays read from metrics.json (a prism record's Fraunhofer line names, a
+    baseline record's run, reason and z-map path) reach the page as text or as JSON in an escaped
+    attribute; a z-map path outside the run folder, or not a file, is not linked; numbers that are
+    not numbers draw no marks."""
+    from spectral_bench.batch import exr
+    from spectral_bench.batch.report import html
+    out = tmp_path / "out"
+    exr.write(out / "s" / "results" / "mitsuba" / "render.exr", np.ones((4, 8, 3), dtype=np.float32))
+    exr.write(out / "s" / "results" / "mitsuba" / "baseline_zscore.exr", np.zeros((4, 8, 3), dtype=np.float32))
+    evil = "<img src=x onerror=alert(1)>'\""
+    prism = {"name": "prism band positions, beam on screen", "pass": True, "expected": [-1.0, 0.0, 2.0],
+             "measured": [-1.0, 0.1, 2.0], "origin_px": [4.0, 2.0], "fan_direction": [1.0, 0.0], "band_height_px": 2.0,
+             "fraunhofer_px": {evil: 1.5, "F": 2.5}}
+    runs = [{"scene": "s", "backend": "mitsuba", "status": "ok", "image": "s/results/mitsuba/render.exr", "resolution": [8, 4],
+             "probes": [prism],
+             "baseline": {"run": evil, "status": "changed", "reason": evil, "p_min": 1e-9, "threshold": 1e-4,
+                          "ratio": [[1.01, 0.001], [1.0, 0.001], [0.99, 0.001]], "zmap": "s/results/mitsuba/baseline_zscore.exr"}},
+            {"scene": "t", "backend": "mitsuba", "status": "ok", "image": "s/results/mitsuba/render.exr", "resolution": [8, 4],
+             "probes": [dict(prism, origin_px=["1", 2], name="prism band positions, x")],
+             "baseline": {"run": "b", "status": "same", "zmap": "../../etc/passwd"}}]
+    write_hand_made_metrics(out, {"started": "now", "runs": runs})
+    page = html.render(out)
+    assert "<img src=x" not in page and evil not in page
+    assert "against baseline &lt;img src=x onerror=alert(1)&gt;&#39;&#34;: changed (smallest p 1e-09 &lt; threshold 0.0001)" in page
+    assert "ratio R 1.0100 +- 0.0010" in page
+    hrefs = re.findall(r"href='([^']*)'", page)
+    assert page.count("z-map (EXR)") == 1 and not any("passwd" in h for h in hrefs)  # outside the run: not linked
+    assert "s/results/mitsuba/baseline_zscore.exr" in hrefs and "baseline_zscore.png" not in page  # no such file
+    marks = [json.loads(__import__("html").unescape(m)) for m in re.findall(r"data-marks='([^']*)'", page)]
+    assert sorted(map(str, marks)).count("None") == 1  # the record whose origin is text draws nothing
+    drawn = next(m for m in marks if m)
+    assert {t["label"] for t in drawn["ticks"] if t["kind"] == "wavelength"} == {"550", evil[:8], "F 486"}
+    assert [t["s"] for t in drawn["ticks"] if t["kind"] == "expected"] == [-1.0, 0.0, 2.0]

@@ -29,7 +29,7 @@ from urllib.parse import quote
 import jinja2
 import numpy as np
 
-from .. import exr, records
+from .. import exr, previews, records
 from ..verdict.status import ORDER
 from . import grouping
 
@@ -158,16 +158,17 @@ def _fresh(target, sources):
 
 def _job_data(folder):
     """view.js of a render's folder (written when missing or older than its EXRs): the render's
-    channels, its standard error, the z map and the FLIP map. Returns the channel names, or None
+    channels, its standard error, the z map, the FLIP map and the probes' images (``_probe_layers``). Returns the channel names, or None
     when there is no readable render."""
     render, z, flip, js = (folder / n for n in ("render.exr", "zscore.exr", "flip.exr", DATA_JS))
     if not render.is_file():
         return None
     try:
         names, img, se = exr.read_image_and_stderr(render)
-        if _fresh(js, (render, z, flip)):
+        if _fresh(js, (render, z, flip, folder / previews.PROBE_RESIDUAL)):
             return names
         layers = {"render": (names, [img[..., i] for i in range(len(names))], 10)}
+        layers.update(_probe_layers(folder))  # overlays (issue 21 item 4): the GGX probe's residual map
         if se is not None:
             layers["stderr"] = (names, [se[..., i] for i in range(len(names))], SE_BITS)
         if z.is_file():
@@ -179,6 +180,21 @@ def _job_data(folder):
         return names
     except (OSError, ValueError, KeyError):
         return None
+
+
+def _probe_layers(folder):
+    """The view.js layers of a render's probe images: ``probe`` from probe_residual.exr (batch/
+    previews.py ``write_probe_residual``: the GGX probe's expected image and block z, NaN off its
+    plates), whose channels keep their EXR names. {} when the render has none."""
+    path = folder / previews.PROBE_RESIDUAL
+    if not path.is_file():
+        return {}
+    try:
+        ch = exr.read(path)
+    except Exception:  # noqa: BLE001 - an overlay is an aid: an unreadable one leaves the render's views
+        return {}
+    names = [n for n in previews.PROBE_RESIDUAL_CHANNELS if n in ch]
+    return {"probe": (names, [ch[n] for n in names], 10)} if names else {}
 
 
 def _reference_data(ref_exr):
@@ -251,18 +267,14 @@ def _checks(run):
 
 
 def _extras(run):
-    """What a judged run could have detected (``detectable``) and its baseline comparison."""
+    """What a judged run could have detected (``detectable``); its baseline comparison is
+    ``_baseline``'s."""
     out = []
     det = run.get("detectable")
     if isinstance(det, dict) and _num(det.get("scale")):
         out.append(f"could have detected: a uniform radiance scale error of {100 * det['scale']:.3g} % with "
                    f"{_fmt(det.get('power'))} power at alpha {_fmt(det.get('alpha'))} ({_text(det.get('method'))})"
                    + (f"; a ColorChecker patch shift of {_fmt(det.get('patch_de00'))} dE00" if _num(det.get("patch_de00")) else ""))
-    base = run.get("baseline")
-    if isinstance(base, dict):
-        out.append(f"against baseline {_text(base.get('run'))}: {_text(base.get('status'))}"
-                   + (f" (p_min {_fmt(base.get('p_min'))} vs {_fmt(base.get('threshold'))})" if _num(base.get("p_min")) else "")
-                   + (f": {_text(base.get('reason'))}" if base.get("reason") else ""))
     return out
 
 
@@ -325,6 +337,101 @@ def _regions(out, run, w, h):
         return []
 
 
+PRISM_POSITIONS = "prism band positions"
+
+
+def _pair(x):
+    return isinstance(x, list) and len(x) == 2 and all(_num(v) for v in x)
+
+
+def _prism_marks(run):
+    """The prism's band positions to mark on the image (issue 21 item 4), from its positions
+    probe's record (batch/verdict/probes/prism.py ``_positions``): position s (px along the fan
+    from 550 nm's band centre) lies at origin_px + s * fan_direction in image pixels. Ticks: 550 nm
+    and the Fraunhofer lines (where Snell's law puts those wavelengths' band centres), each
+    channel's centroid as expected and as measured. None when the run has no such record."""
+    from ...exporters import dispersion
+    for p in _list(run.get("probes")):
+        if not (isinstance(p, dict) and _text(p.get("name")).startswith(PRISM_POSITIONS)):
+            continue
+        exp, meas = _list(p.get("expected")), _list(p.get("measured"))
+        if not (_pair(p.get("origin_px")) and _pair(p.get("fan_direction")) and len(exp) == 3):
+            continue
+        ticks = [{"s": 0.0, "label": "550", "kind": "wavelength"}]
+        for line, s in _dict(p.get("fraunhofer_px")).items():
+            nm = dispersion.FRAUNHOFER_NM.get(line)
+            if _num(s):
+                ticks.append({"s": float(s), "label": f"{_text(line)[:8]} {nm:.0f}" if nm else _text(line)[:8],
+                              "kind": "wavelength"})
+        for c, e, m in zip("RGB", exp, meas + [None] * (3 - len(meas))):
+            if _num(e) and np.isfinite(e):
+                ticks.append({"s": float(e), "label": c, "kind": "expected", "channel": c})
+            if _num(m) and np.isfinite(m):
+                ticks.append({"s": float(m), "label": c, "kind": "measured", "channel": c})
+        height = p.get("band_height_px") if _num(p.get("band_height_px")) else p.get("beam_width_px")
+        return {"origin": [float(v) for v in p["origin_px"]], "u": [float(v) for v in p["fan_direction"]],
+                "half": float(height) / 2 if _num(height) and np.isfinite(height) else 2.0,
+                "pass": p.get("pass") if isinstance(p.get("pass"), bool) else None, "ticks": ticks}
+    return None
+
+
+def _prism_line(run):
+    """The prism's band positions in words beside the marks: each channel's centroid expected and
+    measured (px along the fan from 550 nm's band centre, with its standard error), the colour
+    order expected and measured; None without a positions record."""
+    for p in _list(run.get("probes")):
+        if not (isinstance(p, dict) and _text(p.get("name")).startswith(PRISM_POSITIONS)):
+            continue
+        exp, meas, se = _list(p.get("expected")), _list(p.get("measured")), _list(p.get("standard_error_px"))
+        if len(exp) != 3:
+            return None
+        parts = []
+        for c, e, m, s in zip("RGB", exp, meas + [None] * 3, se + [None] * 3):
+            parts.append(f"{c} {_fmt(e, '{:.2f}')} expected, {_fmt(m, '{:.2f}') or '?'} measured"
+                         + (f" +- {s:.2g}" if _num(s) else ""))
+        return (f"band positions (px along the fan from 550 nm's band centre; marked on the image): " + "; ".join(parts)
+                + f"; colour order {_text(p.get('order_expected'))} expected, {_text(p.get('order_measured'))} measured")
+    return None
+
+
+def _probe_views(out, folder):
+    """The views of a render's probe images: "probe residual" (render - the GGX probe's expected
+    image, per pixel) and "probe z" (its blocks' z) when probe_residual.exr is there."""
+    return ["probe residual", "probe z"] if _local_url(out, folder / previews.PROBE_RESIDUAL) else []
+
+
+def _baseline(out, run):
+    """The job's comparison with a baseline run (metrics.json ``baseline``, batch/verdict/
+    baseline.py): status, the image test's smallest p against its threshold, the mean ratio per
+    channel, what it could detect and the time ratio (baseline.how_much), the reason, and links to
+    its z-map (EXR and PNG) when they are files inside the run folder. None without a record."""
+    from ..verdict import baseline
+    base = run.get("baseline")
+    if not isinstance(base, dict):
+        return None
+    text = f"against baseline {_text(base.get('run'))}: {_text(base.get('status'))}"
+    if _num(base.get("p_min")) and _num(base.get("threshold")):
+        ok = base["p_min"] >= base["threshold"]
+        text += f" (smallest p {base['p_min']:.3g} {'>=' if ok else '<'} threshold {base['threshold']:.3g})"
+    try:
+        much = baseline.how_much(base)
+    except (TypeError, ValueError, KeyError, IndexError):  # a hand-edited record: shown without it
+        much = ""
+    if much:
+        text += f"; {much}"
+    if base.get("reason"):
+        text += f": {_text(base.get('reason'))}"
+    links = []
+    zmap = base.get("zmap")
+    if isinstance(zmap, str) and zmap:
+        for label, rel in (("z-map (EXR)", zmap), ("z-map (PNG)", str(PurePosixPath(zmap).with_name(baseline.ZMAP_PNG)))):
+            url = _local_url(out, rel)
+            if url:
+                links.append({"label": label, "src": url})
+    status = base.get("status") if base.get("status") in baseline.STATUSES else ""  # a CSS class: known words only
+    return {"text": text, "status": status, "links": links}
+
+
 def _deviations(options):
     """{id: first sentence of its explanation} of the repository's known_deviations.toml when the
     run used it ({} when it used its own --known file: a path from metrics.json is never opened)."""
@@ -364,6 +471,7 @@ def _viewer(out, run, deviations=None):
     ref_data = _local_url(out, PurePosixPath(ref).with_suffix(".js")) if ref_js else None
     views = ["render"] + (["reference", "difference"] if ref_data else [])
     views += [v for v, f in (("z-score", "zscore.exr"), ("FLIP", "flip.exr")) if _local_url(out, folder / f)]
+    views += _probe_views(out, folder)
     if all(f"S{k}.{c}" in names for k in range(4) for c in "RGB"):
         views += STOKES_VIEWS
     lines = _checks(run)
@@ -376,6 +484,7 @@ def _viewer(out, run, deviations=None):
             "src": data, "ref": ref_data or "", "checks": lines, "extras": _extras(run),
             "reason": _text(run.get("reason")), "known": _known_lines(run, deviations or {}),
             "tev": _tev(run, folder, ref if ref_url else None), "regions": json.dumps(regions),
+            "marks": json.dumps(_prism_marks(run)), "prism": _prism_line(run), "baseline": _baseline(out, run),
             "numbers": [f"{_text(k)}: {_fmt(v)}" for k, v in _dict(run.get("metrics")).items()],
             "reference_problems": _reference_problems(run)}
 

@@ -1,6 +1,6 @@
 """The verdict of one render: from its EXR (mean and, with passes, per-pixel standard error) to a
 job record with metrics, the noise test against the scene's reference, the analytic probes, the
-images a reader looks at (previews, differences, z-score, FLIP) and a status
+images a reader looks at (previews, differences, z-score, FLIP, the GGX probe's residuals) and a status
 (batch/verdict/status.py). A function of files and settings: it never renders.
 """
 from pathlib import PurePosixPath
@@ -58,8 +58,10 @@ def render_verdict(entry, scene, rendered, image, res_dir, settings, deviations)
     else:
         ztest = noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings)
     observers = sorted({d.observer for d in known.applicable(deviations, entry) if d.observer})
+    maps = {}
     entry["probes"] = probes.evaluate(rendered, names, test_all, reference=None if unusable else ref, stderr=stderr,
-                                      passes=entry["passes"], observers=observers)
+                                      passes=entry["passes"], observers=observers, maps=maps)
+    previews.write_probe_residual(res_dir, maps.get("residual_map"))  # the report's "probe residual" view
     if unusable and not any(p["pass"] is not None for p in entry["probes"]):
         entry["unjudged_because"] = unusable + ("" if entry["probes"] else "; no analytic probe applies")
     status.decide(entry, deviations, ztest)

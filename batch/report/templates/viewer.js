@@ -117,6 +117,7 @@ var spectralBench = (function () {
       var job = parts[0];
       self.w = job.w; self.h = job.h; self.render = job.render; self.stderr = job.stderr;
       self.z = job.z; self.flip = job.flip && job.flip.Y;
+      self.probe = job.probe;  // the GGX probe's expected image and block z (probe views, below)
       if (parts[1] && parts[1].w === job.w && parts[1].h === job.h) self.ref = parts[1].reference;
       if (!self.channel) self.channel = self.worstChannel();
       var sel = self.box.querySelector('select.channel'); if (sel) sel.value = self.channel;
@@ -162,6 +163,7 @@ var spectralBench = (function () {
       }
       return;
     }
+    if (view === 'probe residual' || view === 'probe z') { this.probeColour(view, i, out); return; }
     if (view === 'difference') { t = 0.5 + (r[c][i] - ref[c][i]) / (2 * this.diffRange); lut = LUT.diverging; }
     else if (view === 'z-score') { t = 0.5 + this.z[c][i] / (2 * Z_RANGE); lut = LUT.diverging; }
     else if (view === 'FLIP') { t = this.flip[i]; lut = LUT.magma; }
@@ -186,6 +188,7 @@ var spectralBench = (function () {
     return 0.5 * Math.atan2(this.render['S2.' + c][i], this.render['S1.' + c][i]) * 180 / Math.PI;
   };
   Viewer.prototype.picture = function (view) {  // the view at 1 image pixel per pixel, in an offscreen canvas
+    if (/^probe /.test(view) && this.probeRange === undefined) this.probeRange = this.probeSpread();
     var key = [view, this.ev, this.tf, this.channel, this.diffRange].join('|');
     this.cache = this.cache || {};
     if (this.cache[view] && this.cache[view].key === key) return this.cache[view].canvas;
@@ -217,6 +220,7 @@ var spectralBench = (function () {
       ctx.fillStyle = '#555'; ctx.fillRect(0, 0, c.width, c.height);
       ctx.drawImage(this.picture(views[k]), this.ox, this.oy, this.w * this.scale, this.h * this.scale);
       this.overlay(ctx, views[k]);
+      this.prismMarks(ctx);
     }, this);
     this.legend();
     this.box.dataset.active = this.view;
@@ -248,6 +252,12 @@ var spectralBench = (function () {
     else if (v === 'z-score') { map = 'diverging'; lo = -Z_RANGE; hi = Z_RANGE;
       caption = 'z of the noise test per block, channel ' + c + ' (|z| >= ' + Z_RANGE + ' saturated)'; }
     else if (v === 'FLIP') { map = 'magma'; lo = 0; hi = 1; caption = 'HDR-FLIP error (0: none, 1: most)'; }
+    else if (v === 'probe residual') { map = 'diverging'; lo = -this.probeRange; hi = this.probeRange;
+      caption = 'GGX probe: render - expected (closed form), channel ' + c + ', on the plate (linear; |r| >= ' + fmt(hi)
+        + ' saturated: 99.5th percentile of |r| over R, G, B; grey: off the plate)'; }
+    else if (v === 'probe z') { map = 'diverging'; lo = -Z_RANGE; hi = Z_RANGE;
+      caption = 'GGX probe: z of its test per block (block mean residual / its standard error), channel ' + c
+        + ' (|z| >= ' + Z_RANGE + ' saturated; grey: off the plate)'; }
     else if (v === 'S1' || v === 'S2' || v === 'S3') { map = 'diverging'; lo = -1; hi = 1;
       caption = v + ' / S0, channel ' + c + (v === 'S1' ? ' (+1 horizontal, -1 vertical)' : v === 'S2' ? ' (+1 at +45 deg, -1 at -45 deg)' : ' (circular)'); }
     else if (v === 'DoP') { map = 'viridis'; lo = 0; hi = 1; caption = 'degree of polarisation, channel ' + c; }
@@ -267,9 +277,9 @@ var spectralBench = (function () {
     bar.querySelector('.hi').textContent = fmt(hi);
     bar.querySelector('.caption').textContent = caption;
   };
-  Viewer.prototype.pixelAt = function (canvas, ev) {
-    var r = canvas.getBoundingClientRect(), mx = (ev.clientX - r.left) * canvas.width / r.width,
-      my = (ev.clientY - r.top) * canvas.height / r.height;
+  Viewer.prototype.pixelAt = function (canvas, ev) {  // the canvas's content box: its border is not image
+    var r = canvas.getBoundingClientRect(), mx = (ev.clientX - r.left - canvas.clientLeft) * canvas.width / (canvas.clientWidth || r.width),
+      my = (ev.clientY - r.top - canvas.clientTop) * canvas.height / (canvas.clientHeight || r.height);
     return {mx: mx, my: my, x: Math.floor((mx - this.ox) / this.scale), y: Math.floor((my - this.oy) / this.scale)};
   };
   Viewer.prototype.read = function (x, y) {  // the readout of one pixel: every value is the data's
@@ -285,6 +295,7 @@ var spectralBench = (function () {
     row('standard error (render, 2 digits)', this.stderr, ['R', 'G', 'B']);
     row('z (block)', this.z, ['R', 'G', 'B']);
     if (this.flip) lines.push('FLIP: ' + fmt(this.flip[i]));
+    this.probeLines(i, lines);
     if (this.render['S0.R']) {
       ['S0', 'S1', 'S2', 'S3'].forEach(function (s) { row(s, this.render, [s + '.R', s + '.G', s + '.B']); }, this);
       lines.push('DoP: ' + ['R', 'G', 'B'].map(function (c) { return c + ' ' + fmt(this.dop(i, c)); }, this).join('  ')
@@ -328,8 +339,98 @@ var spectralBench = (function () {
     this.view = view; this.box.dataset.active = view;
     this.box.querySelectorAll('.tabs button').forEach(function (b) { b.classList.toggle('active', b.dataset.view === view); });
     var sel = this.box.querySelector('.channel-box');
-    if (sel) sel.style.visibility = /^(difference|z-score|S[123]|DoP|AoP)$/.test(view) ? '' : 'hidden';
+    if (sel) sel.style.visibility = /^(difference|z-score|S[123]|DoP|AoP|probe residual|probe z)$/.test(view) ? '' : 'hidden';
     this.draw();
+  };
+  // ---- probes drawn on the image (issue 21 item 4) ------------------------------------------------------
+  // The GGX probe's residual map (batch/verdict/probes/ggx.py residual_map, probe_residual.exr): its
+  // expected image per plate pixel (NaN off the plate) and the z of each pixel's block in its test.
+  Viewer.prototype.probeResidual = function (c, i) {  // render - expected: the residual the probe averages
+    var e = this.probe['expected.' + c];
+    return e ? this.render[c][i] - e[i] : NaN;
+  };
+  Viewer.prototype.probeSpread = function () {  // the 99.5th percentile of |residual| over the plates, R, G, B
+    if (!this.probe) return 1e-6;
+    var d = [];
+    ['R', 'G', 'B'].forEach(function (c) {
+      for (var i = 0; i < this.w * this.h; i++) { var x = this.probeResidual(c, i); if (isFinite(x)) d.push(x); }
+    }, this);
+    return pct(d, 0.995) || 1e-6;
+  };
+  Viewer.prototype.probeColour = function (view, i, out) {
+    var c = this.channel, t = view === 'probe z' ? this.probe['z.' + c][i] / (2 * Z_RANGE) + 0.5
+      : this.probeResidual(c, i) / (2 * this.probeRange) + 0.5;
+    if (!isFinite(t)) {  // off the plate: the render's luminance, dimmed grey (for orientation)
+      var r = this.render, y = 0.2126 * r.R[i] + 0.7152 * r.G[i] + 0.0722 * r.B[i];
+      out[0] = out[1] = out[2] = (SRGB[Math.max(0, Math.min(4096, Math.round(y * Math.pow(2, this.ev) * 4096)))] || 0) * 0.35;
+      return;
+    }
+    var v = Math.max(0, Math.min(255, Math.round(t * 255))), lut = LUT.diverging;
+    out[0] = lut[3 * v]; out[1] = lut[3 * v + 1]; out[2] = lut[3 * v + 2];
+  };
+  Viewer.prototype.probeLines = function (i, lines) {  // the readout's probe rows, on the plate only
+    var p = this.probe, m = this.markData();
+    if (m) {  // the prism: where this pixel's centre lies along the fan, as the marks count
+      var x = i % this.w + 0.5, y = Math.floor(i / this.w) + 0.5;
+      lines.push('prism: pixel centre at ' + fmt((x - m.origin[0]) * m.u[0] + (y - m.origin[1]) * m.u[1])
+        + ' px along the fan from 550 nm\'s band centre');
+    }
+    if (!p || !isFinite(p['expected.R'] ? p['expected.R'][i] : NaN)) return;
+    var rgb = ['R', 'G', 'B'];
+    lines.push('GGX probe expected: ' + rgb.map(function (c) { return c + ' ' + fmt(p['expected.' + c][i]); }).join('  '));
+    lines.push('GGX probe residual (render - expected): ' + rgb.map(function (c) { return c + ' ' + fmt(this.probeResidual(c, i)); }, this).join('  '));
+    lines.push('GGX probe z (its block): ' + rgb.map(function (c) { return c + ' ' + fmt(p['z.' + c][i]); }).join('  '));
+  };
+  // The prism's band positions (html.py _prism_marks, from the positions probe's record): a tick at
+  // origin + s u (image pixels) for each position s, across the fan: the wavelengths' ticks above
+  // the band (as the image shows it), the channels' centroids below it, each channel's expected
+  // tick next to the band and its measured tick right after it, so that where they agree they
+  // make one line.
+  var MARK_COLOUR = {R: '#ff4040', G: '#30e030', B: '#4080ff', wavelength: '#ffffff'};
+  Viewer.prototype.markData = function () {
+    return this.marks !== undefined ? this.marks : (this.marks = JSON.parse(this.box.dataset.marks || 'null'));
+  };
+  Viewer.prototype.prismMarks = function (ctx) {
+    var m = this.markData();
+    var show = this.box.querySelector('.show-probes');
+    if (!m || (show && !show.checked)) return;
+    var s = this.scale, ox = this.ox, oy = this.oy, u = m.u;
+    var n = u[0] >= 0 ? [u[1], -u[0]] : [-u[1], u[0]];  // perpendicular to the fan, pointing up the image
+    if (n[1] > 0) n = [-n[0], -n[1]];
+    var gap = m.half * s + 3, L = 9;
+    var at = function (pos, d) {  // canvas point of fan position pos, d canvas pixels along n
+      return [ox + (m.origin[0] + pos * u[0]) * s + d * n[0], oy + (m.origin[1] + pos * u[1]) * s + d * n[1]];
+    };
+    var line = function (pos, d0, d1, colour) {
+      var a = at(pos, d0), b = at(pos, d1);
+      ctx.strokeStyle = colour; ctx.lineWidth = 2; ctx.beginPath(); ctx.moveTo(a[0], a[1]); ctx.lineTo(b[0], b[1]); ctx.stroke();
+    };
+    var label = function (text, p, colour) {  // left-aligned at p
+      var w = ctx.measureText(text).width;
+      ctx.fillStyle = '#000c'; ctx.fillRect(p[0] - 2, p[1] - 6, w + 4, 12);
+      ctx.fillStyle = colour; ctx.fillText(text, p[0], p[1] + 4);
+    };
+    ctx.font = '11px sans-serif';
+    // label rows, 13 px apart: a label starts at its tick and runs along the fan, so it takes the
+    // row above every tick it would cover, and its tick reaches to it (a staircase that no tick
+    // line crosses)
+    var rows = function (ticks) {
+      var placed = [];
+      ticks.slice().sort(function (a, b) { return b.s - a.s; }).forEach(function (t) {
+        var x = t.s * s * (u[0] >= 0 ? 1 : -1), w = ctx.measureText(t.label).width;
+        t.row = 0;
+        placed.forEach(function (q) { if (q.x >= x - 1 && q.x <= x + w + 6) t.row = Math.max(t.row, q.t.row + 1); });
+        placed.push({x: x, t: t});
+      });
+    };
+    var waves = m.ticks.filter(function (t) { return t.kind === 'wavelength'; });
+    var measured = m.ticks.filter(function (t) { return t.kind === 'measured'; });
+    rows(waves); rows(measured);
+    waves.forEach(function (t) { line(t.s, gap, gap + L + 13 * t.row, MARK_COLOUR.wavelength); });
+    m.ticks.forEach(function (t) { if (t.kind === 'expected') line(t.s, -gap, -gap - L, MARK_COLOUR[t.channel]); });
+    measured.forEach(function (t) { line(t.s, -gap - L, -gap - 2 * L - 13 * t.row, MARK_COLOUR[t.channel]); });
+    waves.forEach(function (t) { label(t.label, at(t.s, gap + L + 13 * t.row + 6), MARK_COLOUR.wavelength); });
+    measured.forEach(function (t) { label(t.label, at(t.s, -gap - 2 * L - 13 * t.row - 6), MARK_COLOUR[t.channel]); });
   };
   Viewer.prototype.flipAB = function () { this.show(this.view === 'render' ? 'reference' : 'render'); };
 

@@ -13,7 +13,9 @@ a closed form, independently of any renderer (plain numpy; colour-science for CI
   (rho L + integral P L, judged against the region's own standard error).
 
 Each probe is a dict {name, expected, measured, error, unit, pass}; ``pass`` is None when the
-probe cannot be measured at the render's resolution (fewer than MIN_PIXELS whole pixels).
+probe cannot be measured at the render's resolution (fewer than MIN_PIXELS whole pixels). A probe
+may add an image (an array under one of MAP_KEYS: ggx.py's ``residual_map``); ``evaluate`` takes
+it out of the record (records are metrics.json's plain data) and hands it over in ``maps``.
 """
 from . import fluorescence, fresnel, ggx, lambert, prism, stokes, thin_film
 from .common import MIN_PIXELS, Measurement  # noqa: F401 - part of the interface
@@ -24,10 +26,21 @@ PROBES = [lambert.patches, fresnel.brewster, ggx.plates, stokes.validity, thin_f
           fluorescence.lone_sphere]
 
 
-def evaluate(scene, names, image, reference=None, stderr=None, passes=None, observers=()):
+MAP_KEYS = ("residual_map",)  # record keys that hold an image, not data
+
+
+def evaluate(scene, names, image, reference=None, stderr=None, passes=None, observers=(), maps=None):
     """Every probe that applies to ``scene``, measured on ``image`` (channels ``names``; ``stderr``:
     its per-pixel standard error from ``passes`` independent passes, or None; ``observers``: see
-    Measurement)."""
+    Measurement). The records are plain data: an image a probe returns is removed from its record
+    and, when ``maps`` is a dict, put there as ``maps[key][record name]``."""
     m = Measurement(scene, list(names), image, stderr, reference, passes or (1 if stderr is None else 2),
                     tuple(observers))
-    return [record for probe in PROBES for record in probe(m)]
+    records = [record for probe in PROBES for record in probe(m)]
+    for record in records:
+        for key in MAP_KEYS:
+            if key in record:
+                image_map = record.pop(key)
+                if maps is not None:
+                    maps.setdefault(key, {})[record["name"]] = image_map
+    return records

@@ -20,6 +20,9 @@ cuts images, each pooling enough samples for heavy-tailed pixels), and each bloc
 per channel is compared with its standard error from the spread of the residuals in it; plus the
 plate's luminance scale (measured over expected, weighted least squares over the blocks), which
 pools every pixel and sees a radiometric error of a fraction of a percent. Sidak over all tests.
+The blocks record carries what its residuals are made of as an image (``residual_map``: the
+expected image and each block's z), which probes.evaluate hands to the verdict (written as
+``probe_residual.exr``, shown by the report) and keeps out of metrics.json.
 """
 import numpy as np
 
@@ -217,6 +220,31 @@ def _judge(measured, expected, mask, block_edges, tests):
     return blocks, scale, len(rows)
 
 
+def residual_map(expected, mask, block_edges, blocks):
+    """The blocks test's residuals as an image (issue 21: the report's "probe residual" view):
+    H x W x 6 float32, NaN off the plate. Channels 0-2: the expected radiance of each whole plate
+    pixel (linear sRGB), so that the residual measured - expected that ``_judge`` averages is the
+    render minus these (stored so because the expected image is smooth and compresses to half
+    the size of a noisy residual); channels 3-5: the z of the pixel's block, (block mean measured
+    - block mean expected) / its standard error, read from the ``blocks`` record's arrays (the
+    very values the probe's test judged; nothing is recomputed). Blocks are walked in ``_judge``'s
+    order and with its rule (at least MIN_PIXELS plate pixels)."""
+    out = np.full(mask.shape + (6,), np.nan, dtype=np.float32)
+    out[mask, :3] = expected[mask]
+    z = (np.asarray(blocks["measured"]) - np.asarray(blocks["expected"])) / np.maximum(np.asarray(blocks["se"]), 1e-300)
+    z = z.reshape(-1, 3)
+    ey, ex = block_edges
+    k = 0
+    for y0, y1 in zip(ey[:-1], ey[1:]):
+        for x0, x1 in zip(ex[:-1], ex[1:]):
+            sel = mask[y0:y1, x0:x1]
+            if sel.sum() < MIN_PIXELS:
+                continue
+            out[y0:y1, x0:x1][sel, 3:] = z[k]
+            k += 1
+    return out
+
+
 def plates(m, form=SHADOWING):
     found = _applies(m.scene)
     if not found:
@@ -247,7 +275,8 @@ def plates(m, form=SHADOWING):
                  "quadrature": f"{LIGHT_NODES}x{LIGHT_NODES} per light, {FOOTPRINT}x{FOOTPRINT} per pixel"}
         out.append(_probe(f"{label} blocks", exp_mean, meas_mean, float(np.sum(meas_mean) / np.sum(exp_mean) - 1),
                           "relative", blocks["pass"], z=blocks["z"], stat=blocks,
-                          alternatives={o: a[0] for o, a in alternatives.items()}, **extra))
+                          alternatives={o: a[0] for o, a in alternatives.items()}, **extra,
+                          residual_map=residual_map(expected, mask, edges, blocks)))
         out.append(_probe(f"{label} luminance scale", 1.0, scale["measured"][0], scale["measured"][0] - 1.0,
                           "relative", scale["pass"], z=scale["z"], stat=scale,
                           alternatives={o: a[1] for o, a in alternatives.items()}, **extra))

@@ -331,7 +331,9 @@ def expected(scene, width, height, step_nm=STEP_NM):
     spread = float(np.linalg.norm(fan))
     u = fan / spread if spread > 1e-6 else np.array([1.0, 0.0])
     along = (quads - centres[:, None, :]) @ u
+    across = (quads - centres[:, None, :]) @ np.array([-u[1], u[0]])
     return {"fan_direction": u, "fan_spread_px": spread, "beam_width_px": float(np.median(np.ptp(along, axis=1))),
+            "band_height_px": float(np.median(np.ptp(across, axis=1))),
             "image": img, "mask": mask, "footprint": footprint, "screen": screen, "rho": rho,
             "wavelengths": wl, "centres": centres, "T": t, "flux": flux, "flux_unpolarised": flux_unpol,
             "flux_by_observer": flux_by_observer,
@@ -387,7 +389,11 @@ def _positions(label, gt, s, meas, exp_img, var, threshold):
                   unit_positions="px along the fan (towards more deviation) from 550 nm's band centre",
                   standard_error_px=se_pos, dof=dofs, p_min=float(min(p_pos)), threshold=threshold,
                   order_expected=order_exp, order_measured=order_meas, fraunhofer_px=lines,
-                  beam_width_px=gt["beam_width_px"], fan_spread_px=gt["fan_spread_px"])
+                  beam_width_px=gt["beam_width_px"], fan_spread_px=gt["fan_spread_px"],
+                  # where the positions lie in the image (the report marks them): position s is at
+                  # origin_px + s * fan_direction (image x right, y down, pixels)
+                  origin_px=[float(v) for v in c550], fan_direction=[float(v) for v in u],
+                  band_height_px=gt["band_height_px"])
 
 
 def _energy(label, gt, mask, meas, exp_img, var, observers):
