@@ -4,6 +4,11 @@ looks at is stored as half floats (11 significant bits: 4.9e-4 relative rounding
 noise of any render judged here):
 
 - ``zscore.exr``: the noise test's z per block and colour channel (half);
+- ``block_stderr.exr`` (``BLOCK_STDERR``): the standard error of each block's difference that z
+  divides by (the render's noise, the reference's, and the floor: batch/verdict/compare.py
+  ``z_test``), per block and colour channel (half): what the page shows under the cursor as the
+  standard error (a pixel's own, from a few passes, is itself too noisy to read; it stays in
+  render.exr);
 - ``flip.exr``: the HDR-FLIP map (one channel Y, half, 5 significant bits: ``FLIP_BITS``);
 - ``probe_residual.exr``: for a scene with a GGX/Beckmann plate probe, what that probe's
   residual map needs (half, NaN off the plates: batch/verdict/probes/ggx.py ``residual_map``):
@@ -146,6 +151,7 @@ def float_reference(res_dir, mean):
             os.unlink(tmp)
 
 
+BLOCK_STDERR = "block_stderr.exr"
 FLIP_BITS = 4  # mantissa bits kept of the FLIP map's halves (5 significant: 1.6 % at most)
 
 

@@ -104,3 +104,20 @@ def test_written_and_read_back_unchanged(tmp_path):
     path = exr.write_image(tmp_path / "r.exr", ["R", "G", "B"], m, {f"stderr.{c}": s[..., i] for i, c in enumerate("RGB")})
     names, img, se = exr.read_image_and_stderr(path)
     assert names == ["R", "G", "B"] and np.array_equal(img, m.astype(np.float32)) and np.array_equal(se, s.astype(np.float32))
+
+
+def test_the_block_standard_error_map_is_what_z_divides_by():
+    """block_stderr.exr holds, per pixel, the standard error of its block's difference: the noise
+    test's block difference over it is the block's z (batch/verdict/compare.py z_test)."""
+    rng = np.random.default_rng(8)
+    ref_value = rng.uniform(0.1, 1.0, SHAPE)
+    ref = compare.reference_at(ref_value, np.full(SHAPE, 0.001), 4096, SHAPE, 8)
+    se = np.full(SHAPE, 0.02)
+    zt = _judge(ref_value + rng.normal(0, 0.02, SHAPE), se, ref)
+    assert zt.semap.shape == SHAPE
+    # z * its standard error is the block's mean difference, the same for every pixel of the block
+    d = zt.zmap * zt.semap
+    b = zt.block
+    blk = d[:b, :b, 0]
+    assert np.allclose(blk, blk[0, 0]) and np.isclose(blk[0, 0], zt.diff[0, 0, 0])
+    assert np.isclose(zt.semap[0, 0, 0], np.sqrt(zt.var[0, 0, 0]))

@@ -69,7 +69,7 @@ var cx=Math.ceil(r.left+c.clientLeft+(v.ox+__X__*v.scale)*c.clientWidth/c.width)
 c.dispatchEvent(new MouseEvent('mousemove', {clientX: cx, clientY: cy, bubbles: true}));
 var i=__Y__*v.w+__X__, raw={};
 ['R','G','B'].forEach(function(ch){ raw['render.'+ch]=v.render[ch][i]; if(v.ref) raw['reference.'+ch]=v.ref[ch][i];
-  if(v.z) raw['z.'+ch]=v.z[ch][i]; });
+  if(v.z) raw['z.'+ch]=v.z[ch][i]; if(v.blockse) raw['blockse.'+ch]=v.blockse[ch][i]; });
 return {readout: box.querySelector('.readout').textContent, raw: raw, pixel: box.dataset.pixel, w: v.w, h: v.h};
 """
 
@@ -91,6 +91,7 @@ def test_pixel_values_under_the_cursor_are_the_exrs(run):
     names, img, _ = exr.read_image_and_stderr(run / entry["image"])
     ref = exr.read_rgb(run / entry["reference"]["image"])
     z = exr.read_rgb(run / entry["image"].replace("render.exr", "zscore.exr"))
+    block_se = exr.read_rgb(run / entry["image"].replace("render.exr", "block_stderr.exr"))
     rng = np.random.default_rng(1)
     h, w = img.shape[:2]
     pixels = [tuple(int(v) for v in np.unravel_index(np.argmax(img[..., 0]), (h, w)))[::-1]] + \
@@ -103,6 +104,10 @@ def test_pixel_values_under_the_cursor_are_the_exrs(run):
             assert got["raw"][f"render.{c}"] == half(img[y, x, names.index(c)])
             assert got["raw"][f"reference.{c}"] == half(ref[y, x, k])
             assert got["raw"][f"z.{c}"] == half(z[y, x, k])
+            assert got["raw"][f"blockse.{c}"] == half(block_se[y, x, k])
+            # the standard error shown is the one z divides by: the block's difference over it is z
+            assert shown(got["readout"], "standard error of the block's difference (render and reference noise; "
+                         "z divides by it)")[c] == pytest.approx(block_se[y, x, k], rel=HALF_REL + SHOWN_REL)
             # shown: to 4 significant digits of that
             for label, value in (("render", img[y, x, names.index(c)]), ("reference", ref[y, x, k])):
                 v = shown(got["readout"], label)[c]
@@ -263,7 +268,7 @@ def test_checks_one_line_each_failures_first_with_the_recorded_observer(tmp_path
     folder = PurePosixPath("chart/results/mitsuba")
     assert html._tev(run, folder, "chart/results/reference_4x4.exr") == (
         "tev chart/results/mitsuba/render.exr chart/results/reference_4x4.exr chart/results/mitsuba/zscore.exr "
-        "chart/results/mitsuba/flip.exr")
+        "chart/results/mitsuba/block_stderr.exr chart/results/mitsuba/flip.exr chart/results/mitsuba/probe_residual.exr")
 
 
 @pytest.mark.slow

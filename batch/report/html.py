@@ -158,18 +158,23 @@ def _fresh(target, sources):
 
 def _job_data(folder):
     """view.js of a render's folder (written when missing or older than its EXRs): the render's
-    channels, its standard error, the z map, the FLIP map and the probes' images (``_probe_layers``). Returns the channel names, or None
-    when there is no readable render."""
+    channels, the z map with the standard error it divides by (block_stderr.exr; a run from before
+    it: the render's per-pixel standard error), the FLIP map and the probes' images
+    (``_probe_layers``). Returns the channel names, or None when there is no readable render."""
     render, z, flip, js = (folder / n for n in ("render.exr", "zscore.exr", "flip.exr", DATA_JS))
+    block_se = folder / previews.BLOCK_STDERR
     if not render.is_file():
         return None
     try:
         names, img, se = exr.read_image_and_stderr(render)
-        if _fresh(js, (render, z, flip, folder / previews.PROBE_RESIDUAL)):
+        if _fresh(js, (render, z, flip, block_se, folder / previews.PROBE_RESIDUAL)):
             return names
         layers = {"render": (names, [img[..., i] for i in range(len(names))], 10)}
         layers.update(_probe_layers(folder))  # overlays (issue 21 item 4): the GGX probe's residual map
-        if se is not None:
+        if block_se.is_file():
+            bs = exr.read_rgb(block_se)
+            layers["blockse"] = (["R", "G", "B"], [bs[..., i] for i in range(3)], 10)
+        elif se is not None:
             layers["stderr"] = (names, [se[..., i] for i in range(len(names))], SE_BITS)
         if z.is_file():
             zr = exr.read_rgb(z)
@@ -278,12 +283,15 @@ def _extras(run):
     return out
 
 
-def _tev(run, folder, ref):
-    """A tev command line (run from the output folder) for a render that failed."""
+def _tev(run, folder, ref, out=None):
+    """A tev command line (run from the output folder) for a render that failed: the render, the
+    reference, the z map, the standard error z divides by, FLIP and the probe's images (those
+    present when ``out`` is given)."""
     if _text(run.get("status")) not in ("failed", "known"):
         return None
+    names = ("zscore.exr", previews.BLOCK_STDERR, "flip.exr", previews.PROBE_RESIDUAL)
     files = [str(folder / "render.exr")] + ([str(ref)] if ref else []) + [
-        str(folder / n) for n in ("zscore.exr", "flip.exr")]
+        str(folder / n) for n in names if out is None or _local_url(out, folder / n)]
     return "tev " + " ".join(shlex.quote(f) for f in files)
 
 
@@ -483,7 +491,7 @@ def _viewer(out, run, deviations=None):
             "status": status, "css": _css(run.get("status")), "views": views, "first": first,
             "src": data, "ref": ref_data or "", "checks": lines, "extras": _extras(run),
             "reason": _text(run.get("reason")), "known": _known_lines(run, deviations or {}),
-            "tev": _tev(run, folder, ref if ref_url else None), "regions": json.dumps(regions),
+            "tev": _tev(run, folder, ref if ref_url else None, out), "regions": json.dumps(regions),
             "marks": json.dumps(_prism_marks(run)), "prism": _prism_line(run), "baseline": _baseline(out, run),
             "numbers": [f"{_text(k)}: {_fmt(v)}" for k, v in _dict(run.get("metrics")).items()],
             "reference_problems": _reference_problems(run)}

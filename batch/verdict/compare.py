@@ -181,6 +181,7 @@ class ZTest:
     noise: str = "own"
     dof_min: float = float("inf")
     zmap: np.ndarray = field(repr=False, default=None)
+    semap: np.ndarray = field(repr=False, default=None)  # per pixel: its block difference's standard error (z's divisor)
     # per block and channel, kept to re-judge against a recorded deviation (batch/verdict/known.py)
     diff: np.ndarray = field(repr=False, default=None)
     ref_block_mean: np.ndarray = field(repr=False, default=None)
@@ -322,6 +323,7 @@ def z_test(test, ref, spp, own_var_of_mean=None, own_passes=None, alpha=0.01, bl
     return ZTest(alpha=alpha, block=block, blocks=m, p_min=p_min, threshold=threshold,
                  z_max=float(np.abs(z).max()), frac_over_3=float(np.mean(np.abs(z) > 3)),
                  passed=bool(block_ok and (scale is None or scale["pass"]) and all_finite), zmap=zmap,
+                 semap=expand_blocks(np.sqrt(var), ey, ex),
                  samples_per_block=int(block * block * spp), noise=noise, dof_min=float(np.min(dof)),
                  diff=d, ref_block_mean=ref_block_mean, var=var, dof=dof, weight=weight, scale=scale,
                  block_passed=block_ok, finite=all_finite)

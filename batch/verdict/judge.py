@@ -168,6 +168,7 @@ def noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings):
                 f"differs from the reference beyond noise: min p = {zt.p_min:.3g} < {zt.threshold:.3g} "
                 f"(alpha {zt.alpha} Sidak-corrected over {zt.blocks} tests), max |z| = {zt.z_max:.1f}")
         previews.write_half(res_dir / "zscore.exr", zt.zmap[..., :3])
+        previews.write_half(res_dir / previews.BLOCK_STDERR, zt.semap[..., :3])
     # issue 21: the reader's images kept small (batch/previews.py): one half-float reference per
     # scene and resolution, shared by its backends; no difference images (the page and the panel compute them)
     shared = previews.shared_reference(res_dir, mean, np.sqrt(at.var_of_mean[..., :3]))

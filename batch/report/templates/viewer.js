@@ -115,7 +115,7 @@ var spectralBench = (function () {
     this.status.textContent = 'loading float data...';
     Promise.all(urls.map(load)).then(function (parts) {
       var job = parts[0];
-      self.w = job.w; self.h = job.h; self.render = job.render; self.stderr = job.stderr;
+      self.w = job.w; self.h = job.h; self.render = job.render; self.stderr = job.stderr; self.blockse = job.blockse;
       self.z = job.z; self.flip = job.flip && job.flip.Y;
       self.probe = job.probe;  // the GGX probe's expected image and block z (probe views, below)
       if (parts[1] && parts[1].w === job.w && parts[1].h === job.h) self.ref = parts[1].reference;
@@ -292,7 +292,8 @@ var spectralBench = (function () {
     row('render', this.render, ['R', 'G', 'B']);
     row('reference', this.ref, ['R', 'G', 'B']);
     if (this.ref) lines.push('difference: ' + ['R', 'G', 'B'].map(function (n) { return n + ' ' + fmt(this.render[n][i] - this.ref[n][i]); }, this).join('  '));
-    row('standard error (render, 2 digits)', this.stderr, ['R', 'G', 'B']);
+    row('standard error (render, 2 digits)', this.stderr, ['R', 'G', 'B']);  // a run from before block_stderr.exr
+    row('standard error of the block\'s difference (render and reference noise; z divides by it)', this.blockse, ['R', 'G', 'B']);
     row('z (block)', this.z, ['R', 'G', 'B']);
     if (this.flip) lines.push('FLIP: ' + fmt(this.flip[i]));
     this.probeLines(i, lines);
