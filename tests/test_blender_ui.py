@@ -350,7 +350,8 @@ def test_run_from_blender_then_load_images_and_open_report(tmp_path):
     assert out["r"] == ["FINISHED"] and re.fullmatch(r"passed: 1/1 jobs \(1 (ok|known|fixed)\)", out["status"]), out["status"]
     res = f"{out['out']}/ggx_copper_80/results/mitsuba"
     for kind, name in (("render", "render.exr"), ("reference", "../reference_64x64.exr"), ("diff_abs", "diff_abs.exr"),
-                       ("zscore", "zscore.exr")):  # the reference is the scene's shared one; diff_abs written when loaded
+                       ("zscore", "zscore.exr"), ("flip", "flip.exr")):  # the reference is the scene's shared one;
+        # diff_abs written when loaded; flip.exr is one channel Y, which Blender shows grey (R = G = B)
         expected = exr.read_rgb(f"{res}/{name}")
         assert np.allclose(np.array(out["loaded"][kind]), expected, atol=1e-6), kind
     from spectral_bench.batch import records
