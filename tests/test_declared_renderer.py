@@ -92,9 +92,12 @@ def test_loop_mean_and_standard_error_from_independent_seeds(tmp_path):
     seeds = np.array([5 + k * passes.SEED_STRIDE for k in range(3)], dtype=float)
     names, img, se = exr.read_image_and_stderr(tmp_path / "render.exr")
     assert names == ["R", "G", "B"]
-    assert np.allclose(img[..., 0], seeds.mean()) and np.allclose(img[..., 2], 3 * seeds.mean())
-    # the standard error is stored as half floats (11 significant bits: rounding <= 2^-11 relative)
-    assert np.allclose(se[..., 0], seeds.std(ddof=1) / math.sqrt(3), rtol=2 ** -11)
+    # stored as half floats (batch/exr.py stored_render): the mean within a quarter of its standard
+    # error (no bits below it are kept), the standard error at least the seeds' and at most
+    # 1/16 (rounded up) and 0.8 % (the mean's rounding) above it
+    s0 = seeds.std(ddof=1) / math.sqrt(3)
+    assert np.all(np.abs(img[..., 0] - seeds.mean()) <= s0 / 4) and np.all(np.abs(img[..., 2] - 3 * seeds.mean()) <= 3 * s0 / 4)
+    assert np.all(se[..., 0] >= s0) and np.all(se[..., 0] <= s0 * (1 + 1 / 16) * math.sqrt(1 + 1 / 64))
     assert info["passes"] == 3 and info["spp"] == 12 and len(info["pass_times"]) == 3
     assert info["versions"]["fake_seed"].startswith("Python 3")  # the version command's first line
 
