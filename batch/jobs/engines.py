@@ -85,12 +85,20 @@ class LocalEngine:
             log.exception("verdict of %s failed", job["label"])
             return jobs.failure(job, f"verdict failed: {exc!r}", record)
 
+    @staticmethod
+    def _warm(job_list):
+        try:
+            jobs.warm(job_list)
+        except Exception:  # noqa: BLE001 - only a head start: each verdict loads what it needs itself
+            log.debug("warming the verdicts failed", exc_info=True)
+
     def map(self, job_list, on_result):
         """Run every job; on_result(job, result) in this thread as each finishes."""
         done = queue.Queue()
         renders = cf.ThreadPoolExecutor(1, thread_name_prefix="render")
         verdicts = cf.ThreadPoolExecutor(1, thread_name_prefix="verdict")
         started = {}
+        verdicts.submit(self._warm, job_list)  # a head start while the first job renders
 
         def rendered(job, fut):
             if fut.cancelled():
