@@ -89,7 +89,9 @@ def _child(trace_path, argv):
     try:
         code = entry.main(["run.py", *argv])
     finally:
-        note("exit", None, time.perf_counter())
+        import resource
+        me = resource.getrusage(resource.RUSAGE_SELF)
+        note("exit", None, time.perf_counter(), cpu_s=me.ru_utime + me.ru_stime)
         Path(trace_path).write_text(json.dumps(events))
     return code
 
@@ -138,6 +140,7 @@ def breakdown(wall, events, runs):
     report = sum(e["t1"] - e["t0"] for e in events if e["phase"] == "report")
     exit_t = max((e["t1"] for e in events if e["phase"] == "exit"), default=last_record)
     totals = {p: sum(r.get(p, 0.0) for r in jobs.values()) for p in PHASES + ("render_s",)}
+    totals["main_cpu"] = max((e.get("cpu_s") or 0.0 for e in events if e["phase"] == "exit"), default=0.0)
     totals.update(start=first, jobs_span=last_record - first, report=report, wall=wall,
                   exit=max(0.0, wall - exit_t), tail=max(0.0, exit_t - last_record - report),
                   mitsuba_wall=sum(r.get("wall_s") or 0.0 for r in runs))
@@ -160,7 +163,8 @@ def tables(title, argv, wall, cpu, code, jobs, totals, load):
               f"| report | main: summary.md, report.html | {totals['report']:.2f} | |",
               f"| exit | closing workers, interpreter | {totals['exit'] + totals['tail']:.2f} | |",
               f"| **wall** | | **{wall:.2f}** | |",
-              f"| CPU (run, workers, FLIP: user + system) | | {cpu:.2f} | {cpu / n:.3f} |", "",
+              f"| CPU (run, workers, FLIP: user + system) | | {cpu:.2f} | {cpu / n:.3f} |",
+              f"| of which the runner's process (all its threads) | | {totals['main_cpu']:.2f} | {totals['main_cpu'] / n:.3f} |", "",
               f"Wall / sum of render phases: {wall / max(totals['render'], 1e-9):.2f}x "
               f"(render phases {totals['render']:.1f} s; metrics.json wall_s sum {totals['mitsuba_wall']:.1f} s: "
               f"{wall / max(totals['mitsuba_wall'], 1e-9):.2f}x).", ""]

@@ -2,8 +2,11 @@
 
 - LocalEngine (the default): this machine, no extra service. Renders run one at a time (each
   render uses every core: Mitsuba's LLVM variants and artist are multi-threaded) while the
-  previous render is judged in a second thread (reading EXRs, the noise test, probes, previews,
-  FLIP in its own process): a render never waits for a verdict.
+  previous render is judged in a second thread (reading EXRs, the noise test, probes, previews;
+  FLIP in a warm child process that computes while the probes run: batch/verdict/flip_isolated.py):
+  a render never waits for a verdict. While the first job renders, the verdict thread loads what
+  the verdicts need (job.warm: the verdict modules, colour-science, the FLIP child), so a job's
+  fixed cost is its own work (issue 23; benchmarks/bench_fixed_cost.py measures it per phase).
 - DaskEngine (``--cluster ADDRESS`` or ``--cluster local:N``): the jobs go to a Dask distributed
   scheduler, each job (render and verdict) on one worker; ``local:N`` starts a LocalCluster of N
   single-threaded worker processes, listening on 127.0.0.1 only, without a dashboard unless
