@@ -10,7 +10,7 @@ changes): *start* (interpreter, imports, reading the scenes, planning: until the
 per job *export* (the IR JSON and the backend's scene files), *render* (the pass loop: a warm
 worker's scene load and passes, the render EXR; Mitsuba's own render seconds beside it),
 *verdict* (reading the render, the noise test, probes, FLIP, the previews), *record*
-(metrics.json rewritten, the log line), then *report* (summary.md, report.html with its data
+(metrics.json rewritten, the log line, the report's data files of the job), then *report* (summary.md, report.html with its data
 files) and *exit* (closing the warm workers). Renders and verdicts overlap (the default engine
 judges job k while job k+1 renders: batch/jobs/engines.py), so the phases add up to more than
 the wall time; the wall time against the sum of the render phases is the figure of merit.
@@ -155,7 +155,7 @@ def tables(title, argv, wall, cpu, code, jobs, totals, load):
              f"| start | main: interpreter, imports, scenes, plan | {totals['start']:.2f} | |"]
     where = {"export": "render thread: IR JSON, scene files", "render": "render thread + warm worker: load, passes, EXR",
              "verdict": "verdict thread (+ FLIP child): noise test, probes, FLIP, previews",
-             "record": "main: metrics.json, log, progress"}
+             "record": "main: metrics.json, log, progress, the page's data files (view.js)"}
     for p in PHASES:
         lines.append(f"| {p} | {where[p]} | {totals[p]:.2f} | {totals[p] / n:.3f} |")
     lines += [f"| (Mitsuba's render calls) | worker | {totals['render_s']:.2f} | {totals['render_s'] / n:.3f} |",

@@ -317,12 +317,25 @@ class Run:
         self.done.append((job, result))
         if job["kind"] == "render":
             self.add(result)
+            self.page_data(result)
         else:
             self.results.append({k: v for k, v in result.items() if k not in ("row", "point")} |
                                 ({"row": result["row"]} if "row" in result else {}) |
                                 ({"point": result["point"]} if "point" in result else {}))
             self.save()
         self.progress.step(f"{job['label']}: {result.get('status', '')}")
+
+    def page_data(self, entry):
+        """The report's data files of a finished render (its view.js, the scene's reference_WxH.js),
+        written now, while the next jobs render, instead of all after the last one: report.html's
+        writer at the end finds them fresh (batch/report/html.py ``_job_data`` and
+        ``_reference_data``: written when missing or older than their EXRs), so the page is the
+        same. A failure here is left to that writer."""
+        try:
+            report._viewer(self.out, entry)
+        except Exception:  # noqa: BLE001 - only a head start for the report
+            log.debug("the report's data of %s / %s are left to the end", entry.get("scene"), entry.get("backend"),
+                      exc_info=True)
 
     def finish_studies(self):
         sweep_results = [(j, r) for j, r in self.done if j["kind"] == "sweep"]
