@@ -9,7 +9,8 @@ around each phase (this script's child wraps the functions that the engine calls
 changes): *start* (interpreter, imports, reading the scenes, planning: until the first export),
 per job *export* (the IR JSON and the backend's scene files), *render* (the pass loop: a warm
 worker's scene load and passes, the render EXR; Mitsuba's own render seconds beside it),
-*verdict* (reading the render, the noise test, probes, FLIP, the previews), *record*
+*verdict* (reading the render, the noise test, probes, the previews; FLIP is sent to its warm
+child), *flip* (waiting for FLIP's answer, while the next verdict runs), *record*
 (metrics.json rewritten, the log line, the report's data files of the job), then *report* (summary.md, report.html with its data
 files) and *exit* (closing the warm workers). Renders and verdicts overlap (the default engine
 judges job k while job k+1 renders: batch/jobs/engines.py), so the phases add up to more than
@@ -40,7 +41,7 @@ from record import machine  # noqa: E402
 
 TINY = ["--scale", "0.25", "--spp", "4"]
 SMOKE = ["--scale", "0.25", "--spp", "4", "-s", "ggx_copper_50"]
-PHASES = ("export", "render", "verdict", "record")
+PHASES = ("export", "render", "verdict", "flip", "record")
 
 
 def _child(trace_path, argv):
@@ -84,6 +85,9 @@ def _child(trace_path, argv):
     jobs.execute = timed("execute", jobs.execute, lambda job: job["label"])
     jobs.judge = timed("verdict", jobs.judge, lambda job, *a, **k: job["label"])
     runner.Run.record = timed("record", runner.Run.record, lambda self, job, result: job["label"])
+    from spectral_bench.batch.jobs import engines
+    if hasattr(engines.LocalEngine, "_finish"):  # FLIP collected after the verdict, in a third thread
+        engines.LocalEngine._finish = staticmethod(timed("flip", engines.LocalEngine._finish, lambda job, judged: job["label"]))
     summary.write = timed("report", summary.write)
     html.write = timed("report", html.write)
     try:
@@ -154,7 +158,8 @@ def tables(title, argv, wall, cpu, code, jobs, totals, load):
              "| phase | where | total s | per job s |", "|---|---|---|---|",
              f"| start | main: interpreter, imports, scenes, plan | {totals['start']:.2f} | |"]
     where = {"export": "render thread: IR JSON, scene files", "render": "render thread + warm worker: load, passes, EXR",
-             "verdict": "verdict thread (+ FLIP child): noise test, probes, FLIP, previews",
+             "verdict": "verdict thread: noise test, probes, previews; FLIP sent to its child",
+             "flip": "finishing thread: waiting for the FLIP child's answer",
              "record": "main: metrics.json, log, progress, the page's data files (view.js)"}
     for p in PHASES:
         lines.append(f"| {p} | {where[p]} | {totals[p]:.2f} | {totals[p] / n:.3f} |")
@@ -168,10 +173,10 @@ def tables(title, argv, wall, cpu, code, jobs, totals, load):
               f"Wall / sum of render phases: {wall / max(totals['render'], 1e-9):.2f}x "
               f"(render phases {totals['render']:.1f} s; metrics.json wall_s sum {totals['mitsuba_wall']:.1f} s: "
               f"{wall / max(totals['mitsuba_wall'], 1e-9):.2f}x).", ""]
-    lines += ["| job | export s | render s | Mitsuba s | verdict s | record s |", "|---|---|---|---|---|---|"]
+    lines += ["| job | export s | render s | Mitsuba s | verdict s | FLIP wait s | record s |", "|---|---|---|---|---|---|---|"]
     for label, r in jobs.items():
         lines.append(f"| {label} | {r.get('export', 0):.3f} | {r.get('render', 0):.3f} | {r.get('render_s', 0):.3f} | "
-                     f"{r.get('verdict', 0):.3f} | {r.get('record', 0):.3f} |")
+                     f"{r.get('verdict', 0):.3f} | {r.get('flip', 0):.3f} | {r.get('record', 0):.3f} |")
     return "\n".join(lines)
 
 

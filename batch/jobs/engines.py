@@ -80,13 +80,22 @@ class LocalEngine:
         return None, f"{error} (after one retry)"
 
     def _judge(self, job, record, error):
+        """(result, what finishes its FLIP: job.judge_deferring)."""
         if error is not None:
-            return jobs.failure(job, error)
+            return jobs.failure(job, error), []
         try:
-            return jobs.judge(job, record, self.deviations)
+            return jobs.judge_deferring(job, record, self.deviations)
         except Exception as exc:  # noqa: BLE001 - a broken verdict fails the job, not the batch
             log.exception("verdict of %s failed", job["label"])
-            return jobs.failure(job, f"verdict failed: {exc!r}", record)
+            return jobs.failure(job, f"verdict failed: {exc!r}", record), []
+
+    @staticmethod
+    def _finish(job, judged):
+        """The verdict's result once its FLIP is in (a FLIP that fails is recorded in the result)."""
+        result, pending = judged.result()
+        for finish in pending:
+            finish()
+        return result
 
     @staticmethod
     def _warm(job_list):
@@ -100,6 +109,7 @@ class LocalEngine:
         done = queue.Queue()
         renders = cf.ThreadPoolExecutor(1, thread_name_prefix="render")
         verdicts = cf.ThreadPoolExecutor(1, thread_name_prefix="verdict")
+        finishers = cf.ThreadPoolExecutor(1, thread_name_prefix="finish")  # FLIP k while verdict k+1 runs; in order
         started = {}
         verdicts.submit(self._warm, job_list)  # a head start while the first job renders
 
@@ -111,7 +121,8 @@ class LocalEngine:
             except Exception as exc:  # noqa: BLE001 - an export that raises is one failed job
                 record, error = None, jobs.describe(exc)
             vf = verdicts.submit(self._judge, job, record, error)
-            vf.add_done_callback(lambda f: done.put((job, f)))
+            vf.add_done_callback(lambda f: finishers.submit(self._finish, job, f).add_done_callback(
+                lambda ff: done.put((job, ff))))
 
         for j in job_list:
             f = renders.submit(self._render, j)
@@ -131,12 +142,14 @@ class LocalEngine:
         except KeyboardInterrupt:
             renders.shutdown(wait=False, cancel_futures=True)
             verdicts.shutdown(wait=False, cancel_futures=True)
+            finishers.shutdown(wait=False, cancel_futures=True)
             for j in job_list:
                 if id(j) in remaining:
                     on_result(j, interrupted(j))
             raise Interrupted() from None
         renders.shutdown()
         verdicts.shutdown()
+        finishers.shutdown()
 
     def close(self):
         pass

@@ -186,6 +186,22 @@ def judge(job, record, deviations=None):
     return KINDS_TABLE[job["kind"]].judged(job, record, deviations)
 
 
+def judge_deferring(job, record, deviations=None):
+    """``judge``, leaving a render verdict's FLIP to finish later (batch/verdict/flip_isolated.py
+    ``deferred``): (result, [finish, ...]). The result is complete once each finish has been
+    called, in order, exactly once (the default engine calls them in a third thread, so that the
+    next verdict starts while FLIP computes)."""
+    from ..verdict import flip_isolated
+    with flip_isolated.deferred() as pending:
+        try:
+            result = judge(job, record, deviations)
+        except BaseException:
+            for finish in pending:
+                finish()
+            raise
+    return result, list(pending)
+
+
 def run(job, deviations=None):
     """Execute and judge one job (what an engine's worker calls). Failures inside the verdict
     become failed records; a crashed render raises RenderCrashed for the engine to retry."""

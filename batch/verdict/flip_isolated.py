@@ -17,6 +17,7 @@ to 0, since FLIP requires non-negative input.
     python batch/verdict/flip_isolated.py --serve         (the child; started by FlipWorker)
 """
 import atexit
+import contextlib
 import json
 import os
 import subprocess
@@ -173,6 +174,32 @@ def start(reference, test, map_path, timeout=DEFAULT_TIMEOUT):
         _LOCK.release()
         return Pending((None, error))
     return Pending(timeout=timeout)
+
+
+_DEFERRING = threading.local()
+
+
+@contextlib.contextmanager
+def deferred():
+    """Within this block, in this thread, verdicts hand what finishes their FLIP to the list
+    yielded (``defer``) instead of waiting for it: the caller runs those later, in order, in any
+    thread (the default engine: while the next verdict reads and tests its render). Each must be
+    called exactly once: until then the next FLIP request waits."""
+    _DEFERRING.items = []
+    try:
+        yield _DEFERRING.items
+    finally:
+        _DEFERRING.items = None
+
+
+def defer(finish):
+    """True when ``finish`` was handed to the enclosing ``deferred`` block, False (call it now)
+    outside one."""
+    items = getattr(_DEFERRING, "items", None)
+    if items is None:
+        return False
+    items.append(finish)
+    return True
 
 
 def flip_images(reference, test, map_path, timeout=DEFAULT_TIMEOUT):

@@ -64,8 +64,12 @@ def render_verdict(entry, scene, rendered, image, res_dir, settings, deviations)
         observers = sorted({d.observer for d in known.applicable(deviations, entry) if d.observer})
         entry["probes"] = probes.evaluate(rendered, names, test_all, reference=None if unusable else ref,
                                           stderr=stderr, passes=entry["passes"], observers=observers)
-    finally:
-        for finish in later:
+    except BaseException:
+        for finish in later:  # a verdict that breaks still collects its FLIP (the next one waits for it)
+            finish()
+        raise
+    for finish in later:  # FLIP, now or (the default engine: flip_isolated.deferred) after this verdict
+        if not flip_isolated.defer(finish):
             finish()
     if unusable and not any(p["pass"] is not None for p in entry["probes"]):
         entry["unjudged_because"] = unusable + ("" if entry["probes"] else "; no analytic probe applies")
