@@ -3,7 +3,9 @@ the numbers the plain computations give, bit for bit (a run's metrics.json is th
 after: benchmarks/ENGINES.md).
 
 - FLIP runs in one warm child per process (batch/verdict/flip_isolated.py): reused, its value is
-  flip-evaluator's own, and a child that dies during a request fails that request alone;
+  flip-evaluator's own, and a child that dies during a request fails that request alone; a FLIP
+  left running after its verdict (the default engine collects it while the next verdict runs) is
+  collected by the caller, also when the verdict breaks;
 - the power bisection's Student t / normal cdfs (batch/verdict/stats.py ``power_curve``) are
   scipy.stats' values;
 - a probe's colour table integrates its rows at once (exporters/colorimetry.py ``xyz_rows``);
@@ -146,3 +148,38 @@ def test_the_verdict_thread_is_warmed_with_the_flip_child():
     assert not flip_isolated._WORKER  # --no-flip: no child
     jobs.warm([{"kind": "render", "verdict": {"flip": True}}])
     assert flip_isolated._WORKER and flip_isolated._WORKER[0].alive()
+
+
+def test_a_deferred_flip_is_collected_by_the_caller_in_order(tmp_path):
+    ref, test = _images(7, (8, 8))
+    assert not flip_isolated.defer(lambda: None)  # outside a deferred block: the caller finishes at once
+    got = []
+    with flip_isolated.deferred() as pending:
+        first = flip_isolated.start(ref, test, tmp_path / "a.exr")
+        assert flip_isolated.defer(lambda: got.append(first.result()))
+    assert len(pending) == 1 and not got  # nothing waited for inside the verdict
+    pending[0]()
+    assert got[0][1] is None and got[0][0] == _flip_in_a_fresh_process(tmp_path, ref, test)
+    second, err = flip_isolated.flip_images(test, ref, tmp_path / "b.exr")  # the child is free again
+    assert err is None and second > 0
+
+
+def test_judge_deferring_collects_flip_when_the_verdict_breaks(tmp_path):
+    """A verdict that raises after sending its FLIP still collects it: the next FLIP is not left
+    waiting for a request nobody reads."""
+    from spectral_bench.batch.jobs import job as jobs
+    ref, test = _images(8, (8, 8))
+    kind = jobs.KINDS_TABLE["render"]
+
+    def breaking(job, record, deviations):
+        pending = flip_isolated.start(ref, test, tmp_path / "c.exr")
+        assert flip_isolated.defer(pending.result)
+        raise RuntimeError("a verdict that breaks after sending FLIP")
+    jobs.KINDS_TABLE["render"] = jobs.Kind(breaking)
+    try:
+        with pytest.raises(RuntimeError):
+            jobs.judge_deferring({"kind": "render"}, {"status": "rendered"})
+    finally:
+        jobs.KINDS_TABLE["render"] = kind
+    assert not flip_isolated._LOCK.locked()  # collected: the next request does not wait for ever
+    assert flip_isolated.flip_images(ref, test, tmp_path / "d.exr")[1] is None
