@@ -11,6 +11,10 @@ and the test image as raw H x W x 3 float32 (no temporary files); it answers one
 (batch/previews.py ``write_half``). A child that dies, exits or overruns its time limit is killed
 and fails only that job's FLIP (the reason is recorded); the next job starts a fresh one.
 
+``start`` sends a request and returns at once (a Pending: the child computes while the verdict
+runs its probes); ``flip_images`` waits for it; inside ``deferred`` a verdict hands the waiting
+to its caller (the default engine collects FLIP k in a third thread while verdict k+1 runs).
+
 Inputs are checked first, here: finite, and negative values (out-of-gamut linear RGB) clamped
 to 0, since FLIP requires non-negative input.
 
