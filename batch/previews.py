@@ -155,17 +155,22 @@ BLOCK_STDERR = "block_stderr.exr"
 FLIP_BITS = 4  # mantissa bits kept of the FLIP map's halves (5 significant: 1.6 % at most)
 
 
-def to_half(path, keep_bits=10):
-    """Rewrite the FLIP map (an RGB EXR of three equal channels) in place as one half-float
-    channel Y, rounded to the nearest value with
+def write_flip(path, fmap, keep_bits=FLIP_BITS):
+    """The FLIP map (HxW) as one half-float channel Y, rounded to the nearest value with
     ``keep_bits`` mantissa bits: FLIP is a perceptual index in [0, 1] read to two digits, and the
     bits below carry nothing (its mean, the metric, is taken before)."""
-    grey = exr.read_rgb(path)[..., 0]  # HDR-FLIP writes its map three times, as R = G = B
+    grey = np.asarray(fmap, dtype=np.float32)
     if keep_bits < 10 and fits_half(grey):
         drop = 10 - keep_bits
         u = grey.astype(np.float16).view(np.uint16).astype(np.uint32)
         grey = (((u + (1 << (drop - 1))) >> drop) << drop).astype(np.uint16).view(np.float16)
     return write_half(path, grey, channels="Y")
+
+
+def to_half(path, keep_bits=FLIP_BITS):
+    """Rewrite a FLIP map written as three equal channels R = G = B (HDR-FLIP's own file) in place
+    as ``write_flip`` stores it."""
+    return write_flip(path, exr.read_rgb(path)[..., 0], keep_bits)
 
 
 def differences(render, reference):

@@ -8,6 +8,7 @@ import glob
 import os
 import subprocess
 import sys
+import threading
 from functools import lru_cache
 
 CANDIDATES = ("/usr/lib/x86_64-linux-gnu/libLLVM-19.so", "/usr/lib/llvm-19/lib/libLLVM.so",
@@ -26,8 +27,20 @@ def candidates():
     return list(dict.fromkeys(found))
 
 
-@lru_cache(maxsize=1)
+_LOCK = threading.Lock()  # one probe per process, whichever thread asks first (runner.probe_early)
+
+
 def find():
+    """(path or None, message), probed once per process (_find); a second thread asking meanwhile waits for it."""
+    with _LOCK:
+        return _find()
+
+
+find.cache_clear = lambda: _find.cache_clear()  # tests probe again
+
+
+@lru_cache(maxsize=1)
+def _find():
     """(path or None, message). The path works for llvm_ad_* variants in a child process."""
     tried = []
     for path in candidates():

@@ -288,6 +288,11 @@ def close_pool():
     with _POOL_LOCK:
         workers = list(_POOL.values())
         _POOL.clear()
+    for w in workers:  # every worker told at once, then waited for: they shut down side by side
+        try:
+            w.proc.stdin.close()
+        except (OSError, AttributeError):
+            pass
     for w in workers:
         w.close()
 

@@ -2,8 +2,11 @@
 
 - LocalEngine (the default): this machine, no extra service. Renders run one at a time (each
   render uses every core: Mitsuba's LLVM variants and artist are multi-threaded) while the
-  previous render is judged in a second thread (reading EXRs, the noise test, probes, previews,
-  FLIP in its own process): a render never waits for a verdict.
+  previous render is judged in a second thread (reading EXRs, the noise test, probes, previews;
+  FLIP in a warm child process that computes while the probes run: batch/verdict/flip_isolated.py):
+  a render never waits for a verdict. While the first job renders, the verdict thread loads what
+  the verdicts need (job.warm: the verdict modules, colour-science, the FLIP child), so a job's
+  fixed cost is its own work (issue 23; benchmarks/bench_fixed_cost.py measures it per phase).
 - DaskEngine (``--cluster ADDRESS`` or ``--cluster local:N``): the jobs go to a Dask distributed
   scheduler, each job (render and verdict) on one worker; ``local:N`` starts a LocalCluster of N
   single-threaded worker processes, listening on 127.0.0.1 only, without a dashboard unless
@@ -77,20 +80,38 @@ class LocalEngine:
         return None, f"{error} (after one retry)"
 
     def _judge(self, job, record, error):
+        """(result, what finishes its FLIP: job.judge_deferring)."""
         if error is not None:
-            return jobs.failure(job, error)
+            return jobs.failure(job, error), []
         try:
-            return jobs.judge(job, record, self.deviations)
+            return jobs.judge_deferring(job, record, self.deviations)
         except Exception as exc:  # noqa: BLE001 - a broken verdict fails the job, not the batch
             log.exception("verdict of %s failed", job["label"])
-            return jobs.failure(job, f"verdict failed: {exc!r}", record)
+            return jobs.failure(job, f"verdict failed: {exc!r}", record), []
+
+    @staticmethod
+    def _finish(job, judged):
+        """The verdict's result once its FLIP is in (a FLIP that fails is recorded in the result)."""
+        result, pending = judged.result()
+        for finish in pending:
+            finish()
+        return result
+
+    @staticmethod
+    def _warm(job_list):
+        try:
+            jobs.warm(job_list)
+        except Exception:  # noqa: BLE001 - only a head start: each verdict loads what it needs itself
+            log.debug("warming the verdicts failed", exc_info=True)
 
     def map(self, job_list, on_result):
         """Run every job; on_result(job, result) in this thread as each finishes."""
         done = queue.Queue()
         renders = cf.ThreadPoolExecutor(1, thread_name_prefix="render")
         verdicts = cf.ThreadPoolExecutor(1, thread_name_prefix="verdict")
+        finishers = cf.ThreadPoolExecutor(1, thread_name_prefix="finish")  # FLIP k while verdict k+1 runs; in order
         started = {}
+        verdicts.submit(self._warm, job_list)  # a head start while the first job renders
 
         def rendered(job, fut):
             if fut.cancelled():
@@ -100,7 +121,8 @@ class LocalEngine:
             except Exception as exc:  # noqa: BLE001 - an export that raises is one failed job
                 record, error = None, jobs.describe(exc)
             vf = verdicts.submit(self._judge, job, record, error)
-            vf.add_done_callback(lambda f: done.put((job, f)))
+            vf.add_done_callback(lambda f: finishers.submit(self._finish, job, f).add_done_callback(
+                lambda ff: done.put((job, ff))))
 
         for j in job_list:
             f = renders.submit(self._render, j)
@@ -120,12 +142,14 @@ class LocalEngine:
         except KeyboardInterrupt:
             renders.shutdown(wait=False, cancel_futures=True)
             verdicts.shutdown(wait=False, cancel_futures=True)
+            finishers.shutdown(wait=False, cancel_futures=True)
             for j in job_list:
                 if id(j) in remaining:
                     on_result(j, interrupted(j))
             raise Interrupted() from None
         renders.shutdown()
         verdicts.shutdown()
+        finishers.shutdown()
 
     def close(self):
         pass

@@ -166,10 +166,40 @@ KINDS_TABLE = {
 }
 
 
+def warm(job_list):
+    """Load what the verdicts of ``job_list`` need before the first of them: the verdict modules,
+    colour-science (its import is about a second) and the warm FLIP child
+    (batch/verdict/flip_isolated.py). The default engine calls it in its verdict thread while the
+    first job renders; the verdicts are the same without it, only later."""
+    if not any(j["kind"] in ("render", "sweep") for j in job_list):
+        return
+    from ..verdict import flip_isolated, judge as _verdicts  # noqa: F401 - imported to be ready
+    from ...exporters import colorimetry
+    colorimetry.srgb_to_xyz([1.0, 1.0, 1.0])
+    if any(j["kind"] == "render" and j["verdict"].get("flip", True) for j in job_list):
+        flip_isolated.prestart()
+
+
 def judge(job, record, deviations=None):
     """The kind's verdict on a render record: the job's result (a metrics.json entry, a sweep
     point, a stability row or a reference pass), through KINDS_TABLE."""
     return KINDS_TABLE[job["kind"]].judged(job, record, deviations)
+
+
+def judge_deferring(job, record, deviations=None):
+    """``judge``, leaving a render verdict's FLIP to finish later (batch/verdict/flip_isolated.py
+    ``deferred``): (result, [finish, ...]). The result is complete once each finish has been
+    called, in order, exactly once (the default engine calls them in a third thread, so that the
+    next verdict starts while FLIP computes)."""
+    from ..verdict import flip_isolated
+    with flip_isolated.deferred() as pending:
+        try:
+            result = judge(job, record, deviations)
+        except BaseException:
+            for finish in pending:
+                finish()
+            raise
+    return result, list(pending)
 
 
 def run(job, deviations=None):

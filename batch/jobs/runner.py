@@ -17,7 +17,7 @@ from ...exporters import art_writer, ir_json
 from .. import backends, records, scene_sources
 from ..verdict import baseline as baselines, known, status
 from ..report import html as report, summary
-from ..studies import stability, sweep
+from ..studies import sweep
 from . import engines, plan as planning
 from .progress import Progress
 
@@ -270,6 +270,7 @@ class Run:
             job_list += sweep_jobs
             self.sweeps += lines
         if self.opts["stability"]:
+            from ..studies import stability  # the probes and scipy.stats: loaded when needed, not at start-up
             golden = {n: s for n, s in scenes if isinstance(s, dict)}
             self.stability = [{"sweep": s.name, "status": "skipped", "problems": [], "reason": f"needs {s.base} in the input"}
                               for s in stability.STRIPS if isinstance(s.base, str) and s.base not in golden]
@@ -316,12 +317,25 @@ class Run:
         self.done.append((job, result))
         if job["kind"] == "render":
             self.add(result)
+            self.page_data(result)
         else:
             self.results.append({k: v for k, v in result.items() if k not in ("row", "point")} |
                                 ({"row": result["row"]} if "row" in result else {}) |
                                 ({"point": result["point"]} if "point" in result else {}))
             self.save()
         self.progress.step(f"{job['label']}: {result.get('status', '')}")
+
+    def page_data(self, entry):
+        """The report's data files of a finished render (its view.js, the scene's reference_WxH.js),
+        written now, while the next jobs render, instead of all after the last one: report.html's
+        writer at the end finds them fresh (batch/report/html.py ``_job_data`` and
+        ``_reference_data``: written when missing or older than their EXRs), so the page is the
+        same. A failure here is left to that writer."""
+        try:
+            report._viewer(self.out, entry)
+        except Exception:  # noqa: BLE001 - only a head start for the report
+            log.debug("the report's data of %s / %s are left to the end", entry.get("scene"), entry.get("backend"),
+                      exc_info=True)
 
     def finish_studies(self):
         sweep_results = [(j, r) for j, r in self.done if j["kind"] == "sweep"]
@@ -330,6 +344,7 @@ class Run:
             self.finish_sweeps()
         stab_results = [(j, r) for j, r in self.done if j["kind"] == "stability"]
         if stab_results:
+            from ..studies import stability
             self.stability += stability.finish(stab_results, self.out / "stability")
         self.save()
 
@@ -373,6 +388,22 @@ def write_junit(path, batch):
         log.error("--junit %s: cannot write it: %s", path, exc.strerror or exc)
 
 
+def probe_early(opts):
+    """Start Mitsuba's LLVM and CUDA probes (child processes that import Mitsuba, a second or so:
+    batch/backends/llvm.py, cuda.py) in a thread while the scenes are read and planned; whoever
+    needs the answer first waits for the same probe. Nothing is started for --device cpu
+    (the CUDA probe then never runs) or a run without Mitsuba."""
+    import threading
+    from ..backends import cuda, llvm
+    try:
+        wanted = "mitsuba" in backend_names(opts) and not opts.get("export_only")
+    except Exception:  # noqa: BLE001 - a bad --renderers file is reported where it is read, not here
+        return
+    if wanted:
+        target = llvm.find if (opts.get("device") or "auto") == "cpu" else cuda.find  # cuda.find asks llvm.find first
+        threading.Thread(target=target, name="mitsuba-probe", daemon=True).start()
+
+
 def check_device(opts):
     """UsageError where --device gpu cannot be honoured (Mitsuba runs and CUDA does not render here:
     batch/backends/cuda.py's probe says why); other devices and backends need nothing."""
@@ -390,6 +421,7 @@ def run(opts):
     cannot be resumed, a broken --known file, a cluster that cannot be reached. Sets opts["out"]
     to the folder used."""
     t0 = time.perf_counter()
+    probe_early(opts)
     deviations = None if opts.get("resume") else load_known(opts.get("known"))
     if opts.get("junit"):
         check_junit(opts["junit"])

@@ -228,14 +228,17 @@ class ZTest:
         shift = (self.ref_block_mean / np.sqrt(self.var)).reshape(-1, c)
         dof = np.broadcast_to(np.asarray(self.dof, dtype=np.float64), self.diff.shape).reshape(-1, c)
 
+        block_curve = stats.power_curve(self.threshold, dof, shift.shape)  # critical values once per bisection
+
         def block_power(eps):
-            miss = np.clip(1.0 - stats.shifted_power(eps * shift, self.threshold, dof), 1e-300, 1.0)
+            miss = np.clip(1.0 - block_curve(eps * shift), 1e-300, 1.0)
             return float(np.max(1.0 - np.exp(np.sum(np.log(miss), axis=0))))
         tests = {"block test": block_power}
         if self.scale is not None:
             sens = np.asarray([x or 0.0 for x in self.scale["sensitivity"]], dtype=np.float64)
             sdof = np.asarray([np.inf if x is None else x for x in self.scale["dof"]], dtype=np.float64)
-            tests["scale test"] = lambda eps: float(np.max(stats.shifted_power(eps * sens, self.scale["threshold"], sdof)))
+            scale_curve = stats.power_curve(self.scale["threshold"], sdof, sens.shape)
+            tests["scale test"] = lambda eps: float(np.max(scale_curve(eps * sens)))
         found = {k: e for k, fn in tests.items() if (e := stats.smallest_detectable(fn, power)) is not None}
         if not found:
             return None

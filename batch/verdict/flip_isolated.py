@@ -1,57 +1,254 @@
-"""HDR-FLIP (Andersson et al. 2021, flip-evaluator), run in a child process.
+"""HDR-FLIP (Andersson et al. 2021, "Visualizing Errors in Rendered High Dynamic Range Images",
+Eurographics short papers; the flip-evaluator package), run in a warm child process.
 
-flip_evaluator calls sys.exit on bad arguments; a child process keeps that from ever closing
-the batch runner or Blender. Inputs are checked first: finite, and negative values (out-of-gamut
-linear RGB) clamped to 0, since FLIP requires non-negative input.
+flip_evaluator calls sys.exit on bad arguments and is native code; a child process keeps that
+from ever closing the batch runner or Blender. The child is started once per process (on the
+first verdict that asks for FLIP: ``prestart``) and kept warm across jobs, so a job pays neither a
+Python start nor the imports (issue 23: they were about 1 s of every job's verdict). Requests go
+over its stdin: one JSON line ``{"shape": [H, W], "map": "flip.exr"}`` followed by the reference
+and the test image as raw H x W x 3 float32 (no temporary files); it answers one JSON line
+``{"flip": mean}`` or ``{"error": "..."}`` and writes the map as half floats
+(batch/previews.py ``write_flip``: one channel Y). A child that dies, exits or overruns its time limit is killed
+and fails only that job's FLIP (the reason is recorded); the next job starts a fresh one.
 
-    python batch/verdict/flip_isolated.py reference.exr test.exr flipmap.exr   -> prints {"flip": mean}
+``start`` sends a request and returns at once (a Pending: the child computes while the verdict
+runs its probes); ``flip_images`` waits for it; inside ``deferred`` a verdict hands the waiting
+to its caller (the default engine collects FLIP k in a third thread while verdict k+1 runs).
+
+Inputs are checked first, here: finite, and negative values (out-of-gamut linear RGB) clamped
+to 0, since FLIP requires non-negative input.
+
+    python batch/verdict/flip_isolated.py --serve         (the child; started by FlipWorker)
 """
+import atexit
+import contextlib
 import json
+import os
 import subprocess
 import sys
+import tempfile
+import threading
 from pathlib import Path
 
 import numpy as np
 
+DEFAULT_TIMEOUT = 600
+# flip-evaluator parallelises with OpenMP over every core: beside a render that uses every core
+# too, on a busy machine its threads spin at barriers (measured on 2 cores at load 8: 5 FLIPs of
+# 128x128 took 2.7 s with 2 threads, 0.6 s with 1). One thread, waiting passively: the mean is
+# the same (measured: identical to the last digit with 1, 2 and 4 threads).
+OPENMP = {"OMP_NUM_THREADS": "1", "OMP_WAIT_POLICY": "PASSIVE"}
+
 
 def prepare(img):
+    """RGB as contiguous float32, negatives clamped to 0; ValueError for NaN or Inf."""
     img = np.asarray(img, dtype=np.float32)[..., :3]
     if not np.all(np.isfinite(img)):
         raise ValueError("image has NaN or Inf values; FLIP is not defined for it")
     return np.ascontiguousarray(np.maximum(img, 0.0))
 
 
-def hdr_flip(ref_path, test_path, map_path, timeout=600):
-    """Mean HDR-FLIP of test against reference, computed in a child process; map written to
-    ``map_path``. Returns (mean or None, error message or None)."""
-    cmd = [sys.executable, str(Path(__file__).resolve()), str(ref_path), str(test_path), str(map_path)]
-    try:
-        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
-    except subprocess.TimeoutExpired:
-        return None, f"FLIP timed out after {timeout} s"
-    if proc.returncode != 0:
-        return None, f"FLIP failed (exit {proc.returncode}): {(proc.stderr or proc.stdout).strip()[-500:]}"
-    try:
-        return json.loads(proc.stdout.strip().splitlines()[-1])["flip"], None
-    except (ValueError, IndexError, KeyError):
-        return None, f"FLIP printed no result: {proc.stdout[-300:]}"
+class FlipWorker:
+    """One warm ``--serve`` child (dies with this process: batch/backends/child.py)."""
+
+    def __init__(self):
+        from ..backends import child
+        self.stderr = tempfile.TemporaryFile()
+        self.proc = subprocess.Popen([sys.executable, str(Path(__file__).resolve()), "--serve"],
+                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self.stderr,
+                                     env=dict(os.environ, **OPENMP), **child.popen_kwargs())
+
+    def alive(self):
+        return self.proc is not None and self.proc.poll() is None
+
+    def send(self, ref, test, map_path):
+        """Send one request (the reply is read by ``receive``); None, or the error when the child is gone."""
+        head = json.dumps({"shape": list(ref.shape[:2]), "map": str(map_path)}) + "\n"
+        try:
+            self.proc.stdin.write(head.encode() + ref.tobytes() + test.tobytes())
+            self.proc.stdin.flush()
+        except OSError as exc:
+            return self._died(f"FLIP worker stopped: {exc}")
+        return None
+
+    def receive(self, timeout):
+        """(mean, None) or (None, error); a child that dies or overruns is killed (``alive`` False)."""
+        import selectors
+        sel = selectors.DefaultSelector()
+        sel.register(self.proc.stdout, selectors.EVENT_READ)
+        ready = sel.select(timeout)
+        sel.close()
+        if not ready:
+            self.kill()
+            return None, f"FLIP timed out after {timeout} s"
+        line = self.proc.stdout.readline()
+        if not line:
+            return None, self._died(f"FLIP failed (exit {self.proc.wait()})")
+        try:
+            reply = json.loads(line)
+        except ValueError:
+            return None, self._died(f"FLIP printed no result: {line[-300:]!r}")
+        if "error" in reply:
+            return None, f"FLIP failed: {reply['error'][-500:]}"
+        return reply["flip"], None
+
+    def _died(self, what):
+        self.kill()
+        self.stderr.seek(0)
+        said = self.stderr.read().decode(errors="replace").strip()
+        return what + (f": {said[-500:]}" if said else "")
+
+    def kill(self):
+        if self.proc is not None:
+            if self.proc.poll() is None:
+                self.proc.kill()
+            self.proc.wait()
+            self.proc = None
+
+    def close(self):
+        if self.proc is not None:
+            try:
+                self.proc.stdin.close()
+                self.proc.wait(timeout=10)
+            except (OSError, subprocess.TimeoutExpired):
+                pass
+            self.kill()
 
 
-def _main(ref_path, test_path, map_path):
+_WORKER = []  # the process's one warm FlipWorker (at most)
+_LOCK = threading.Lock()  # one request at a time (a second verdict thread waits its turn)
+
+
+def _worker():
+    if not (_WORKER and _WORKER[0].alive()):
+        _WORKER[:] = [FlipWorker()]
+    return _WORKER[0]
+
+
+def prestart():
+    """Start the warm child now (it imports while the caller reads images and tests noise)."""
+    with _LOCK:
+        _worker()
+
+
+@atexit.register
+def close():
+    """Stop the warm child (it also dies with this process)."""
+    with _LOCK:
+        for w in _WORKER:
+            w.close()
+        _WORKER.clear()
+
+
+class Pending:
+    """A FLIP request under way in the warm child: ``result()`` waits for it (mean or None, error
+    or None). The child serves one request at a time: until ``result()`` is called, another
+    ``start`` waits."""
+
+    def __init__(self, outcome=None, timeout=None):
+        self._outcome, self._timeout, self._held = outcome, timeout, outcome is None
+
+    def result(self):
+        if self._held:
+            try:
+                self._outcome = _WORKER[0].receive(self._timeout)
+            finally:
+                self._held = False
+                _LOCK.release()
+        return self._outcome
+
+
+def start(reference, test, map_path, timeout=DEFAULT_TIMEOUT):
+    """Send ``test`` and ``reference`` (H x W x >= 3 linear sRGB arrays) to the warm child, which
+    computes the mean HDR-FLIP and writes its map to ``map_path`` (half floats) while the caller
+    goes on (the probes); returns a Pending. Call its ``result()`` exactly once."""
+    try:
+        ref, img = prepare(reference), prepare(test)
+    except ValueError as exc:
+        return Pending((None, f"FLIP not computed: {exc}"))
+    if ref.shape != img.shape:
+        return Pending((None, f"FLIP not computed: shapes differ: {ref.shape} vs {img.shape}"))
+    _LOCK.acquire()
+    try:
+        error = _worker().send(ref, img, map_path)
+    except BaseException:
+        _LOCK.release()
+        raise
+    if error:
+        _LOCK.release()
+        return Pending((None, error))
+    return Pending(timeout=timeout)
+
+
+_DEFERRING = threading.local()
+
+
+@contextlib.contextmanager
+def deferred():
+    """Within this block, in this thread, verdicts hand what finishes their FLIP to the list
+    yielded (``defer``) instead of waiting for it: the caller runs those later, in order, in any
+    thread (the default engine: while the next verdict reads and tests its render). Each must be
+    called exactly once: until then the next FLIP request waits."""
+    _DEFERRING.items = []
+    try:
+        yield _DEFERRING.items
+    finally:
+        _DEFERRING.items = None
+
+
+def defer(finish):
+    """True when ``finish`` was handed to the enclosing ``deferred`` block, False (call it now)
+    outside one."""
+    items = getattr(_DEFERRING, "items", None)
+    if items is None:
+        return False
+    items.append(finish)
+    return True
+
+
+def flip_images(reference, test, map_path, timeout=DEFAULT_TIMEOUT):
+    """Mean HDR-FLIP of ``test`` against ``reference``, waited for (``start``): (mean or None,
+    error message or None)."""
+    return start(reference, test, map_path, timeout).result()
+
+
+def hdr_flip(ref_path, test_path, map_path, timeout=DEFAULT_TIMEOUT):
+    """Mean HDR-FLIP of the RGB of EXR ``test_path`` against ``ref_path`` (flip_images)."""
+    from .. import exr
+    return flip_images(exr.read_rgb(ref_path), exr.read_rgb(test_path), map_path, timeout)
+
+
+def _serve():
+    """The child: answer requests from stdin until it closes (module docstring)."""
+    reply = os.fdopen(os.dup(1), "w", buffering=1)
+    os.dup2(2, 1)  # whatever flip_evaluator prints goes to stderr, never into the replies
     sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
     import pkg_bootstrap
     pkg_bootstrap.package()
-    from spectral_bench.batch import exr
+    from spectral_bench.batch import previews
     import flip_evaluator
-    ref, test = prepare(exr.read_rgb(ref_path)), prepare(exr.read_rgb(test_path))
-    if ref.shape != test.shape:
-        raise ValueError(f"shapes differ: {ref.shape} vs {test.shape}")
-    fmap, mean, _params = flip_evaluator.evaluate(ref, test, "HDR", inputsRGB=False, applyMagma=False,
-                                                  computeMeanError=True)
-    fmap = np.asarray(fmap, dtype=np.float32).reshape(ref.shape[0], ref.shape[1], -1)[..., 0]
-    exr.write(map_path, np.repeat(fmap[..., None], 3, axis=-1))
-    print(json.dumps({"flip": float(mean)}))
+    stdin = sys.stdin.buffer
+    for line in iter(stdin.readline, b""):
+        if not line.strip():
+            continue
+        req = json.loads(line)
+        h, w = (int(v) for v in req["shape"])
+        size = h * w * 3 * 4
+        ref = np.frombuffer(stdin.read(size), dtype=np.float32).reshape(h, w, 3).copy()  # writable, as flip needs
+        test = np.frombuffer(stdin.read(size), dtype=np.float32).reshape(h, w, 3).copy()
+        try:
+            fmap, mean, _params = flip_evaluator.evaluate(ref, test, "HDR", inputsRGB=False, applyMagma=False,
+                                                          computeMeanError=True)
+            fmap = np.asarray(fmap, dtype=np.float32).reshape(h, w, -1)[..., 0]
+            previews.write_flip(req["map"], fmap)  # one channel Y, 5 significant bits
+            answer = {"flip": float(mean)}
+        except (Exception, SystemExit) as exc:  # noqa: BLE001 - reported for this request; the child stays
+            answer = {"error": f"{type(exc).__name__}: {exc}"}
+        reply.write(json.dumps(answer) + "\n")
 
 
 if __name__ == "__main__":
-    _main(*sys.argv[1:4])
+    if sys.argv[1:] == ["--serve"]:
+        _serve()
+    else:
+        sys.exit("usage: flip_isolated.py --serve (started by batch/verdict/flip_isolated.py FlipWorker)")

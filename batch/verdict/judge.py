@@ -43,6 +43,8 @@ def render_verdict(entry, scene, rendered, image, res_dir, settings, deviations)
     """Judge the render ``image`` of ``rendered`` (the scene as rendered: spp and scale applied;
     ``scene`` as authored, for its reference) in place in ``entry``; writes the verdict's images
     into ``res_dir``. ``settings``: alpha, min_samples, block, flip, references."""
+    if settings.get("flip", True):
+        flip_isolated.prestart()  # the FLIP child starts (once) while this verdict reads and tests
     names, test_all, stderr = exr.read_image_and_stderr(image)
     entry["channels"] = names
     entry["sanity"] = compare.image_sanity(test_all)
@@ -53,15 +55,24 @@ def render_verdict(entry, scene, rendered, image, res_dir, settings, deviations)
                                              shape=test_all.shape, names=names)
     entry["reference_problems"] = problems
     ztest = None
-    if unusable:
-        entry["reference_problem"] = unusable
-    else:
-        ztest = noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings)
-    observers = sorted({d.observer for d in known.applicable(deviations, entry) if d.observer})
+    later = []  # FLIP, computing in its child while the probes run here
     maps = {}
-    entry["probes"] = probes.evaluate(rendered, names, test_all, reference=None if unusable else ref, stderr=stderr,
-                                      passes=entry["passes"], observers=observers, maps=maps)
-    previews.write_probe_residual(res_dir, maps.get("residual_map"))  # the report's "probe residual" view
+    try:
+        if unusable:
+            entry["reference_problem"] = unusable
+        else:
+            ztest = noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings, later)
+        observers = sorted({d.observer for d in known.applicable(deviations, entry) if d.observer})
+        entry["probes"] = probes.evaluate(rendered, names, test_all, reference=None if unusable else ref,
+                                          stderr=stderr, passes=entry["passes"], observers=observers, maps=maps)
+        previews.write_probe_residual(res_dir, maps.get("residual_map"))  # the report's "probe residual" view
+    except BaseException:
+        for finish in later:  # a verdict that breaks still collects its FLIP (the next one waits for it)
+            finish()
+        raise
+    for finish in later:  # FLIP, now or (the default engine: flip_isolated.deferred) after this verdict
+        if not flip_isolated.defer(finish):
+            finish()
     if unusable and not any(p["pass"] is not None for p in entry["probes"]):
         entry["unjudged_because"] = unusable + ("" if entry["probes"] else "; no analytic probe applies")
     status.decide(entry, deviations, ztest)
@@ -122,9 +133,11 @@ def detectable(ztest, probe_records, alpha=None):
     return out
 
 
-def noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings):
+def noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings, later=None):
     """The noise test against the reference, on the render's own noise (entry["test"]); the
-    diff, z-score and FLIP images. Returns the in-memory test (for re-judging) or None."""
+    diff, z-score and FLIP images. Returns the in-memory test (for re-judging) or None.
+    ``later``: a list that receives what finishes FLIP (call it), which then computes meanwhile;
+    None: FLIP is waited for here."""
     entry["reference"] = {"path": str(ref.path), "spp": ref.spp, "backend": ref.provenance.get("backend"),
                           "mode": ref.provenance.get("mode"), "versions": ref.provenance.get("versions"),
                           "date": ref.provenance.get("date")}
@@ -175,14 +188,22 @@ def noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings):
     entry["reference"]["image"] = str(PurePosixPath(entry["image"]).parent.parent / shared.name) \
         if isinstance(entry.get("image"), str) else None
     if settings.get("flip", True):
-        with previews.float_reference(res_dir, mean) as ref_exr:
-            flip, err = flip_isolated.hdr_flip(ref_exr, image, res_dir / "flip.exr")
-        entry["metrics"]["flip"] = flip
-        if err:
-            entry["flip_error"] = err
-        elif (res_dir / "flip.exr").exists():
-            previews.to_half(res_dir / "flip.exr", previews.FLIP_BITS)
+        # the warm FLIP child (flip_isolated.py) gets the arrays in hand (no temporary reference
+        # file, no re-reading of the render) and writes the map as half floats; it computes while
+        # this thread goes on (the probes) when the caller collects it later (``later``)
+        pending = flip_isolated.start(mean, test, res_dir / "flip.exr")  # nothing below can raise before it is collected
+        if later is not None:
+            later.append(lambda: _flip_result(entry, pending))
+        else:
+            _flip_result(entry, pending)
     return zt
+
+
+def _flip_result(entry, pending):
+    flip, err = pending.result()
+    entry["metrics"]["flip"] = flip
+    if err:
+        entry["flip_error"] = err
 
 
 def look(scene_name, scene, rendered, backend, mode, spp, passes, image, res_dir, settings, alpha):

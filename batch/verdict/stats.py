@@ -10,7 +10,7 @@ tolerance: a probe passes when its residual is compatible with the render's own 
 import math
 
 import numpy as np
-from scipy import stats as _st
+from scipy import special as _sc, stats as _st
 
 ALPHA = 0.01  # family-wise false-alarm rate of one probe: its tests share it (Sidak)
 
@@ -113,12 +113,29 @@ def shifted_power(shift, threshold, dof=None):
     P(|T + shift| > t*) = 1 - F(t* - shift) + F(-t* - shift) (the location-shift approximation of
     the noncentral t; exact for the normal)."""
     shift = np.asarray(shift, dtype=np.float64)
-    d = np.broadcast_to(np.asarray(np.inf if dof is None else dof, dtype=np.float64), shift.shape)
+    return power_curve(threshold, dof, shift.shape)(shift)
+
+
+def power_curve(threshold, dof=None, shape=()):
+    """``shifted_power`` as a function of the shift alone, for shifts of ``shape``: the critical
+    values t* are computed once, and F is scipy.special's stdtr (Student's t) and ndtr (normal),
+    the functions scipy.stats' t.cdf and norm.cdf evaluate (same values, without their argument
+    handling: a bisection calls this some fifty times per test, issue 23)."""
+    d = np.broadcast_to(np.asarray(np.inf if dof is None else dof, dtype=np.float64), shape)
     small = np.isfinite(d) & (d < 1e7)
     dd = np.where(small, np.maximum(d, 1.0), 1e7)
-    tcrit = np.where(small, _st.t.isf(threshold / 2.0, dd), _st.norm.isf(threshold / 2.0))
-    cdf = (lambda x: np.where(small, _st.t.cdf(x, dd), _st.norm.cdf(x)))
-    return 1.0 - cdf(tcrit - shift) + cdf(-tcrit - shift)
+    q = threshold / 2.0
+    if 0.0 < q < 1.0:  # scipy.stats' isf is -stdtrit(df, q) (t) and -ndtri(q) (normal) inside (0, 1)
+        tcrit = np.where(small, -_sc.stdtrit(dd, q), -_sc.ndtri(q))
+    else:
+        tcrit = np.where(small, _st.t.isf(q, dd), _st.norm.isf(q))
+
+    def cdf(x):
+        return np.where(small, _sc.stdtr(dd, x), _sc.ndtr(x))
+
+    def power(shift):
+        return 1.0 - cdf(tcrit - shift) + cdf(-tcrit - shift)
+    return power
 
 
 def smallest_detectable(power_of, power=0.9, hi=1.0, steps=50):
@@ -144,4 +161,5 @@ def detectable_scale(stat, power=0.9):
     sens = np.abs(e) / np.maximum(s, 1e-300)
     if not sens.size or not np.isfinite(sens).any():
         return None
-    return smallest_detectable(lambda eps: float(np.max(shifted_power(eps * sens, stat["threshold"], dof))), power)
+    curve = power_curve(stat["threshold"], dof, sens.shape)
+    return smallest_detectable(lambda eps: float(np.max(curve(eps * sens))), power)

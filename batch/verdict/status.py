@@ -21,7 +21,7 @@ Exit status of a batch (batch/jobs/runner.py):
 from dataclasses import dataclass
 from typing import Callable, Optional
 
-from . import known as _known, stats
+from . import known as _known
 
 ORDER = {"failed": 0, "known": 1, "unjudged": 2, "fixed": 3, "ok": 4, "unsupported": 5, "skipped": 6}
 EXIT_FAILED, EXIT_UNJUDGED, EXIT_NOTHING_RAN = 1, 3, 4
@@ -63,6 +63,7 @@ def _rejudge_probe(record, dev):
     """A probe's verdict under a deviation's model (None when the probe has no result for the
     model's observer)."""
     stat = record["stat"] if dev.observer is None else (record.get("alternatives") or {}).get(dev.observer)
+    from . import stats  # scipy.stats: imported by the first verdict, not at start-up
     return None if stat is None else stats.rejudge(stat, dev.scale, dev.scale_se)
 
 

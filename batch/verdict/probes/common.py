@@ -1,10 +1,44 @@
 """What every probe shares: what it measures (a Measurement), its record, and the smallest
 region it can be measured on."""
+import functools
+import json
+import threading
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
 
 MIN_PIXELS = 4
+
+
+def remembered(size=32):
+    """Decorator: keep the last ``size`` results of a function of JSON-like arguments (scene
+    parts: a BSDF, a spectrum, an observer's name), keyed by their JSON text, so that scenes
+    which share a material and a light (ggx_copper_50 ... 80 and their isolated twins) or one
+    scene judged on several backends compute its spectral tables once per process (issue 23).
+    The result's arrays are made read-only: every caller gets the same objects."""
+    def wrap(fn):
+        cache, lock = OrderedDict(), threading.Lock()
+
+        @functools.wraps(fn)
+        def cached(*args):
+            key = json.dumps(args, sort_keys=True, default=repr)
+            with lock:
+                if key in cache:
+                    cache.move_to_end(key)
+                    return cache[key]
+            value = fn(*args)
+            for a in (value if isinstance(value, tuple) else (value,)):
+                if isinstance(a, np.ndarray):
+                    a.flags.writeable = False
+            with lock:
+                cache[key] = value
+                while len(cache) > size:
+                    cache.popitem(last=False)
+            return value
+        cached.cache = cache
+        return cached
+    return wrap
 
 
 @dataclass

@@ -28,7 +28,7 @@ import numpy as np
 
 from ....exporters import colorimetry, spectra
 from .. import compare, optics, raycast, stats
-from .common import MIN_PIXELS, probe as _probe
+from .common import MIN_PIXELS, probe as _probe, remembered
 
 LIGHT_NODES = 16   # Gauss-Legendre nodes per axis of a light
 FOOTPRINT = 2      # Gauss-Legendre nodes per axis of a pixel
@@ -64,6 +64,7 @@ def _eta_k(bsdf):
     return bsdf["eta"], bsdf["k"]
 
 
+@remembered()
 def fresnel_colour_table(bsdf, radiance, obs=colorimetry.GROUND_TRUTH):
     """(cos grid, RGB of F(cos, l) L_e(l) per cos): the spectral part of the integrand."""
     wl = spectra.cie_1931_cmfs()[0]
@@ -72,7 +73,7 @@ def fresnel_colour_table(bsdf, radiance, obs=colorimetry.GROUND_TRUTH):
     le = spectra.evaluate(radiance, wl)
     cos = np.linspace(0.0, 1.0, F_TABLE)
     f = optics.fresnel_conductor(cos[:, None], eta[None, :], k[None, :])  # cos x wavelengths
-    xyz = np.stack([colorimetry.xyz(row * le, obs) for row in f])
+    xyz = colorimetry.xyz_rows(f * le[None, :], obs)
     return cos, colorimetry.xyz_to_srgb(xyz)
 
 

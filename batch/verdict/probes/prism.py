@@ -206,17 +206,19 @@ def project(camera, width, height, points):
 @np.errstate(divide="ignore", invalid="ignore")
 def _clip_boxes(x0, y0, quad):
     """Area of each unit pixel box [x0, x0+1] x [y0, y0+1] inside the convex quad (4 x 2, either
-    orientation): Sutherland-Hodgman, vectorised over boxes."""
+    orientation; or one quad per box, n x 4 x 2): Sutherland-Hodgman, vectorised over boxes (each
+    box's arithmetic is the same whichever boxes share the call)."""
     n = len(x0)
     px = np.stack([x0, x0 + 1, x0 + 1, x0], axis=1).astype(np.float64)
     py = np.stack([y0, y0, y0 + 1, y0 + 1], axis=1).astype(np.float64)
     count = np.full(n, 4)
-    q = np.asarray(quad, dtype=np.float64)
-    orient = np.sign(np.sum(q[:, 0] * np.roll(q[:, 1], -1) - np.roll(q[:, 0], -1) * q[:, 1]))
+    q = np.broadcast_to(np.asarray(quad, dtype=np.float64), (n, 4, 2))
+    orient = np.sign(np.sum(q[..., 0] * np.roll(q[..., 1], -1, axis=-1) - np.roll(q[..., 0], -1, axis=-1) * q[..., 1],
+                            axis=-1))
     rows = np.arange(n)
     for e in range(4):
-        ax, ay = q[e]
-        bx, by = q[(e + 1) % 4]
+        ax, ay = q[:, e, 0], q[:, e, 1]
+        bx, by = q[:, (e + 1) % 4, 0], q[:, (e + 1) % 4, 1]
         k_max = px.shape[1]
         ox, oy = np.zeros((n, k_max + 1)), np.zeros((n, k_max + 1))
         oc = np.zeros(n, dtype=int)
@@ -242,6 +244,44 @@ def _clip_boxes(x0, y0, quad):
     valid = k < count[:, None]
     area = np.where(valid, px * np.take_along_axis(py, nxt, 1) - np.take_along_axis(px, nxt, 1) * py, 0.0)
     return np.abs(area.sum(axis=1)) / 2
+
+
+BOXES_PER_CALL = 1 << 16  # pixel boxes clipped in one call (bounded memory: about 10 arrays of n x 8)
+
+
+def _beam_coverage(quads, lit, width, height):
+    """[(k, y0, y1, x0, x1, coverage of each pixel of that window by quad k)] for the wavelengths
+    ``lit``, in their order: the boxes of many wavelengths clipped together (_clip_boxes), each
+    exactly as on its own."""
+    windows = []
+    for k in lit:
+        q = quads[k]
+        x0, x1 = int(max(0, math.floor(q[:, 0].min()))), int(min(width, math.ceil(q[:, 0].max())))
+        y0, y1 = int(max(0, math.floor(q[:, 1].min()))), int(min(height, math.ceil(q[:, 1].max())))
+        if x1 > x0 and y1 > y0:
+            windows.append((k, y0, y1, x0, x1))
+    out, batch = [], []
+
+    def flush():
+        if not batch:
+            return
+        grids = [np.meshgrid(np.arange(x0, x1), np.arange(y0, y1)) for _, y0, y1, x0, x1 in batch]
+        gx, gy = (np.concatenate([g[i].ravel() for g in grids]) for i in (0, 1))
+        sizes = [(y1 - y0) * (x1 - x0) for _, y0, y1, x0, x1 in batch]
+        per_box = np.repeat(np.stack([quads[k] for k, *_ in batch]), sizes, axis=0)
+        cov = np.split(_clip_boxes(gx, gy, per_box), np.cumsum(sizes)[:-1])
+        out.extend((k, y0, y1, x0, x1, c.reshape(y1 - y0, x1 - x0)) for (k, y0, y1, x0, x1), c in zip(batch, cov))
+        batch.clear()
+    boxes = 0
+    for w in windows:
+        size = (w[2] - w[1]) * (w[4] - w[3])
+        if batch and boxes + size > BOXES_PER_CALL:
+            flush()
+            boxes = 0
+        batch.append(w)
+        boxes += size
+    flush()
+    return out
 
 
 def _channel_weights(wl, obs=colorimetry.GROUND_TRUTH):
@@ -304,14 +344,7 @@ def expected(scene, width, height, step_nm=STEP_NM):
     radiance = rho / math.pi * e * t * tr["area"] / area_s
     w = _channel_weights(wl)
     img = np.zeros((height, width, 3))
-    for k in np.flatnonzero(t > 0):
-        q = quads[k]
-        x0, x1 = int(max(0, math.floor(q[:, 0].min()))), int(min(width, math.ceil(q[:, 0].max())))
-        y0, y1 = int(max(0, math.floor(q[:, 1].min()))), int(min(height, math.ceil(q[:, 1].max())))
-        if x1 <= x0 or y1 <= y0:
-            continue
-        gx, gy = np.meshgrid(np.arange(x0, x1), np.arange(y0, y1))
-        cov = _clip_boxes(gx.ravel(), gy.ravel(), q).reshape(gy.shape)
+    for k, y0, y1, x0, x1, cov in _beam_coverage(quads, np.flatnonzero(t > 0), width, height):
         img[y0:y1, x0:x1] += cov[..., None] * (radiance[k] * w[k])[None, None, :]
     mask, footprint = screen_pixels(scene, width, height, screen)
     inside = np.ones(len(wl), dtype=bool)

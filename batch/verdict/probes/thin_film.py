@@ -24,7 +24,7 @@ import numpy as np
 
 from ....exporters import colorimetry, spectra
 from .. import airy, raycast, stats
-from .common import MIN_PIXELS, probe as _probe
+from .common import MIN_PIXELS, probe as _probe, remembered
 
 THETA_TABLE = 4097      # colour as a function of the angle of incidence, linearly interpolated
 # Tiles of 4 x 4 image pixels (tiles with fewer than 8 usable pixels are left out): the film's
@@ -49,6 +49,7 @@ def applies(obj):
             and not ((b.get("roughness") or {}).get("alpha", 0) > 0))
 
 
+@remembered()
 def colour_table(bsdf, radiance, obs=colorimetry.GROUND_TRUTH):
     """(theta grid, linear sRGB of R(theta, l) L(l) per angle) for a filmed conductor."""
     wl = spectra.cie_1931_cmfs()[0]
@@ -58,7 +59,7 @@ def colour_table(bsdf, radiance, obs=colorimetry.GROUND_TRUTH):
     refl = airy.unpolarized_reflectance(np.cos(theta)[:, None], wl[None, :], film.get("ext_ior", 1.0),
                                         film["ior"], film["thickness"], n3[None, :])
     light = spectra.evaluate(radiance, wl)
-    xyz = np.stack([colorimetry.xyz(r * light, obs) for r in refl])
+    xyz = colorimetry.xyz_rows(refl * light[None, :], obs)
     return theta, colorimetry.xyz_to_srgb(xyz)
 
 

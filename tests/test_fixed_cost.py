@@ -1,0 +1,185 @@
+"""A job's fixed cost (issue 23): the warm FLIP child, and the verdict's shortcuts, which must give
+the numbers the plain computations give, bit for bit (a run's metrics.json is the same before and
+after: benchmarks/ENGINES.md).
+
+- FLIP runs in one warm child per process (batch/verdict/flip_isolated.py): reused, its value is
+  flip-evaluator's own, and a child that dies during a request fails that request alone; a FLIP
+  left running after its verdict (the default engine collects it while the next verdict runs) is
+  collected by the caller, also when the verdict breaks;
+- the power bisection's Student t / normal cdfs (batch/verdict/stats.py ``power_curve``) are
+  scipy.stats' values;
+- a probe's colour table integrates its rows at once (exporters/colorimetry.py ``xyz_rows``);
+- the prism probe clips the pixel boxes of many wavelengths in one call (probes/prism.py);
+- the spectral tables are remembered per material and light (probes/common.py ``remembered``);
+- the default engine's verdict thread loads what the verdicts need while the first job renders.
+"""
+import json
+import os
+import signal
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from scipy import stats as st
+
+from spectral_bench.batch.verdict import flip_isolated, stats
+
+
+def _images(seed, shape=(24, 32)):
+    rng = np.random.default_rng(seed)
+    a = rng.random(shape + (3,)).astype(np.float32) * 4
+    return a, (a * rng.uniform(0.7, 1.3, a.shape)).astype(np.float32)
+
+
+def _flip_in_a_fresh_process(tmp_path, ref, test):
+    """flip-evaluator's own mean on the same arrays, computed in a fresh interpreter."""
+    np.save(tmp_path / "r.npy", ref)
+    np.save(tmp_path / "t.npy", test)
+    code = ("import json, sys, numpy as np, flip_evaluator; r, t = np.load(sys.argv[1]), np.load(sys.argv[2]); "
+            "print(json.dumps(float(flip_evaluator.evaluate(r, t, 'HDR', inputsRGB=False, applyMagma=False, "
+            "computeMeanError=True)[1])))")
+    proc = subprocess.run([sys.executable, "-c", code, str(tmp_path / "r.npy"), str(tmp_path / "t.npy")],
+                          capture_output=True, text=True, check=True)
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def test_flip_child_is_warm_and_gives_flip_evaluators_value(tmp_path):
+    from spectral_bench.batch import exr
+    ref, test = _images(1)
+    first, err = flip_isolated.flip_images(ref, test, tmp_path / "f1.exr")
+    assert err is None
+    pid = flip_isolated._WORKER[0].proc.pid
+    second, err = flip_isolated.flip_images(test, ref, tmp_path / "f2.exr")
+    assert err is None and flip_isolated._WORKER[0].proc.pid == pid  # the same child served both
+    assert first == _flip_in_a_fresh_process(tmp_path, ref, test)
+    assert second == _flip_in_a_fresh_process(tmp_path, test, ref)
+    fmap = exr.read(tmp_path / "f1.exr")
+    assert fmap["R"].shape == ref.shape[:2] and abs(float(np.mean(fmap["R"])) - first) < 1e-3  # the map, half floats
+
+
+def test_a_flip_child_that_dies_during_a_request_fails_that_request_alone(tmp_path):
+    ref, test = _images(2, (8, 8))
+    assert flip_isolated.flip_images(ref, test, tmp_path / "f.exr")[1] is None
+    worker = flip_isolated._WORKER[0]
+    os.kill(worker.proc.pid, signal.SIGSTOP)  # it cannot answer: the request below waits in its pipe
+    pending = flip_isolated.start(ref, test, tmp_path / "f.exr")
+    os.kill(worker.proc.pid, signal.SIGKILL)
+    value, err = pending.result()
+    assert value is None and "FLIP failed (exit -9)" in err
+    again, err = flip_isolated.flip_images(ref, test, tmp_path / "g.exr")  # the next request: a fresh child
+    assert err is None and again == _flip_in_a_fresh_process(tmp_path, ref, test)
+    assert flip_isolated._WORKER[0] is not worker
+
+
+def test_flip_refuses_what_it_cannot_judge_without_a_child():
+    ref, test = _images(3)
+    bad = test.copy()
+    bad[0, 0, 0] = np.inf
+    assert "NaN or Inf" in flip_isolated.flip_images(ref, bad, "unused.exr")[1]
+    assert "shapes differ" in flip_isolated.flip_images(ref, test[:4], "unused.exr")[1]
+
+
+def _scipy_stats_power(shift, threshold, dof):
+    """The power as scipy.stats computes it (the formula of stats.shifted_power before issue 23)."""
+    shift = np.asarray(shift, dtype=np.float64)
+    d = np.broadcast_to(np.asarray(np.inf if dof is None else dof, dtype=np.float64), shift.shape)
+    small = np.isfinite(d) & (d < 1e7)
+    dd = np.where(small, np.maximum(d, 1.0), 1e7)
+    tcrit = np.where(small, st.t.isf(threshold / 2.0, dd), st.norm.isf(threshold / 2.0))
+    cdf = lambda x: np.where(small, st.t.cdf(x, dd), st.norm.cdf(x))
+    return 1.0 - cdf(tcrit - shift) + cdf(-tcrit - shift)
+
+
+def test_power_curve_is_scipy_stats_bit_for_bit():
+    rng = np.random.default_rng(5)
+    for trial in range(300):
+        n = int(rng.integers(1, 40))
+        shift = rng.normal(0, 4, (n, 3)) * rng.choice([1e-3, 1.0, 30.0])
+        dof = [None, np.inf, 2.0, np.where(rng.random((n, 3)) < 0.3, np.inf, rng.uniform(0.5, 1e8, (n, 3)))][trial % 4]
+        threshold = float(rng.choice([1e-7, 1e-3, 0.05, 0.6]))
+        expected = _scipy_stats_power(shift, threshold, dof)
+        assert np.array_equal(stats.shifted_power(shift, threshold, dof), expected)
+        assert np.array_equal(stats.power_curve(threshold, dof, shift.shape)(shift), expected)
+
+
+def test_xyz_rows_is_xyz_per_row_bit_for_bit():
+    from spectral_bench.exporters import colorimetry
+    rng = np.random.default_rng(6)
+    for obs in colorimetry.OBSERVERS:
+        wl = colorimetry.observer(obs)[0]
+        rows = rng.random((257, wl.size)) * 3
+        assert np.array_equal(colorimetry.xyz_rows(rows, obs), np.stack([colorimetry.xyz(r, obs) for r in rows]))
+
+
+def test_prism_boxes_clipped_together_as_each_wavelength_alone(golden):
+    from spectral_bench.batch.verdict.probes import prism
+    scene = golden["dispersion_prism"]
+    w, h = 64, 32
+    wl = np.arange(380.0, 781.0, 2.0)
+    tr = prism.trace_beam(scene, wl, [(-1, -1), (1, -1), (1, 1), (-1, 1), (0, 0)])
+    quads = prism.project(scene["camera"], w, h, tr["point"][:, :4])
+    lit = np.flatnonzero(tr["T"][:, 4] > 0)
+    together = prism._beam_coverage(quads, lit, w, h)
+    assert len(together) > 10
+    for k, y0, y1, x0, x1, cov in together:
+        gx, gy = np.meshgrid(np.arange(x0, x1), np.arange(y0, y1))
+        alone = prism._clip_boxes(gx.ravel(), gy.ravel(), quads[k]).reshape(gy.shape)
+        assert np.array_equal(cov, alone)
+
+
+def test_spectral_tables_are_remembered_and_read_only(golden):
+    from spectral_bench.batch.verdict.probes import ggx
+    plate = next(o for o in golden["ggx_copper_50"]["objects"] if (o.get("bsdf") or {}).get("type") == "conductor")
+    light = next(o for o in golden["ggx_copper_50"]["objects"] if o.get("emitter"))
+    first = ggx.fresnel_colour_table(plate["bsdf"], light["emitter"]["radiance"])
+    again = ggx.fresnel_colour_table(json.loads(json.dumps(plate["bsdf"])), light["emitter"]["radiance"])
+    assert again is first  # equal arguments (not the same objects) find the table
+    fresh = ggx.fresnel_colour_table.__wrapped__(plate["bsdf"], light["emitter"]["radiance"])
+    assert all(np.array_equal(a, b) for a, b in zip(first, fresh))
+    with pytest.raises(ValueError):
+        first[1][0, 0] = 0.0  # shared by every caller: never written
+
+
+def test_the_verdict_thread_is_warmed_with_the_flip_child():
+    from spectral_bench.batch.jobs import job as jobs
+    flip_isolated.close()
+    jobs.warm([{"kind": "render", "verdict": {"flip": False}}])
+    assert not flip_isolated._WORKER  # --no-flip: no child
+    jobs.warm([{"kind": "render", "verdict": {"flip": True}}])
+    assert flip_isolated._WORKER and flip_isolated._WORKER[0].alive()
+
+
+def test_a_deferred_flip_is_collected_by_the_caller_in_order(tmp_path):
+    ref, test = _images(7, (8, 8))
+    assert not flip_isolated.defer(lambda: None)  # outside a deferred block: the caller finishes at once
+    got = []
+    with flip_isolated.deferred() as pending:
+        first = flip_isolated.start(ref, test, tmp_path / "a.exr")
+        assert flip_isolated.defer(lambda: got.append(first.result()))
+    assert len(pending) == 1 and not got  # nothing waited for inside the verdict
+    pending[0]()
+    assert got[0][1] is None and got[0][0] == _flip_in_a_fresh_process(tmp_path, ref, test)
+    second, err = flip_isolated.flip_images(test, ref, tmp_path / "b.exr")  # the child is free again
+    assert err is None and second > 0
+
+
+def test_judge_deferring_collects_flip_when_the_verdict_breaks(tmp_path):
+    """A verdict that raises after sending its FLIP still collects it: the next FLIP is not left
+    waiting for a request nobody reads."""
+    from spectral_bench.batch.jobs import job as jobs
+    ref, test = _images(8, (8, 8))
+    kind = jobs.KINDS_TABLE["render"]
+
+    def breaking(job, record, deviations):
+        pending = flip_isolated.start(ref, test, tmp_path / "c.exr")
+        assert flip_isolated.defer(pending.result)
+        raise RuntimeError("a verdict that breaks after sending FLIP")
+    jobs.KINDS_TABLE["render"] = jobs.Kind(breaking)
+    try:
+        with pytest.raises(RuntimeError):
+            jobs.judge_deferring({"kind": "render"}, {"status": "rendered"})
+    finally:
+        jobs.KINDS_TABLE["render"] = kind
+    assert not flip_isolated._LOCK.locked()  # collected: the next request does not wait for ever
+    assert flip_isolated.flip_images(ref, test, tmp_path / "d.exr")[1] is None
