@@ -137,20 +137,6 @@ def shared_reference(res_dir, mean, stderr=None):
     return write_half(path, rgb)
 
 
-@contextlib.contextmanager
-def float_reference(res_dir, mean):
-    """A float32 EXR of ``mean`` for the length of a ``with`` block (HDR-FLIP reads files), then
-    removed: FLIP sees the reference at full precision and no copy stays."""
-    fd, tmp = tempfile.mkstemp(suffix=".exr", prefix=".ref-", dir=res_dir)
-    os.close(fd)
-    try:
-        exr.write(tmp, mean)
-        yield Path(tmp)
-    finally:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-
-
 BLOCK_STDERR = "block_stderr.exr"
 FLIP_BITS = 4  # mantissa bits kept of the FLIP map's halves (5 significant: 1.6 % at most)
 
@@ -166,11 +152,6 @@ def write_flip(path, fmap, keep_bits=FLIP_BITS):
         grey = (((u + (1 << (drop - 1))) >> drop) << drop).astype(np.uint16).view(np.float16)
     return write_half(path, grey, channels="Y")
 
-
-def to_half(path, keep_bits=FLIP_BITS):
-    """Rewrite a FLIP map written as three equal channels R = G = B (HDR-FLIP's own file) in place
-    as ``write_flip`` stores it."""
-    return write_flip(path, exr.read_rgb(path)[..., 0], keep_bits)
 
 
 def differences(render, reference):
