@@ -19,7 +19,7 @@ from pathlib import Path
 from ..exporters import names as scene_names, validate
 from .backends import BACKENDS, DEFAULT, GROUPS, command, expand, known_names
 
-DEVICES = ("cpu", "gpu", "auto")  # --device (batch/backends/cuda.py)
+DEVICES = ("cpu", "gpu", "auto")  # --device (batch/backends/mitsuba/cuda.py)
 FORMATS = ("mitsuba", "art", "json", "cycles", "luxcore")
 # Bounds of the options (documented in --help and the README's option table)
 MAX_SPP = validate.render_limit("spp")[1]  # samples per pixel: the scene IR's own bound

@@ -56,7 +56,7 @@ print(json.dumps({"first": times[0], "steady": sorted(times[1:])[len(times[1:]) 
 def main():
     pkg_bootstrap.package()
     from spectral_bench.batch import scene_sources
-    from spectral_bench.batch.backends import llvm
+    from spectral_bench.batch.backends.mitsuba import llvm
     from spectral_bench.exporters import ir, mitsuba_writer
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])

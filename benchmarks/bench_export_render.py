@@ -54,7 +54,7 @@ def main():
             sc = plan.for_run(sc, {"spp": None, "scale": args.scale})
             xml = backend.export(sc, Path(tmp) / name)
             mode, _ = backend.mode_for(sc)
-            from spectral_bench.batch.backends.mitsuba_backend import PLUGIN_NEEDS, scalar_twin
+            from spectral_bench.batch.backends.mitsuba.backend import PLUGIN_NEEDS, scalar_twin
             # a scene with a Python plugin would call Python per ray in a scalar variant (and the
             # fluorescent integrator needs a JIT one): its plugin's own benchmark times it instead
             scalar = None if PLUGIN_NEEDS & set(sc.get("needs", [])) else scalar_twin(mode)

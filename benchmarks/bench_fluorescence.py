@@ -76,7 +76,7 @@ def export_pair(scene, out, elastic_only=False):
 
 
 def time_once(folder, spp, repeat):
-    from spectral_bench.batch.backends import llvm
+    from spectral_bench.batch.backends.mitsuba import llvm
     proc = subprocess.run([sys.executable, "-c", CHILD, str(folder), VARIANT, str(spp), str(repeat)],
                           capture_output=True, text=True, env=llvm.env(), timeout=1800)
     if proc.returncode != 0:
@@ -87,7 +87,7 @@ def time_once(folder, spp, repeat):
 def main():
     pkg_bootstrap.package()
     from spectral_bench.batch import scene_sources
-    from spectral_bench.batch.backends import llvm
+    from spectral_bench.batch.backends.mitsuba import llvm
     from spectral_bench.batch.jobs import plan
 
     ap = argparse.ArgumentParser()

@@ -11,7 +11,7 @@
    each device: wall time.
 
 Prints a Markdown table naming the devices; ``--write`` records it in benchmarks/GPU.md. Where
-CUDA does not render (batch/backends/cuda.py's probe), it measures nothing and prints (and with
+CUDA does not render (batch/backends/mitsuba/cuda.py's probe), it measures nothing and prints (and with
 ``--write`` records) that it was not measured, and why. Sized to finish within 10 minutes on one
 H200 with 16 cores (``--budget`` seconds in all, default 570: a step that would run past it is
 stopped and named in the table).
@@ -41,7 +41,7 @@ def cuda_probe():
     """(usable, message) of the product's own CUDA probe."""
     import pkg_bootstrap
     pkg_bootstrap.package()
-    from spectral_bench.batch.backends import cuda
+    from spectral_bench.batch.backends.mitsuba import cuda
     return cuda.find()
 
 

@@ -43,7 +43,7 @@ MITSUBA_Y_NORMALISATION = 106.7502593994140625  # MI_CIE_Y_NORMALIZATION, includ
 def main():
     pkg_bootstrap.package()
     from spectral_bench.batch import backends, exr, scene_sources
-    from spectral_bench.batch.backends import llvm
+    from spectral_bench.batch.backends.mitsuba import llvm
     from spectral_bench.batch.jobs import plan
     from spectral_bench.batch.verdict import probes
     from spectral_bench.batch.verdict.probes import fluorescence as probe

@@ -25,7 +25,7 @@ Materials (LuxCore 2.x names, src/slg/scene/parsematerials.cpp):
 
 Render settings (render.cfg): PATHCPU with the RANDOM sampler (independent, uniformly jittered
 samples; adaptive strength 0), ``batch.haltspp`` = the scene's spp (the backend polls the session:
-see batch/backends/luxcore_worker.py), pixel filter NONE (each sample lands in the pixel it was
+see batch/backends/luxcore/worker.py), pixel filter NONE (each sample lands in the pixel it was
 drawn in, uniformly over that pixel: a one-pixel box; the backend's test checks it), no variance
 clamping, no hybrid back/forward (light tracing) or PhotonGI caches, path depths = the IR's
 max_depth (LuxCore's total depth d >= 2 allows d path segments, as Mitsuba's max_depth does:

@@ -1,4 +1,4 @@
-"""Mitsuba's spectral image (specfilm, box bands, batch/backends/mitsuba_spectral.py) integrated to
+"""Mitsuba's spectral image (specfilm, box bands, batch/backends/mitsuba/spectral.py) integrated to
 RGB (batch/spectral_exr.py) against Mitsuba's own RGB render (hdrfilm) of the same scene, judged on
 both renders' noise; and the band discretisation error expected from the scene's spectra.
 
@@ -22,7 +22,7 @@ import pkg_bootstrap  # noqa: E402
 
 pkg_bootstrap.package()
 from spectral_bench.batch import backends, exr, spectral_exr  # noqa: E402
-from spectral_bench.batch.backends import mitsuba_spectral  # noqa: E402
+from spectral_bench.batch.backends.mitsuba import spectral as mitsuba_spectral  # noqa: E402
 from spectral_bench.batch.verdict import compare  # noqa: E402
 from spectral_bench.exporters import colorimetry, ir, ir_json, spectra  # noqa: E402
 

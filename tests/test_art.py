@@ -98,7 +98,7 @@ def test_art46_observer_is_the_backends_band_film(tmp_path):
     it must differ from the CIE observer where the deviation says it does (a saturated colour)."""
     import numpy as np
     import OpenEXR
-    from spectral_bench.batch.backends.art_backend import stokes_to_rgb
+    from spectral_bench.batch.backends.art.backend import stokes_to_rgb
     from spectral_bench.exporters import colorimetry, spectra
     start, width, count = colorimetry.ART_BANDS_NM
     fine = np.linspace(300.0, 850.0, 55001)

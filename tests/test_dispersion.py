@@ -12,7 +12,7 @@ import pytest
 
 from conftest import DISPERSION, ROOT, metrics, run_batch
 from spectral_bench.batch import backends, exr
-from spectral_bench.batch.backends import llvm
+from spectral_bench.batch.backends.mitsuba import llvm
 from spectral_bench.batch.verdict import compare, probes, references
 from spectral_bench.exporters import dispersion, ir
 

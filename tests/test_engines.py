@@ -94,12 +94,12 @@ def test_a_killed_worker_loses_no_job(golden, tmp_path):
         victim = sorted(pids.values())[0]
 
         def kill_in_a_render():
-            # the event, not a delay: the victim has a render child (batch/backends/mitsuba_worker.py)
+            # the event, not a delay: the victim has a render child (batch/backends/mitsuba/worker.py)
             import psutil
             worker = psutil.Process(victim)
             while not results or len(results) < 3:
                 try:
-                    if any("mitsuba_worker" in " ".join(c.cmdline()) for c in worker.children()):
+                    if any("mitsuba/worker.py" in " ".join(c.cmdline()) for c in worker.children()):
                         os.kill(victim, signal.SIGKILL)
                         killed.append(victim)
                         return

@@ -24,7 +24,7 @@ import pytest
 
 from conftest import FLUORESCENCE, ROOT, metrics, run_batch
 from spectral_bench.batch import backends, exr
-from spectral_bench.batch.backends import llvm
+from spectral_bench.batch.backends.mitsuba import llvm
 from spectral_bench.batch.verdict import compare, probes, raycast, references, stats
 from spectral_bench.exporters import (art_writer, fluorescence, ir, ir_json, mitsuba_writer, spectra,
                                       validate)
@@ -364,7 +364,7 @@ def test_without_llvm_fluorescence_is_unsupported_with_the_reason(tmp_path):
         import json, sys
         sys.path.insert(0, {str(ROOT)!r})
         import pkg_bootstrap; pkg_bootstrap.package()
-        from spectral_bench.batch.backends import llvm
+        from spectral_bench.batch.backends.mitsuba import llvm
         from spectral_bench.batch import backends
         from spectral_bench.exporters import ir_json
         llvm.CANDIDATES = ()

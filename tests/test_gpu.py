@@ -1,4 +1,4 @@
-"""--device cpu|gpu|auto: Mitsuba's cuda_ad_* variants (batch/backends/cuda.py, mitsuba_backend.py).
+"""--device cpu|gpu|auto: Mitsuba's cuda_ad_* variants (batch/backends/mitsuba/cuda.py, mitsuba/backend.py).
 
 On a machine without CUDA the selection is tested through the documented test hook
 SPECTRAL_BENCH_TEST_CUDA=1 (the probe answers "usable" without rendering), and ``--device gpu`` is
@@ -15,8 +15,8 @@ import pytest
 from conftest import ALL_SCENES, GOLDEN, ROOT, metrics, run_batch
 
 from spectral_bench.batch import cli
-from spectral_bench.batch.backends import cuda, llvm
-from spectral_bench.batch.backends.mitsuba_backend import MitsubaBackend
+from spectral_bench.batch.backends.mitsuba import cuda, llvm
+from spectral_bench.batch.backends.mitsuba.backend import MitsubaBackend
 from spectral_bench.batch.jobs import runner
 
 
@@ -38,7 +38,7 @@ def real_cuda():
     test hook are left alone)."""
     env = {k: v for k, v in os.environ.items() if k != cuda.TEST_HOOK}
     code = ("import sys; sys.path.insert(0, %r); import pkg_bootstrap; pkg_bootstrap.package(); "
-            "import json; from spectral_bench.batch.backends import cuda; print(json.dumps(cuda.find()))" % str(ROOT))
+            "import json; from spectral_bench.batch.backends.mitsuba import cuda; print(json.dumps(cuda.find()))" % str(ROOT))
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300)
     assert proc.returncode == 0, proc.stderr[-2000:]
     return tuple(json.loads(proc.stdout.strip().splitlines()[-1]))

@@ -13,7 +13,7 @@ def test_no_llvm_falls_back_to_scalar_and_says_why(tmp_path):
         import json, sys
         sys.path.insert(0, {str(ROOT)!r})
         import pkg_bootstrap; pkg_bootstrap.package()
-        from spectral_bench.batch.backends import llvm
+        from spectral_bench.batch.backends.mitsuba import llvm
         from spectral_bench.batch import backends
         from spectral_bench.exporters import ir_json
         llvm.CANDIDATES = ()

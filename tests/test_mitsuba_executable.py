@@ -16,7 +16,7 @@ sys.path.insert(0, str(ROOT))
 import pkg_bootstrap  # noqa: E402
 
 pkg_bootstrap.package()
-from spectral_bench.batch.backends import mitsuba_backend  # noqa: E402
+from spectral_bench.batch.backends.mitsuba import backend as mitsuba_backend  # noqa: E402
 
 pytestmark = pytest.mark.skipif(not MITSUBA.is_file(), reason=f"no mitsuba executable beside {sys.executable}")
 

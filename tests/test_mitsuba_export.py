@@ -12,7 +12,7 @@ import pytest
 
 from conftest import ALL_SCENES, metrics, run_batch, write_scene
 from spectral_bench.batch import exr
-from spectral_bench.batch.backends import llvm
+from spectral_bench.batch.backends.mitsuba import llvm
 from spectral_bench.exporters import ir, mitsuba_writer
 
 

@@ -315,7 +315,7 @@ def test_mitsuba_spectral_render_matches_its_rgb_render(tmp_path):
 
 
 def test_spectral_scene_xml_and_refusals(tmp_path):
-    from spectral_bench.batch.backends import mitsuba_spectral as ms
+    from spectral_bench.batch.backends.mitsuba import spectral as ms
     text = (ROOT / "golden" / "mitsuba" / "ggx_copper_50" / "scene.xml").read_text()
     out = ms.spectral_xml(text, ms.bands())
     assert 'type="specfilm"' in out and "pixel_format" not in out and out.count('type="irregular"') == 47
@@ -332,7 +332,7 @@ def test_spectral_film_band_is_the_band_average(tmp_path):
     """A constant environment of a known spectrum seen through the spectral film: each 10 nm band
     holds the spectrum's average over the band (specfilm stores the band integral; the module
     divides by the width), judged on the pixels' own spread."""
-    from spectral_bench.batch.backends import mitsuba_spectral as ms
+    from spectral_bench.batch.backends.mitsuba import spectral as ms
     xml = tmp_path / "env.xml"
     xml.write_text("""<scene version="3.0.0"><integrator type="path"/>
       <sensor type="perspective"><float name="fov" value="10"/>

@@ -22,11 +22,11 @@ log)`` renders one pass at a time (``render`` above is that loop). Renderers dec
 Constructors take ``executable`` (and: Mitsuba ``force_variant``, ART ``ggx``, Cycles and LuxCore
 ``approximate``, from --approximate).
 """
-from .art_backend import ArtBackend
+from .art.backend import ArtBackend
 from .command import CommandBackend
-from .cycles_backend import CyclesBackend
-from .luxcore_backend import LuxCoreBackend
-from .mitsuba_backend import MitsubaBackend
+from .cycles.backend import CyclesBackend
+from .luxcore.backend import LuxCoreBackend
+from .mitsuba.backend import MitsubaBackend
 from .passes import BackendFailure  # noqa: F401 - BackendFailure is part of the interface
 
 # spectral backends first; the RGB ones (Cycles, LuxCore) measure what reducing spectra to RGB costs

@@ -1,6 +1,6 @@
 """What the RGB backends (Cycles, LuxCore) share: deciding the mode from what the scene needs
 (rgb_scene.problems), exporting the reduced scene, running a child process under a time limit,
-and writing independent passes as a mean and its standard error (as mitsuba_worker does).
+and writing independent passes as a mean and its standard error (as mitsuba/worker.py does).
 
 Modes: ``rgb`` (spectra reduced to RGB by exporters/rgb_reduction.py's rule: always, that is what
 these backends measure) and ``rgb-approx`` (``--approximate``: something the renderer cannot
@@ -111,5 +111,5 @@ def write_passes(out_exr, images, film_scale=1.0, stokes=False):
 
 
 def split_spp(spp, passes):
-    """Samples per pass (the same in every pass, rounded up as mitsuba_worker does)."""
+    """Samples per pass (the same in every pass, rounded up as mitsuba/worker.py does)."""
     return math.ceil(spp / max(1, passes))

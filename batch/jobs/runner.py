@@ -406,7 +406,7 @@ def probe_early(opts):
 
 def check_device(opts):
     """UsageError where --device gpu cannot be honoured (Mitsuba runs and CUDA does not render here:
-    batch/backends/cuda.py's probe says why); other devices and backends need nothing."""
+    batch/backends/mitsuba/cuda.py's probe says why); other devices and backends need nothing."""
     if opts.get("device") == "gpu" and "mitsuba" in backend_names(opts) and not opts.get("export_only"):
         problem = make_backend("mitsuba", opts).device_problem()
         if problem:

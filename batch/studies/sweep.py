@@ -169,6 +169,6 @@ def sweep_modes(backend, scene, requested=None):
     modes = [mode]
     if "_ad_" in mode and "fluorescence" not in scene.get("needs", []):
         # (fluorescent scenes render through a Python integrator, which needs a JIT variant)
-        from ..backends.mitsuba_backend import scalar_twin
+        from ..backends.mitsuba.backend import scalar_twin
         modes.append(scalar_twin(mode))
     return modes, None

@@ -21,10 +21,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ...exporters import art_writer
-from .. import spectral_exr
-from . import passes as passes_mod
-from .passes import BackendFailure
+from ....exporters import art_writer
+from ... import spectral_exr
+from .. import passes as passes_mod
+from ..passes import BackendFailure
 
 NATIVE = {"spectral", "polarization", "dispersion", "fluorescence"}  # dispersion: CONST_SELLMEIER_DISPERSION_6;
 # fluorescence: CONST_FLUORESCENT_COLOUR (art_writer)

@@ -26,7 +26,7 @@ from pathlib import Path
 
 BAND_NM = 10.0
 RANGE_NM = (360.0, 830.0)  # Mitsuba 3's MI_CIE_MIN, MI_CIE_MAX
-MAX_WAVEFRONT = 1 << 24  # samples per render call on the LLVM variants (as mitsuba_worker.py)
+MAX_WAVEFRONT = 1 << 24  # samples per render call on the LLVM variants (as mitsuba/worker.py)
 # the film parameters specfilm shares with hdrfilm (src/films/specfilm.cpp); the rest are dropped
 FILM_KEEP = {"width", "height", "crop_offset_x", "crop_offset_y", "crop_width", "crop_height", "sample_border"}
 HERE = Path(__file__).resolve()
@@ -89,7 +89,9 @@ def render(xml_path, out_exr, spp, seed=0, variant=None, band_nm=BAND_NM, range_
     llvm_ad_spectral where LLVM works, else scalar_spectral)."""
     import subprocess
 
-    from . import child, llvm
+    from .. import child
+
+    from . import llvm
     xml_path = Path(xml_path)
     if (xml_path.parent / "camera_filter.json").is_file():
         raise SpectralRenderError(f"{xml_path.parent / 'camera_filter.json'}: a camera polariser needs Stokes output; "
@@ -123,7 +125,7 @@ def main(argv=None):
     ap.add_argument("--range-nm", type=float, nargs=2, default=RANGE_NM)
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
-    sys.path.insert(0, str(HERE.parents[2]))
+    sys.path.insert(0, str(HERE.parents[3]))
     import pkg_bootstrap
     pkg_bootstrap.package()
     import drjit as dr

@@ -1,6 +1,6 @@
-"""A warm Mitsuba 3 render process for one variant (started and kept by batch/backends/mitsuba_backend.py).
+"""A warm Mitsuba 3 render process for one variant (started and kept by batch/backends/mitsuba/backend.py).
 
-    python batch/backends/mitsuba_worker.py --variant llvm_ad_spectral
+    python batch/backends/mitsuba/worker.py --variant llvm_ad_spectral
 
 It imports Mitsuba once and says so with one JSON line ``{"ready": true, "versions": {...}}``,
 then answers request lines read from stdin, one JSON line each: ``{"load": "scene.xml", "log":
@@ -43,7 +43,7 @@ def main(argv=None):
     reply = os.fdopen(os.dup(1), "w", buffering=1)
     os.dup2(2, 1)  # whatever else prints goes to the log, never into the replies
     t0 = time.perf_counter()
-    sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+    sys.path.insert(0, str(Path(__file__).resolve().parents[3]))
     import pkg_bootstrap
     pkg_bootstrap.package()
     from spectral_bench.batch import exr

@@ -1,6 +1,6 @@
 """Whether Mitsuba's CUDA variants (cuda_ad_*) can render here, once per process.
 
-The probe mirrors batch/backends/llvm.py: a child process sets ``cuda_ad_rgb`` and renders a tiny
+The probe mirrors batch/backends/mitsuba/llvm.py: a child process sets ``cuda_ad_rgb`` and renders a tiny
 scene at 1 spp, so a missing driver, a GPU Dr.Jit cannot use or a crash in the CUDA back end costs
 a failed probe, never the runner. The answer (usable, message) is cached for the process.
 

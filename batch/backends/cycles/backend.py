@@ -1,6 +1,6 @@
 """Cycles backend (``-r cycles``): the IR reduced to RGB (exporters/rgb_reduction.py), written as
 a .blend by a child bpy process, rendered on CPU by another child that opens that .blend
-(batch/backends/cycles_worker.py: every Cycles setting and how it is verified is listed there).
+(batch/backends/cycles/worker.py: every Cycles setting and how it is verified is listed there).
 
 Cycles is an RGB renderer: it has no spectra, polarisation, fluorescence or dispersion, and its
 thin film is not mapped yet; what a scene needs beyond RGB is reported per object and field
@@ -11,12 +11,12 @@ import json
 import sys
 from pathlib import Path
 
-from ...exporters import rgb_scene
-from .. import exr
-from . import passes as passes_mod
-from .rgb_common import RgbBackend, reduction_of, run_child
+from ....exporters import rgb_scene
+from ... import exr
+from .. import passes as passes_mod
+from ..rgb_common import RgbBackend, reduction_of, run_child
 
-WORKER = Path(__file__).resolve().parent / "cycles_worker.py"
+WORKER = Path(__file__).resolve().parent / "worker.py"
 EXPORT_TIMEOUT = 600
 
 

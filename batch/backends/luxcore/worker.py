@@ -1,7 +1,7 @@
 """LuxCoreRender (pyluxcore) as a child process: render an exported render.cfg in independent
 passes and save them (the backend writes their mean and standard error as EXR).
 
-    python batch/backends/luxcore_worker.py --cfg render.cfg --spp 64 --passes 2 --seed 0 \
+    python batch/backends/luxcore/worker.py --cfg render.cfg --spp 64 --passes 2 --seed 0 \
         --timeout 1800 --out passes.npy --result result.json
 
 This process imports nothing but pyluxcore and numpy, pyluxcore first: pyluxcore 2.11.2 bundles
@@ -59,7 +59,7 @@ def main(argv=None):
     scene = pyluxcore.Scene()
     scene.Parse(scene_props)
     width, height = base.Get("film.width").GetInt(), base.Get("film.height").GetInt()
-    per_pass = math.ceil(args.spp / max(1, args.passes))  # as mitsuba_worker
+    per_pass = math.ceil(args.spp / max(1, args.passes))  # as mitsuba/worker.py
     images, taken, render_s, timed_out = [], [], 0.0, False
     for k in range(args.passes):
         props = pyluxcore.Properties(base)

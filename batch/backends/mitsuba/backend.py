@@ -1,6 +1,6 @@
 """Mitsuba 3 backend: renders the exported scene.xml in a child process.
 
-Default route: batch/backends/mitsuba_worker.py with the mitsuba Python package, one warm process
+Default route: batch/backends/mitsuba/worker.py with the mitsuba Python package, one warm process
 per render that loads the scene once and renders one pass per request (render time measured
 inside). With ``-e mitsuba=PATH`` the user's ``mitsuba`` executable renders each pass instead
 (``mitsuba -m VARIANT -Dspp=N -Dseed=S -o pass.exr scene.xml``). Both routes go through the one
@@ -9,7 +9,7 @@ pass loop (batch/backends/passes.py) and the same conversion of the film's chann
 its banner, so the known deviations of that Mitsuba version apply to it. Scenes that need this
 project's Python plugins are unsupported on the executable route, with the reason.
 
-Device (``--device cpu|gpu|auto``, batch/backends/cuda.py): on the GPU the same "cheapest variant
+Device (``--device cpu|gpu|auto``, batch/backends/mitsuba/cuda.py): on the GPU the same "cheapest variant
 that models the scene" rule picks from Mitsuba's cuda_ad_* variants instead of llvm_ad_*/scalar_*;
 auto uses the GPU where the CUDA probe renders. The executable route (-e mitsuba=PATH) is asked for
 the cuda_ad_* variant the same way (the probe is the Python package's; an executable built without
@@ -29,13 +29,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ...exporters import camera_filter, colorimetry, mitsuba_writer
-from .. import exr
-from . import child, cuda, llvm
-from . import passes as passes_mod
-from .passes import BackendFailure
+from ....exporters import camera_filter, colorimetry, mitsuba_writer
+from ... import exr
+from .. import child
+from . import cuda, llvm
+from .. import passes as passes_mod
+from ..passes import BackendFailure
 
-WORKER = Path(__file__).resolve().parent / "mitsuba_worker.py"
+WORKER = Path(__file__).resolve().parent / "worker.py"
 NATIVE = {"spectral", "polarization"}
 # phenomena this project's Python plugins add (exporters/mitsuba_plugins): they load through the
 # Python API only, not through the mitsuba executable
@@ -202,7 +203,7 @@ def executable_version(executable):
 
 
 class WorkerProcess:
-    """One batch/backends/mitsuba_worker.py process of one variant: started once, then kept warm
+    """One batch/backends/mitsuba/worker.py process of one variant: started once, then kept warm
     (``_POOL``) across passes and jobs, so a job pays neither the Python start, the Mitsuba import
     nor the JIT compilation of kernels another job of that variant already compiled."""
 

@@ -1,7 +1,7 @@
 """LuxCoreRender backend (``-r luxcore``): the IR reduced to RGB (exporters/rgb_reduction.py),
 written as LuxCore SDL (exporters/luxcore_writer.py: scene.scn, render.cfg, meshes/*.ply; every
 setting is listed there) and rendered on CPU by pyluxcore 2.11.2 in a child process
-(batch/backends/luxcore_worker.py), which polls the session and stops it at the time limit.
+(batch/backends/luxcore/worker.py), which polls the session and stops it at the time limit.
 
 LuxCore is an RGB renderer (its wavelength sampling serves only glass dispersion, not mapped yet);
 it has no Beckmann distribution and no polarisation. What a scene needs beyond that is reported
@@ -15,11 +15,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ...exporters import luxcore_writer
-from . import passes as passes_mod
-from .rgb_common import RgbBackend, expand, reduction_of
+from ....exporters import luxcore_writer
+from .. import passes as passes_mod
+from ..rgb_common import RgbBackend, expand, reduction_of
 
-WORKER = Path(__file__).resolve().parent / "luxcore_worker.py"
+WORKER = Path(__file__).resolve().parent / "worker.py"
 GRACE_S = 30  # the worker stops itself at the time limit; it is killed this much later
 
 
@@ -58,12 +58,12 @@ class LuxCoreBackend(RgbBackend):
         try:
             passes_mod.run_command(cmd, timeout + GRACE_S, log, "LuxCore render")
         except passes_mod.BackendFailure as exc:
-            if "exited with 3" in str(exc):  # the worker's own time limit (luxcore_worker.TIMEOUT_EXIT)
+            if "exited with 3" in str(exc):  # the worker's own time limit (luxcore/worker.py TIMEOUT_EXIT)
                 raise passes_mod.PassTimeout(f"LuxCore render timed out after {timeout} s") from exc
             raise
         info = json.loads(result.read_text())
         names, img = expand(np.load(stack)[0], meta.get("film_scale", 1.0), meta.get("stokes", False))
         stack.unlink()
-        # LuxCore stops between polls: the samples actually taken are the pass's spp (luxcore_worker)
+        # LuxCore stops between polls: the samples actually taken are the pass's spp (luxcore/worker.py)
         return {"names": names, "image": img, "time_s": info["time_s"], "spp": info["spp"],
                 "info": {"versions": info.get("versions", {})}}

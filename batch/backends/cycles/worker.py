@@ -1,8 +1,8 @@
 """Cycles in the bpy module, as a child process: build a .blend from an RGB scene, or render a
 .blend in independent passes.
 
-    python batch/backends/cycles_worker.py build --scene scene_rgb.json --blend scene.blend
-    python batch/backends/cycles_worker.py render --blend scene.blend --spp 64 --passes 2 \
+    python batch/backends/cycles/worker.py build --scene scene_rgb.json --blend scene.blend
+    python batch/backends/cycles/worker.py render --blend scene.blend --spp 64 --passes 2 \
         --seed 0 --out render.exr --result result.json
 
 The .blend holds everything a user needs to re-render it in Blender (Cycles, CPU). How the
@@ -43,7 +43,7 @@ from pathlib import Path
 
 
 def _bootstrap():
-    sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+    sys.path.insert(0, str(Path(__file__).resolve().parents[3]))
     import pkg_bootstrap
     pkg_bootstrap.package()
 

@@ -1,0 +1,1 @@
+"""Blender Cycles (an RGB renderer): the backend and its worker process (bpy)."""

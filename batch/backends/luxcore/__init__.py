@@ -1,0 +1,1 @@
+"""LuxCoreRender (an RGB renderer): the backend and its worker process (pyluxcore)."""
