@@ -390,11 +390,11 @@ def write_junit(path, batch):
 
 def probe_early(opts):
     """Start Mitsuba's LLVM and CUDA probes (child processes that import Mitsuba, a second or so:
-    batch/backends/llvm.py, cuda.py) in a thread while the scenes are read and planned; whoever
+    batch/backends/mitsuba/llvm.py, cuda.py) in a thread while the scenes are read and planned; whoever
     needs the answer first waits for the same probe. Nothing is started for --device cpu
     (the CUDA probe then never runs) or a run without Mitsuba."""
     import threading
-    from ..backends import cuda, llvm
+    from ..backends.mitsuba import cuda, llvm
     try:
         wanted = "mitsuba" in backend_names(opts) and not opts.get("export_only")
     except Exception:  # noqa: BLE001 - a bad --renderers file is reported where it is read, not here
