@@ -181,8 +181,8 @@ except ImportError:  # pytest-xdist not installed: the suite runs in one process
 if LoadScopeScheduling is not None:
     class ModuleOrTestScheduling(LoadScopeScheduling):
         """loadscope whose unit is the module where the module shares a fixture and the test elsewhere;
-        the next unit goes to a worker when it has one test left (not three, as loadscope does), so
-        a long test never waits queued behind another on a busy worker while the other is idle."""
+        a worker gets its next unit when it has one test left (loadscope: two), so at most one test
+        waits queued on a busy worker while the other may fall idle."""
 
         def __init__(self, config, log=None):
             super().__init__(config, log)
