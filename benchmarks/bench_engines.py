@@ -1,7 +1,7 @@
 """The engines' overhead, measured side by side in one run (issue 10's benchmark).
 
     .venv/bin/python benchmarks/bench_engines.py [--scale 1.0] [--reference-scene ggx_copper_50] [--write]
-    .venv/bin/python benchmarks/bench_engines.py --smoke   # seconds: one scene, tiny settings
+    .venv/bin/python benchmarks/bench_engines.py --smoke   # seconds: one scene, tiny settings, one cluster size
 
 1. The full default suite (every scene, the Mitsuba backend, the product's default settings) on
    the default engine: total wall time against the sum of its renders' wall times (each render's
@@ -31,6 +31,9 @@ from record import machine  # noqa: E402
 
 SMOKE_SUITE = ["-s", "ggx_copper_50", "--spp", "4"]  # --smoke: tiny settings, checks the script runs
 SMOKE_REFERENCE = ["--spp", "16", "--passes", "2", "--scale", "0.125"]
+ENGINES = (("default engine (this machine)", None), ("--cluster local:1", "local:1"), ("--cluster local:2", "local:2"))
+WORKERS = (1, 2)  # the reference maker's Dask workers
+SMOKE_ENGINES, SMOKE_WORKERS = ENGINES[:2], WORKERS[:1]  # --smoke: each code path once (local:2 is local:1's)
 
 
 def suite(out, scale, cluster=None, extra=()):
@@ -60,7 +63,8 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--scale", type=float, default=1.0)
     ap.add_argument("--reference-scene", default="ggx_copper_50")
-    ap.add_argument("--smoke", action="store_true", help="one scene at scale 0.125 and 4 spp; a 16-spp reference")
+    ap.add_argument("--smoke", action="store_true", help="one scene at scale 0.125 and 4 spp, on the default engine "
+                    "and local:1; a 16-spp reference on 1 worker")
     ap.add_argument("--write", action="store_true")
     args = ap.parse_args()
     if args.smoke:
@@ -68,13 +72,13 @@ def main():
     extra, ref_extra = (SMOKE_SUITE, SMOKE_REFERENCE) if args.smoke else ((), ())
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
-        for label, cluster in (("default engine (this machine)", None), ("--cluster local:1", "local:1"),
-                               ("--cluster local:2", "local:2")):
+        for label, cluster in (SMOKE_ENGINES if args.smoke else ENGINES):
             r = suite(Path(tmp) / label.replace(" ", "_").replace(":", ""), args.scale, cluster, extra)
             r["label"] = label
             rows.append(r)
             print(label, r, flush=True)
-        refs = {w: reference(args.reference_scene, w, Path(tmp) / f"ref{w}", ref_extra) for w in (1, 2)}
+        refs = {w: reference(args.reference_scene, w, Path(tmp) / f"ref{w}", ref_extra)
+                for w in (SMOKE_WORKERS if args.smoke else WORKERS)}
     text = [f"Machine: {machine()}; "
             f"Python {platform.python_version()}; scale {args.scale}.", "",
             "| suite on | jobs | wall s | sum of render wall s | wall / renders | overhead per job s | exit |",
@@ -83,8 +87,9 @@ def main():
         text.append(f"| {r['label']} | {r['jobs']} | {r['wall_s']:.1f} | {r['renders_s']:.1f} | "
                     f"{r['wall_s'] / max(r['renders_s'], 1e-9):.2f}x | "
                     f"{(r['wall_s'] - r['renders_s']) / max(r['jobs'], 1):.2f} | {r['exit']} |")
-    text += ["", f"Reference maker, {args.reference_scene} (4096 spp in 8 passes): 1 worker {refs[1]:.1f} s, "
-             f"2 workers {refs[2]:.1f} s ({refs[1] / refs[2]:.2f}x)."]
+    speed_up = f" ({refs[1] / refs[2]:.2f}x)" if 2 in refs else ""
+    text += ["", f"Reference maker, {args.reference_scene} ({'tiny settings' if args.smoke else '4096 spp in 8 passes'}): "
+             + ", ".join(f"{w} worker{'s' if w > 1 else ''} {t:.1f} s" for w, t in refs.items()) + f"{speed_up}."]
     table = "\n".join(text)
     print(table)
     if args.write:

@@ -1,6 +1,7 @@
 """Calibration of the verdicts on real renders at the product's default settings (not timings).
 
     .venv/bin/python benchmarks/calibrate_noise_test.py [--seeds 20] [-s SCENE ...] [--write]
+    .venv/bin/python benchmarks/calibrate_noise_test.py --smoke -s ggx_copper_50   # seconds: 1 seed, 4 spp; not recorded
 
 False alarms: every canonical scene (every case, every channel: R, G, B and S0..S3), rendered at
 its own resolution and sample count in two passes with new seeds, judged exactly as the runner
@@ -24,6 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import pkg_bootstrap  # noqa: E402
 
+SMOKE_SPP = 4  # --smoke: every render at 4 spp (the figures mean nothing)
 SEED0 = 10_000  # distinct from the runner's (0) and the references' (1000 + pass * 1000)
 
 
@@ -93,8 +95,15 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--seeds", type=int, default=20)
     ap.add_argument("-s", "--scene", action="append")
+    ap.add_argument("--smoke", action="store_true", help=f"checks that the script runs: one seed, every render at "
+                    f"{SMOKE_SPP} spp; never recorded")
     ap.add_argument("--write", action="store_true")
     args = ap.parse_args()
+    if args.smoke and args.write:
+        ap.error("--smoke checks that the script runs; its figures are never recorded: leave out --write")
+    if args.smoke:
+        args.seeds = 1
+    spp_of = (lambda sc: SMOKE_SPP) if args.smoke else (lambda sc: sc["render"]["spp"])
     settings = plan.verdict_settings({"alpha": 0.01, "min_samples": 65536, "block": None, "flip": False,
                                       "references": None, "known": None})
     backend = backends.get("mitsuba")
@@ -108,7 +117,7 @@ def main():
         for name, sc in scenes.items():
             mode, _ = backend.mode_for(sc)
             for k in range(args.seeds):
-                job_list.append(jobs.make("render", name, sc, "mitsuba", mode, sc["render"]["spp"], tmp,
+                job_list.append(jobs.make("render", name, sc, "mitsuba", mode, spp_of(sc), tmp,
                                           f"{name}/seed{k}", passes=2, seed=SEED0 + 100 * k, source_scene=sc,
                                           verdict=settings, label=f"{name} seed {k}"))
 
@@ -124,7 +133,7 @@ def main():
                 wrong = copy.deepcopy(sc)
                 change(wrong)
                 mode, _ = backend.mode_for(wrong)
-                job = jobs.make("render", name, wrong, "mitsuba", mode, sc["render"]["spp"], tmp,
+                job = jobs.make("render", name, wrong, "mitsuba", mode, spp_of(sc), tmp,
                                 f"{name}/wrong_{len(power)}", passes=2, seed=SEED0 - 1, source_scene=sc, verdict=settings)
                 record = jobs.execute(job)
                 claimed = dict(job, scene=sc)  # judged as the scene it claims to be
@@ -150,7 +159,8 @@ def main():
                     f"{tests[0]['tests'] if tests else ''} | {fa_test}/{len(tests)} | {med:.2f} | "
                     f"{fa_probe}/{len(probe_runs)} | {', '.join(f'{n} {s}' for s, n in sorted(statuses.items()))} |")
     text = "\n".join([
-        f"## Verdicts at default settings, {dt.date.today().isoformat()}: each scene's resolution and spp, "
+        f"## Verdicts at default settings, {dt.date.today().isoformat()}: each scene's resolution and "
+        f"{'spp' if not args.smoke else f'{SMOKE_SPP} spp (--smoke)'}, "
         f"2 passes, alpha 0.01, {args.seeds} seeds per scene, {os.cpu_count()} cores",
         "", "False alarms on unbiased renders (the noise test on the render's own noise, every channel; the probes "
         "with their Sidak-corrected tests; the status with the known deviations applied):", "",

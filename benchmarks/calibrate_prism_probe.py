@@ -1,6 +1,7 @@
 """Calibrate the prism probes (batch/verdict/probes/prism.py) on dispersion_prism.
 
     .venv/bin/python benchmarks/calibrate_prism_probe.py [--seeds 8] [--write]
+    .venv/bin/python benchmarks/calibrate_prism_probe.py --smoke   # seconds: every step at 4 spp, 1 seed; not recorded
 
 Measures (1) the ground truth's own error (1 nm wavelength grid against 0.25 nm), (2) false
 alarms on unbiased renders at the scene's default settings (its spp, 2 passes, distinct seeds),
@@ -23,6 +24,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import pkg_bootstrap  # noqa: E402
 
+SMOKE_SPP = 4  # --smoke
+
 
 def main():
     pkg_bootstrap.package()
@@ -33,13 +36,22 @@ def main():
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=8)
+    ap.add_argument("--smoke", action="store_true", help="checks that the script runs: one seed, every render at "
+                    f"{SMOKE_SPP} spp in 2 passes (the figures mean nothing); never recorded")
     ap.add_argument("--write", action="store_true")
     args = ap.parse_args()
+    if args.smoke and args.write:
+        ap.error("--smoke checks that the script runs; its figures are never recorded: leave out --write")
+    if args.smoke:
+        args.seeds = 1
     base = dict(scene_sources.load([str(scene_sources.DEFAULT_BLEND)]))["dispersion_prism"]
     r = base["render"]
+    spp = SMOKE_SPP if args.smoke else r["spp"]  # (2), (3): the scene's own
+    high_spp, high_passes = (SMOKE_SPP, 2) if args.smoke else (16 * r["spp"], 8)  # (4)
+    sky_spp, sky_passes = (SMOKE_SPP, 2) if args.smoke else (4096, 8)  # (5)
     backend = backends.get("mitsuba")
     lines = [f"## Dispersion: prism probes, {dt.date.today().isoformat()} (dispersion_prism, "
-             f"{r['width']}x{r['height']}, {r['spp']} spp, 2 passes, alpha 0.01 Sidak over 3 channels)", ""]
+             f"{r['width']}x{r['height']}, {spp} spp, 2 passes, alpha 0.01 Sidak over 3 channels)", ""]
 
     # (1) the ground truth's own error
     fine = prism.expected(base, r["width"], r["height"], step_nm=0.25)
@@ -67,7 +79,7 @@ def main():
     fails = 0
     with tempfile.TemporaryDirectory() as tmp:
         for seed in range(args.seeds):
-            p = run(base, r["spp"], 2, 100 * seed, tmp)
+            p = run(base, spp, 2, 100 * seed, tmp)
             pos, en = p["prism band positions"], p["prism energy"]
             fails += (not pos["pass"]) + (not en["pass"])
             lines.append(f"| {100 * seed} | {pos['error']:.2f} | {'pass' if pos['pass'] else 'FAIL'} | "
@@ -96,13 +108,13 @@ def main():
         for label, change in (("fused silica", silica), ("N-BK7 with n_d + 1e-4", bk7_plus), ("beam +1 %", brighter)):
             sc = copy.deepcopy(base)
             change(sc)
-            p = run(sc, r["spp"], 2, 7, tmp)
+            p = run(sc, spp, 2, 7, tmp)
             pos, en = p["prism band positions"], p["prism energy"]
             lines.append(f"| {label} | {pos['error']:.1f} | {'fail (detected)' if not pos['pass'] else 'pass (missed)'} "
                          f"| {en['error']:.1f} | {'fail (detected)' if not en['pass'] else 'pass (missed)'} |")
 
     # (4) the renderer at 16x the samples, at the origin and moved 30 units along x
-    lines += ["", f"Mitsuba at {16 * r['spp']} spp, 8 passes (the known deviations):", "",
+    lines += ["", f"Mitsuba at {high_spp} spp, {high_passes} passes (the known deviations):", "",
               "| scene placement | centroid shift R, G, B (px) | standard error (px) | flux relative error R, G, B | standard error |",
               "|---|---|---|---|---|"]
     with tempfile.TemporaryDirectory() as tmp:
@@ -113,7 +125,7 @@ def main():
             sc_json = copy.deepcopy(sc)
             sc_json["needs"] = ir.derived_needs({k: v for k, v in sc.items() if k != "needs"})
             xml = backend.export(sc_json, Path(tmp) / f"m{shift:g}")
-            backend.render(xml, backend.mode_for(sc_json)[0], 16 * r["spp"], Path(tmp) / "r.exr", passes=8, seed=500)
+            backend.render(xml, backend.mode_for(sc_json)[0], high_spp, Path(tmp) / "r.exr", passes=high_passes, seed=500)
             names, img, se = exr.read_image_and_stderr(Path(tmp) / "r.exr")
             p = {q["name"].split(",")[0]: q for q in probes.evaluate(sc_json, names, img, stderr=se)}
             pos, en = p["prism band positions"], p["prism energy"]
@@ -127,18 +139,18 @@ def main():
     from spectral_bench.exporters import colorimetry
     d65 = {"type": "named", "name": "cie_d65", "scale": 1.0}
     sky = {"format": ir.FORMAT, "version": ir.VERSION, "name": "d65_sky", "case": "custom", "needs": ["spectral"],
-           "render": {"spp": 4096, "width": 16, "height": 16, "max_depth": 2, "filter": "box", "integrator": "path"},
+           "render": {"spp": sky_spp, "width": 16, "height": 16, "max_depth": 2, "filter": "box", "integrator": "path"},
            "camera": copy.deepcopy(base["camera"]), "environment": {"type": "uniform", "radiance": d65}, "objects": []}
     with tempfile.TemporaryDirectory() as tmp:
         xml = backend.export(sky, Path(tmp) / "m")
-        backend.render(xml, backend.mode_for(sky)[0], 4096, Path(tmp) / "r.exr", passes=8, seed=900)
+        backend.render(xml, backend.mode_for(sky)[0], sky_spp, Path(tmp) / "r.exr", passes=sky_passes, seed=900)
         _, img, se = exr.read_image_and_stderr(Path(tmp) / "r.exr")
     expected = colorimetry.xyz_to_srgb(colorimetry.spectrum_xyz(d65))
     n = img.shape[0] * img.shape[1]
     ratio = img[..., :3].mean(axis=(0, 1)) / expected
     rel_se = np.sqrt((se[..., :3] ** 2).sum(axis=(0, 1))) / n / expected
     lines += ["", "Mitsuba's spectral film against colorimetry.py (camera path tracer, uniform D65 environment only, "
-              "16x16, 4096 spp x 8): rendered / expected R, G, B = "
+              f"16x16, {sky_spp} spp x {sky_passes}): rendered / expected R, G, B = "
               + ", ".join(f"{x:.5f}" for x in ratio) + " (standard errors " + ", ".join(f"{x:.1e}" for x in rel_se) + ")."]
     text = "\n".join(lines + [""])
     print(text)

@@ -5,6 +5,7 @@ reduction rule| (the rule's own error is known without a renderer: what is left 
 whatever the renderer does differently). The test's CHART_DE_NOISE must exceed the largest value.
 
     .venv/bin/python benchmarks/calibrate_rgb_colorchecker.py [--seeds 5] [--write]
+    .venv/bin/python benchmarks/calibrate_rgb_colorchecker.py --smoke   # seconds: 1 seed, 4 spp, 2 passes; not recorded
 
 --write appends the result to benchmarks/CALIBRATION.md.
 """
@@ -20,6 +21,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import pkg_bootstrap  # noqa: E402
 
 SCALE, SPP, PASSES = 0.25, 64, 4
+SMOKE_SPP, SMOKE_PASSES = 4, 2  # --smoke: the figures mean nothing
 
 
 def main(argv=None):
@@ -28,8 +30,15 @@ def main(argv=None):
     from spectral_bench.batch.studies import rgb_error
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=5)
+    ap.add_argument("--smoke", action="store_true", help=f"checks that the script runs: one seed, {SMOKE_SPP} spp in "
+                    f"{SMOKE_PASSES} passes; never recorded")
     ap.add_argument("--write", action="store_true")
     args = ap.parse_args(argv)
+    if args.smoke and args.write:
+        ap.error("--smoke checks that the script runs; its figures are never recorded: leave out --write")
+    spp, passes = (SMOKE_SPP, SMOKE_PASSES) if args.smoke else (SPP, PASSES)
+    if args.smoke:
+        args.seeds = 1
     golden = {n: s for n, s in scene_sources.load([str(scene_sources.DEFAULT_BLEND)])
               if n in ("macbeth_chart_D65", "macbeth_chart_D50")}
     rows, worst = [], {}
@@ -43,7 +52,7 @@ def main(argv=None):
                 path = b.export(sc, Path(tmp) / "export")
                 diffs, measured = [], []
                 for seed in range(args.seeds):
-                    b.render(path, "rgb", SPP, Path(tmp) / "r.exr", passes=PASSES, seed=100 * seed)
+                    b.render(path, "rgb", spp, Path(tmp) / "r.exr", passes=passes, seed=100 * seed)
                     _, img = exr.read_image(Path(tmp) / "r.exr")
                     errs = rgb_error.chart_errors(sc, img)
                     diffs.append([abs(m - p) for m, p, _ in errs.values()])

@@ -1,5 +1,6 @@
 import copy
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -152,3 +153,63 @@ def run_bpy(body, timeout=600, env=None):
 
 def pytest_configure(config):
     config.addinivalue_line("markers", "slow: renders whole cases or runs long studies; `pytest -m 'not slow'` is the fast subset")
+
+
+# pytest.ini runs the suite on pytest-xdist workers with `--dist loadscope`, which this file's
+# scheduler (below) refines: a module that defines a fixture wider than one test (a batch run, a
+# render, a built zip, found by SHARED_FIXTURE in its text) is one unit of work, so it runs on one
+# worker and the fixture runs once; every other test is a unit of its own, so the long ones (the
+# benchmark smoke runs, the example renderers end to end) spread over the workers. (xdist's own
+# `loadgroup` marks do not reach its scheduler under pytest 9: it rewrites item._nodeid, which
+# pytest 9 no longer reads.)
+SHARED_FIXTURE = re.compile(r"@pytest\.fixture\(\s*scope\s*=\s*[\"'](module|package|session)[\"']")
+
+
+def shares_a_fixture(module_path):
+    """True when the test module at module_path defines a module-, package- or session-scoped fixture."""
+    try:
+        return bool(SHARED_FIXTURE.search(Path(module_path).read_text(encoding="utf-8")))
+    except OSError:
+        return True  # unreadable here: keep it whole, as loadscope would
+
+
+try:
+    from xdist.scheduler import LoadScopeScheduling
+except ImportError:  # pytest-xdist not installed: the suite runs in one process (pytest.ini's -n needs it)
+    LoadScopeScheduling = None
+
+if LoadScopeScheduling is not None:
+    class ModuleOrTestScheduling(LoadScopeScheduling):
+        """loadscope whose unit is the module where the module shares a fixture and the test elsewhere;
+        a worker gets its next unit when it has one test left (loadscope: two), so at most one test
+        waits queued on a busy worker while the other may fall idle."""
+
+        def __init__(self, config, log=None):
+            super().__init__(config, log)
+            self._whole = {}  # module path -> shares a fixture (read once)
+            self._root = Path(str(config.rootpath))
+
+        def _split_scope(self, nodeid):
+            module = nodeid.split("::", 1)[0]
+            if module not in self._whole:
+                self._whole[module] = shares_a_fixture(self._root / module)
+            return module if self._whole[module] else nodeid
+
+        def _reschedule(self, node):
+            """loadscope's, with one test waiting behind the running one instead of two (a worker
+            starts a test once it holds the next one or is told to stop)."""
+            if node.shutting_down:
+                return
+            if not self.workqueue:
+                node.shutdown()
+                return
+            if self._pending_of(self.assigned_work[node]) > 1:
+                return
+            self._assign_work_unit(node)
+
+
+@pytest.hookimpl(optionalhook=True)  # a pytest-xdist hook: absent without it
+def pytest_xdist_make_scheduler(config, log):
+    if LoadScopeScheduling is not None and config.getvalue("dist") == "loadscope":
+        return ModuleOrTestScheduling(config, log)
+    return None
