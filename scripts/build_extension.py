@@ -53,7 +53,7 @@ PLATFORMS = {"linux-x64": ["manylinux_2_17_x86_64", "manylinux_2_28_x86_64", "ma
                                                            "macosx_14_0_arm64"]}
 _IGNORE_NAMES = shutil.ignore_patterns(".git", ".venv", "__pycache__", "tests", "golden", "benchmarks", "outputs-*",
                                        "dist", "build", "*.blend1", ".ci", "wheels", ".pytest_cache", ".work", ".hypothesis",
-                                       ".lock")
+                                       ".lock", "pytest.ini")
 
 
 def IGNORE(folder, names):
