@@ -200,7 +200,7 @@ def test_a_scheduler_without_workers_fails_within_the_timeout(tmp_path):
     with LocalCluster(n_workers=0, processes=False, protocol="tcp://", host="127.0.0.1",
                       dashboard_address=None) as cluster:
         proc = run_batch("-i", GOOD, "-r", "mitsuba", *TINY, "--cluster", cluster.scheduler_address,
-                         "--cluster-timeout", "2", "-o", tmp_path / "o", timeout=120)
+                         "--cluster-timeout", "0.5", "-o", tmp_path / "o", timeout=120)
     assert proc.returncode == 2 and "no Dask worker joined" in proc.stderr, proc.stderr[-2000:]
 
 
