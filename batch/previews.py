@@ -73,12 +73,18 @@ def write_half(path, rgb, channels="RGB"):
     if channels == "Y" and rgb.ndim == 2:
         rgb = rgb[..., None]
     dtype = np.float16 if fits_half(rgb) else np.float32
+    return _replace(path, {c: rgb[..., i].astype(dtype) for i, c in enumerate(channels)})
+
+
+def _replace(path, channels):
+    """Write {channel: HxW array} to ``path`` through a temporary name and a rename (a reader, or
+    another job writing the same file, never sees half a file); the umask's permissions."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(suffix=".exr", prefix=".tmp-", dir=path.parent)
     os.close(fd)
     try:
-        exr.write_channels(tmp, {c: rgb[..., i].astype(dtype) for i, c in enumerate(channels)})
+        exr.write_channels(tmp, channels)
         umask = os.umask(0o022)
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)
@@ -108,19 +114,7 @@ def write_probe_residual(res_dir, maps):
         values = np.asarray(values, dtype=np.float32)
         merged = values.copy() if merged is None else np.where(np.isnan(merged), values, merged)
     merged = np.where(np.isfinite(merged), np.clip(merged, -HALF_MAX, HALF_MAX), merged)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(suffix=".exr", prefix=".tmp-", dir=path.parent)
-    os.close(fd)
-    try:
-        exr.write_channels(tmp, {c: merged[..., i].astype(np.float16) for i, c in enumerate(PROBE_RESIDUAL_CHANNELS)})
-        umask = os.umask(0o022)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
-    finally:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-    return path
+    return _replace(path, {c: merged[..., i].astype(np.float16) for i, c in enumerate(PROBE_RESIDUAL_CHANNELS)})
 
 
 def shared_reference_name(shape):
