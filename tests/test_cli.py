@@ -90,3 +90,16 @@ def test_log_option_writes_the_log_to_a_file(tmp_path):
     assert proc.returncode == 0, proc.stderr[-1000:]
     text = log.read_text()
     assert f"writing to {out}" in text and "ggx_glass" in text
+
+
+def test_a_backend_missing_for_every_scene_is_one_line_of_the_log(tmp_path):
+    """ART missing: the log says so once with the count, not once per scene (the summary likewise
+    has one row: batch/report/grouping.py); every scene's entry is still in metrics.json."""
+    missing = tmp_path / "no-such-artist"
+    proc = run_batch("-r", "art", "-e", f"art={missing}", "-s", "ggx_copper_50", "-s", "ggx_glass", "-s",
+                     "polarizing_spheres", "--scale", "0.125", "-o", tmp_path / "o", timeout=300)
+    log = proc.stdout + proc.stderr
+    lines = [l for l in log.splitlines() if l.startswith("SKIPPED")]
+    assert len(lines) == 1 and lines[0].startswith("SKIPPED  art on 3 scenes: "), lines
+    assert sorted(r["scene"] for r in metrics(tmp_path / "o")["runs"]) == ["ggx_copper_50", "ggx_glass", "polarizing_spheres"]
+    assert proc.returncode == 4  # nothing ran

@@ -7,6 +7,7 @@ becomes a result with status "failed" and a reason, and metrics.json is rewritte
 every job, so finished results survive a crash of the runner itself. ``--resume OUT`` finishes an
 interrupted run: results whose job id (batch/jobs/job.py) still matches are kept, the rest run.
 """
+from collections import Counter
 import datetime as _dt
 import logging
 import time
@@ -201,13 +202,14 @@ class Run:
         """metrics.json, rewritten atomically (batch/records.py: versioned, paths relative to OUT)."""
         records.write(self.out, self.started, self.opts, self.runs, self.results, self.sweeps, self.stability)
 
-    def add(self, entry):
+    def add(self, entry, quiet=False):
         if self.base is not None:  # judged against the previous run too (--baseline); the status stays
             baselines.attach(entry, self.out, self.base, planning.verdict_settings(self.opts))
         self.runs.append(entry)
         self.save()
-        log.info("%-8s %s / %s %s%s", entry["status"].upper(), entry["scene"], entry["backend"], entry.get("mode") or "",
-                 f": {entry['reason']}" if entry.get("reason") else "")
+        if not quiet:
+            log.info("%-8s %s / %s %s%s", entry["status"].upper(), entry["scene"], entry["backend"], entry.get("mode") or "",
+                     f": {entry['reason']}" if entry.get("reason") else "")
         for p in entry.get("reference_problems") or []:  # every reference problem, with its file
             log.warning("reference problem (%s / %s): %s: %s", entry["scene"], entry["backend"], p["file"], p["problem"])
 
@@ -284,8 +286,16 @@ class Run:
                                                 "status": "failed", "reason": f"cannot be planned: {type(exc).__name__}: {exc}"}]
                     job_list += stab_jobs
                     self.stability += rows
+        # the same verdict before rendering for several scenes of a backend (ART missing: every
+        # scene) is one line of the log, as it is one row of the summary (batch/report/grouping.py)
+        same = Counter((e["backend"], e["status"], e.get("reason") or "") for e in immediate)
+        told = set()
         for entry in immediate:
-            self.add(entry)
+            key = (entry["backend"], entry["status"], entry.get("reason") or "")
+            self.add(entry, quiet=same[key] > 1)
+            if same[key] > 1 and key not in told:
+                told.add(key)
+                log.info("%-8s %s on %d scenes: %s", key[1].upper(), key[0], same[key], key[2])
         self.done = []
         todo = []
         for j in job_list:
