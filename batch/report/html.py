@@ -123,7 +123,7 @@ def _pack(planes, keep_bits=10):
         drop = 10 - keep_bits
         h = ((h.astype(np.uint32) + (1 << (drop - 1))) >> drop << drop).astype(np.uint16)
     split = np.concatenate([(h & 0xFF).astype(np.uint8), (h >> 8).astype(np.uint8)])
-    return zlib.compress(split.tobytes(), 4)  # level 4: 0.8 s for the default run's renders, 1.4 % larger than level 9 (8.1 s)
+    return zlib.compress(split.tobytes(), 4)  # level 4: the default run's render layers in 0.8 s of CPU, not 8.1 s (level 9); view.js 24.5 MB, not 21.1
 
 
 def _js_bytes(data):
