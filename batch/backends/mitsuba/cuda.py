@@ -13,8 +13,6 @@ with a GPU). Any other value, or none, runs the real probe.
 import os
 import subprocess
 import sys
-import threading
-from functools import lru_cache
 
 from . import llvm
 
@@ -26,20 +24,8 @@ _PROBE = ("import drjit as dr, mitsuba as mi; mi.set_variant('cuda_ad_rgb'); d =
           "img = mi.render(mi.load_dict(d), spp=1); dr.eval(img); dr.sync_thread(); print('ok')")
 
 
-_LOCK = threading.Lock()  # one probe per process, whichever thread asks first (runner.probe_early)
-
-
+@llvm.probed_once
 def find():
-    """(usable, message), probed once per process (_find); a second thread asking meanwhile waits for it."""
-    with _LOCK:
-        return _find()
-
-
-find.cache_clear = lambda: _find.cache_clear()  # tests probe again
-
-
-@lru_cache(maxsize=1)
-def _find():
     """(usable, message): whether a cuda_ad_* variant renders in a child process here."""
     hook = os.environ.get(TEST_HOOK)
     if hook == "1":

@@ -4,6 +4,7 @@ Mitsuba's llvm_ad_* variants JIT-compile through libLLVM. Measured here (../shar
 Debian's libllvm19 works; LLVM 14 and 16 crash Dr.Jit; llvmlite's copy does not work. The
 probe renders a tiny scene in a child process, so a crash cannot take the runner down.
 """
+import functools
 import glob
 import os
 import subprocess
@@ -27,20 +28,22 @@ def candidates():
     return list(dict.fromkeys(found))
 
 
-_LOCK = threading.Lock()  # one probe per process, whichever thread asks first (runner.probe_early)
+def probed_once(fn):
+    """``fn()`` computed once per process (functools.lru_cache); a second thread asking meanwhile
+    (runner.probe_early probes from a thread while the scenes load) waits for the first.
+    ``.cache_clear()`` lets tests probe again."""
+    cached, lock = lru_cache(maxsize=1)(fn), threading.Lock()
+
+    @functools.wraps(fn)
+    def once():
+        with lock:
+            return cached()
+    once.cache_clear = cached.cache_clear
+    return once
 
 
+@probed_once
 def find():
-    """(path or None, message), probed once per process (_find); a second thread asking meanwhile waits for it."""
-    with _LOCK:
-        return _find()
-
-
-find.cache_clear = lambda: _find.cache_clear()  # tests probe again
-
-
-@lru_cache(maxsize=1)
-def _find():
     """(path or None, message). The path works for llvm_ad_* variants in a child process."""
     tried = []
     for path in candidates():
