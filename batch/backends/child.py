@@ -3,6 +3,7 @@ so a killed runner or Dask worker leaves no orphaned render writing into a job's
 job is retried elsewhere."""
 import ctypes
 import signal
+import subprocess
 import sys
 
 
@@ -16,3 +17,22 @@ def _die_with_parent():
 def popen_kwargs():
     """Keyword arguments for subprocess.run/Popen of a render child."""
     return {"preexec_fn": _die_with_parent} if sys.platform.startswith("linux") else {}
+
+
+def kill(proc):
+    """End a kept child at once and reap it (nothing when it is None)."""
+    if proc is not None:
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait()
+
+
+def close(proc, wait_s=10):
+    """Ask a kept child to finish (its stdin closed), wait up to ``wait_s``, then ``kill`` it."""
+    if proc is not None:
+        try:
+            proc.stdin.close()
+            proc.wait(timeout=wait_s)
+        except (OSError, subprocess.TimeoutExpired):
+            pass
+        kill(proc)

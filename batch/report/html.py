@@ -37,7 +37,6 @@ STOKES_VIEWS = ["S0", "S1", "S2", "S3", "DoP", "AoP"]
 DATA_JS = "view.js"
 _UMASK = os.umask(0o022)
 os.umask(_UMASK)
-SE_BITS = 4  # mantissa bits kept of the standard error's half floats (of 10): 5 significant bits
 TEMPLATES = Path(__file__).resolve().parent / "templates"
 SAFE_ID = re.compile(r"[A-Za-z0-9_.-]{1,120}")  # ids, #anchors, and the view=ID:VIEW hash of the page
 
@@ -175,7 +174,7 @@ def _job_data(folder):
             bs = exr.read_rgb(block_se)
             layers["blockse"] = (["R", "G", "B"], [bs[..., i] for i in range(3)], 10)
         elif se is not None:
-            layers["stderr"] = (names, [se[..., i] for i in range(len(names))], SE_BITS)
+            layers["stderr"] = (names, [se[..., i] for i in range(len(names))], exr.SE_BITS)  # a run from before block_stderr.exr
         if z.is_file():
             zr = exr.read_rgb(z)
             layers["z"] = (["R", "G", "B"], [zr[..., i] for i in range(3)], 10)

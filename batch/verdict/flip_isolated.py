@@ -99,20 +99,14 @@ class FlipWorker:
         return what + (f": {said[-500:]}" if said else "")
 
     def kill(self):
-        if self.proc is not None:
-            if self.proc.poll() is None:
-                self.proc.kill()
-            self.proc.wait()
-            self.proc = None
+        from ..backends import child
+        child.kill(self.proc)
+        self.proc = None
 
     def close(self):
-        if self.proc is not None:
-            try:
-                self.proc.stdin.close()
-                self.proc.wait(timeout=10)
-            except (OSError, subprocess.TimeoutExpired):
-                pass
-            self.kill()
+        from ..backends import child
+        child.close(self.proc)
+        self.proc = None
 
 
 _WORKER = []  # the process's one warm FlipWorker (at most)

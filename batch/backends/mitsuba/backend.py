@@ -247,20 +247,12 @@ class WorkerProcess:
         return json.loads(line)
 
     def kill(self):
-        if self.proc is not None:
-            if self.proc.poll() is None:
-                self.proc.kill()
-            self.proc.wait()
-            self.proc = None
+        child.kill(self.proc)
+        self.proc = None
 
     def close(self):
-        if self.proc is not None:
-            try:
-                self.proc.stdin.close()
-                self.proc.wait(timeout=10)
-            except (OSError, subprocess.TimeoutExpired):
-                pass
-            self.kill()
+        child.close(self.proc)
+        self.proc = None
 
 
 _POOL = {}  # variant -> idle WorkerProcess (a local run renders one job at a time)
