@@ -277,9 +277,9 @@ def parser():
                     help="renderer executable, e.g. mitsuba=/opt/mitsuba/mitsuba (a bare PATH needs exactly one backend)")
     ap.add_argument("--spp", type=T["spp"], metavar="N", help=f"samples per pixel, 1 to {MAX_SPP} (default: each scene's own)")
     ap.add_argument("--scale", type=T["scale"], metavar="F", help=f"resolution scale, 0 < F <= {MAX_SCALE:g} (default 1.0); a render is judged against its "
-                         "reference box-filtered by an integer factor in each axis, so a scale that gives no integer "
-                         "fraction of a selected scene's resolution (e.g. 0.125 of the 620x420 charts) is refused "
-                         "(exit 2) naming the scene and the nearest valid scales")
+                         "reference box-filtered by an integer factor in each axis, so a scene whose resolution F "
+                         "divides into no integer fraction renders at the nearest scale that does, logged (0.125 "
+                         "of the 620x420 charts: 0.1, 62x42); above 1 is refused (exit 2)")
     ap.add_argument("-o", "--out", type=T["out"], metavar="DIR",
                     help="output folder (default: outputs-YYYYmmdd-HHMMSS, with -2, -3, ... if taken)")
     ap.add_argument("--export-only", action="store_true", help="export scenes, render nothing")

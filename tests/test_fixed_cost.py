@@ -142,6 +142,20 @@ def test_spectral_tables_are_remembered_and_read_only(golden):
         first[1][0, 0] = 0.0  # shared by every caller: never written
 
 
+def test_prestart_does_not_wait_for_a_flip_in_flight(tmp_path):
+    """The next verdict's prestart must not hold it behind the previous job's FLIP (the child
+    serves one request: the lock is held until its result is collected)."""
+    import threading
+    ref, test = _images(3, (8, 8))
+    pending = flip_isolated.start(ref, test, tmp_path / "f.exr")  # held until result()
+    t = threading.Thread(target=flip_isolated.prestart, daemon=True)
+    t.start()
+    t.join(60)  # the old prestart waited for the lock, i.e. for ever here: nobody reads the result
+    still_waiting = t.is_alive()
+    value, err = pending.result()
+    assert not still_waiting and err is None and value > 0
+
+
 def test_the_verdict_thread_is_warmed_with_the_flip_child():
     from spectral_bench.batch.jobs import job as jobs
     flip_isolated.close()

@@ -1,6 +1,7 @@
 """Issue 20: every judged run states its power (``detectable``), the noise test's scale test, and
-any integer fraction of a reference's resolution (independent per axis) is judged while a --scale
-that gives none is refused (exit 2).
+any integer fraction of a reference's resolution (independent per axis) is judged; a scene that
+--scale divides into no integer fraction renders at the nearest scale that does (issue 23: the
+tiny suite's 0.125 and the 620x420 charts), and a scale above 1 is refused (exit 2).
 
 The power test simulates on the stored noise model of a committed reference (its mean, its
 per-sample variance and its own standard error), not by rendering: planted uniform scale errors of
@@ -39,29 +40,39 @@ def test_reference_box_filters_by_independent_integer_factors():
         compare.reference_at(big, big * 0.01, 64, (52, 78, 3))
 
 
-def test_scale_problem_names_scenes_and_nearest_valid_scales(golden):
+def test_a_scale_no_resolution_divides_moves_to_the_nearest_judged_one(golden):
     chart = [("macbeth_chart_D65", golden["macbeth_chart_D65"])]
-    why = plan.scale_problem(chart, 0.125)
-    assert "macbeth_chart_D65" in why and "620x420 -> 78x52" in why and "0.1, 0.2" in why, why
-    assert plan.scale_problem(chart, 0.1) is None and plan.scale_problem(chart, 0.2) is None
+    assert plan.scale_for(620, 420, 0.125) == 0.1  # 78x52 is no fraction; 0.1 (62x42) is nearer than 0.2
+    assert plan.scale_for(620, 420, 0.15) == 0.2 and plan.scale_for(512, 512, 0.125) == 0.125
+    assert plan.scale_for(620, 420, 0.2) == 0.2 and plan.scale_for(620, 420, 0.05) == 0.05
+    changes = plan.scale_changes(chart, 0.125)
+    assert changes == [(0.1, [("macbeth_chart_D65", (620, 420), (62, 42))])], changes
     both = chart + [("ggx_glass", golden["ggx_glass"])]
-    assert "ggx_glass" not in plan.scale_problem(both, 0.125) and "0.25" in plan.scale_problem(both, 0.125)
-    assert "ggx_glass" in plan.scale_problem(both, 0.1)
-    assert plan.scale_problem(both, 0.25) is None and plan.scale_problem(both, 1.0) is None
+    assert [n for _, moved in plan.scale_changes(both, 0.125) for n, _, _ in moved] == ["macbeth_chart_D65"]
+    assert plan.scale_changes(both, 0.25) == [] and plan.scale_changes(both, 1.0) == []
+    assert plan.for_run(golden["macbeth_chart_D65"], {"scale": 0.125})["render"]["width"] == 62
+    assert plan.for_run(golden["macbeth_chart_D65"], {"scale": 0.125}, judged=False)["render"]["width"] == 78
+    assert plan.scale_problem(both, 0.125) is None and plan.scale_problem(both, 1.0) is None
     assert "ggx_glass" in plan.scale_problem(both, 2.0)  # larger than the reference: nothing to box-filter
 
 
 def test_help_says_which_scales_are_judged():
     text = cli.parser().format_help()
-    assert "integer" in text and "exit 2" in text
+    text = " ".join(text.split())  # argparse wraps lines
+    assert "integer" in text and "nearest scale" in text and "exit 2" in text
 
 
-def test_non_dividing_scale_exits_2_and_dividing_one_is_judged(tmp_path):
-    bad = run_batch("-i", GOLDEN / "macbeth_chart_D65.json", "-r", "mitsuba", "--scale", "0.125", "--spp", "4",
-                    "--no-flip", "-o", tmp_path / "bad")
-    assert bad.returncode == 2, bad.stderr[-2000:]
-    assert "macbeth_chart_D65" in bad.stderr and "0.1, 0.2" in bad.stderr, bad.stderr[-2000:]
-    assert not (tmp_path / "bad" / "metrics.json").exists()
+def test_non_dividing_scale_renders_at_the_nearest_judged_one(tmp_path):
+    moved = run_batch("-i", GOLDEN / "macbeth_chart_D65.json", "-r", "mitsuba", "--scale", "0.125", "--spp", "4",
+                      "--no-flip", "-o", tmp_path / "moved")
+    assert moved.returncode in (0, 1), moved.stderr[-2000:]
+    assert "--scale 0.125 is no integer fraction of 620x420: macbeth_chart_D65 renders at 0.1 (62x42)" \
+        in moved.stderr, moved.stderr[-2000:]
+    assert metrics(tmp_path / "moved")["runs"][0]["resolution"] == [62, 42]
+    finer = run_batch("-i", GOLDEN / "macbeth_chart_D65.json", "-r", "mitsuba", "--scale", "2", "--spp", "4",
+                      "--no-flip", "-o", tmp_path / "finer")
+    assert finer.returncode == 2 and "macbeth_chart_D65" in finer.stderr, finer.stderr[-2000:]
+    assert not (tmp_path / "finer" / "metrics.json").exists()
     out = tmp_path / "good"
     ok = run_batch("-i", GOLDEN / "macbeth_chart_D65.json", "-r", "mitsuba", "--scale", "0.1", "--spp", "16",
                    "--no-flip", "-o", out)

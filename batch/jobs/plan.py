@@ -3,6 +3,7 @@ and the results that need no render (a bad scene, a missing backend, a scene a b
 model). Plain data in, plain data out: no rendering here.
 """
 import copy
+import math
 from pathlib import Path
 
 from ...exporters import validate
@@ -28,14 +29,16 @@ def verdict_settings(opts):
     return settings
 
 
-def for_run(scene, opts):
-    """The scene with --spp and --scale applied."""
+def for_run(scene, opts, judged=True):
+    """The scene with --spp and --scale applied (``judged``: at the scale its reference can be
+    box-filtered to, ``scale_for``; the reference maker renders at the scale as given)."""
     sc = copy.deepcopy(scene)
     if opts.get("spp"):
         sc["render"]["spp"] = int(opts["spp"])
     if opts.get("scale") and opts["scale"] != 1.0:
-        sc["render"]["width"] = max(1, round(sc["render"]["width"] * opts["scale"]))
-        sc["render"]["height"] = max(1, round(sc["render"]["height"] * opts["scale"]))
+        r = sc["render"]
+        scale = scale_for(r["width"], r["height"], opts["scale"]) if judged else opts["scale"]
+        r["width"], r["height"] = scaled_size(r["width"], r["height"], scale)
     return validate.check_render(sc, f" (after --spp {opts.get('spp')} --scale {opts.get('scale')})"
                                  if opts.get("spp") or opts.get("scale", 1.0) != 1.0 else "")
 
@@ -60,26 +63,48 @@ def valid_scales(sizes):
     return sorted(c for c in candidates if c <= 1 and all(scale_fits(w, h, c) for w, h in sizes))
 
 
+def scale_for(width, height, scale):
+    """The scale a scene of width x height renders at for --scale ``scale``: ``scale`` itself when
+    it gives an integer fraction of the resolution in each axis, else the valid scale (<= 1)
+    nearest to it in ratio (ties: the smaller, cheaper one). 0.125 of the 620x420 charts would be
+    78x52, which their reference cannot be box-filtered to; they render at 0.1 (62x42) instead,
+    judged like any other render. A scale above 1 is returned as it is (``scale_problem`` refuses
+    it: a render finer than its reference has nothing to be box-filtered from)."""
+    if scale > 1.0 or scale_fits(width, height, scale):
+        return scale
+    return min(valid_scales([(width, height)]), key=lambda c: (abs(math.log(c / scale)), c))
+
+
+def scale_changes(scenes, scale):
+    """[(scale rendered at, [(scene, (width, height), (w, h))])] for the selected ``scenes`` [(name,
+    IR or error)] that --scale ``scale`` does not divide (``scale_for``), grouped by the scale they
+    render at instead; [] when every scene takes ``scale`` as given."""
+    if not scale or scale >= 1.0:
+        return []
+    groups = {}
+    for name, sc in scenes:
+        if isinstance(sc, dict):
+            size = (sc["render"]["width"], sc["render"]["height"])
+            if (chosen := scale_for(*size, scale)) != scale:
+                groups.setdefault(chosen, []).append((name, size, scaled_size(*size, chosen)))
+    return sorted(groups.items())
+
+
 def scale_problem(scenes, scale):
-    """None, or why --scale cannot be judged on the selected ``scenes`` [(name, IR or error)]:
-    the scenes whose render at that scale is no integer fraction of their reference's
-    resolution, and the nearest scales that are one for every selected scene (a usage error:
-    the noise test could not judge them)."""
-    if not scale or scale == 1.0:
+    """None, or why --scale cannot be judged on the selected ``scenes`` [(name, IR or error)]: a
+    scale above 1 asks for renders finer than their references, which cannot be box-filtered to
+    them (a usage error; a scale below 1 that divides no resolution is moved to the nearest one
+    that does, ``scale_for``)."""
+    if not scale or scale <= 1.0:
         return None
     sizes = {n: (sc["render"]["width"], sc["render"]["height"]) for n, sc in scenes if isinstance(sc, dict)}
-    bad = [n for n, (w, h) in sizes.items() if not scale_fits(w, h, scale)]
+    bad = list(sizes)
     if not bad:
         return None
     shown = "; ".join(f"{n}: {sizes[n][0]}x{sizes[n][1]} -> {'x'.join(map(str, scaled_size(*sizes[n], scale)))}"
                       for n in bad[:5]) + (f"; and {len(bad) - 5} more" if len(bad) > 5 else "")
-    ok = valid_scales(sorted(set(sizes.values())))
-    below = [c for c in ok if c < scale][-2:]
-    above = [c for c in ok if c > scale][:2]
-    near = ", ".join(f"{c:.6g}" for c in below + above) or "1"
-    return (f"--scale {scale:g} gives no integer fraction of the reference's resolution for {shown} "
-            f"(the reference is box-filtered by an integer factor in each axis); nearest scales valid for "
-            f"every selected scene: {near}")
+    return (f"--scale {scale:g} renders finer than the reference for {shown} (a render is judged against its "
+            f"reference box-filtered by an integer factor in each axis); scales up to 1 are judged")
 
 
 def main_jobs(scenes, made, opts, out, settings):

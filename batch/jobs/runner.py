@@ -460,6 +460,13 @@ def _run(opts, out, deviations, t0):
     _jobs, scenes = plan(opts)
     if not opts["export_only"] and (why := planning.scale_problem(scenes, opts.get("scale"))):
         raise UsageError(why)  # exit 2: renders the noise test could not judge
+    if not opts["export_only"]:
+        for chosen, moved in planning.scale_changes(scenes, opts.get("scale")):
+            sizes = sorted({(size, to) for _, size, to in moved})
+            log.info("--scale %g is no integer fraction of %s: %s render%s at %g (%s), the nearest scale their "
+                     "reference can be box-filtered to", opts["scale"], ", ".join(f"{w}x{h}" for (w, h), _ in sizes),
+                     ", ".join(n for n, _, _ in moved), "s" if len(moved) == 1 else "", chosen,
+                     ", ".join(f"{w}x{h}" for _, (w, h) in sizes))
     batch = Run(opts, out, deviations)
     log.info("writing to %s", batch.out)
     if not scenes:

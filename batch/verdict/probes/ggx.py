@@ -124,30 +124,39 @@ def _light_nodes(shape, plate_normal, plate_point):
 def plate_radiance(points, w_o, normal, bsdf, lights, tables, form=SHADOWING):
     """Expected RGB radiance (P x 3) leaving ``points`` along ``w_o`` (unit vectors towards the
     camera), summed over the lights; ``tables`` holds per light {observer: Fresnel colour table},
-    and the result is {observer: P x 3}: the geometry is computed once for every observer."""
+    and the result is {observer: P x 3}: the geometry is computed once for every observer.
+
+    The colour table is sampled uniformly in cos(w_i . h) (``fresnel_colour_table``), so its
+    linear interpolation is one index and weight per quadrature point shared by the three
+    channels and every observer (np.interp's lerp with the search done by arithmetic: the same
+    values to rounding). Dot products are einsums, and Lambda(w_o) is computed once per point."""
     kind = bsdf["roughness"]["distribution"]
     alpha = float(bsdf["roughness"]["alpha"])
     out = {o: np.zeros((len(points), 3)) for o in tables[0]}
     cos_o_all = w_o @ normal
+    dot = lambda u, v: np.einsum("pnk,pnk->pn", u, v)
     for (q, wq, nl), table in zip(lights, tables):
         for s in range(0, len(points), CHUNK):
             p, wo, cos_o = points[s:s + CHUNK], w_o[s:s + CHUNK], cos_o_all[s:s + CHUNK]
             d = q[None, :, :] - p[:, None, :]
-            r2 = np.sum(d * d, axis=-1)
+            r2 = dot(d, d)
             wi = d / np.sqrt(r2)[..., None]
             cos_i = wi @ normal
             cos_l = -(wi @ nl)
             h = wi + wo[:, None, :]
-            h /= np.linalg.norm(h, axis=-1, keepdims=True)
+            h /= np.sqrt(dot(h, h))[..., None]
             cos_h = h @ normal
-            cos_d = np.clip(np.sum(wi * h, axis=-1), 0.0, 1.0)
+            cos_d = np.clip(dot(wi, h), 0.0, 1.0)
             ok = (cos_i > 0) & (cos_l > 0) & (cos_o[:, None] > 0)
-            g = optics.shadowing(kind, cos_i, np.broadcast_to(cos_o[:, None], cos_i.shape), alpha, form)
+            g = optics.shadowing(kind, cos_i, cos_o[:, None], alpha, form)
             val = np.where(ok, optics.distribution(kind, cos_h, alpha) * g * cos_l
                            / (4.0 * np.maximum(cos_o[:, None], 1e-300) * r2), 0.0) * wq[None, :]
             for o, (cos_grid, rgb) in table.items():
-                for c in range(3):
-                    out[o][s:s + CHUNK, c] += np.sum(val * np.interp(cos_d, cos_grid, rgb[:, c]), axis=1)
+                x = cos_d * (len(cos_grid) - 1)
+                i = np.minimum(x.astype(np.intp), len(cos_grid) - 2)
+                f = x - i
+                slope = rgb[1:] - rgb[:-1]
+                out[o][s:s + CHUNK] += np.einsum("pn,pnc->pc", val, rgb[i]) + np.einsum("pn,pnc->pc", val * f, slope[i])
     return out
 
 
@@ -182,14 +191,19 @@ def expected_images(scene, plate, light_ids, w, h, observers=(colorimetry.GROUND
     t = raycast.hit_plane(obj["shape"], origin, d)
     t = np.where(np.isfinite(t), t, 0.0)
     nodes = plate_radiance(origin + t[:, None] * d, -d, normal, obj["bsdf"], lights, tables, form)
+    # the footprint points of every pixel lie on a tensor grid (pixel rows x columns plus one
+    # offset per axis): the splines are evaluated on it (fitpack's bispev, separable, several
+    # times faster than point by point) and the plate's pixels picked from it
+    r0, c0 = rows.min(), cols.min()
+    py, px = np.arange(r0, rows.max() + 1, dtype=np.float64), np.arange(c0, cols.max() + 1, dtype=np.float64)
     for o, values in nodes.items():
         grid = values.reshape(len(ys), len(xs), 3)
         for c in range(3):
             spline = RectBivariateSpline(ys, xs, grid[..., c], kx=3, ky=3)
-            acc = np.zeros(len(rows))
+            acc = np.zeros((len(py), len(px)))
             for (ox, oy), weight in raycast.footprint_offsets(FOOTPRINT):
-                acc += weight * spline.ev(rows + oy, cols + ox)
-            images[o][rows, cols, c] = acc
+                acc += weight * spline(py + oy, px + ox, grid=True)
+            images[o][rows, cols, c] = acc[rows - r0, cols - c0]
     return mask, images
 
 
