@@ -1,6 +1,6 @@
 """A job's fixed cost: where a run's wall time goes, per job and phase (issue 23, item 2).
 
-    .venv/bin/python benchmarks/bench_fixed_cost.py                       # the tiny suite: --scale 0.25 --spp 4
+    .venv/bin/python benchmarks/bench_fixed_cost.py                       # the tiny suite: --scale 0.125 --spp 4
     .venv/bin/python benchmarks/bench_fixed_cost.py --default [--write]   # the default suite (scenes' own settings)
     .venv/bin/python benchmarks/bench_fixed_cost.py --smoke               # seconds: one scene
 
@@ -16,9 +16,9 @@ files) and *exit* (closing the warm workers). Renders and verdicts overlap (the 
 judges job k while job k+1 renders: batch/jobs/engines.py), so the phases add up to more than
 the wall time; the wall time against the sum of the render phases is the figure of merit.
 
-The tiny suite is ``--scale 0.25``: 0.125 is no integer fraction of the 620x420 charts'
-references and the runner refuses it (exit 2, README "Running"); 0.25 is the smallest scale
-valid for every scene (the next ones, 1/400 and below, leave nothing to judge).
+The tiny suite is issue 23's ``--scale 0.125 --spp 4``: the 620x420 charts, which 0.125 divides
+into no integer fraction, render at 0.1 (62x42), the nearest scale their references judge
+(README "Running"; the run's log says so).
 
 Prints Markdown tables; --write records them in benchmarks/ENGINES.md. Run it on a quiet machine
 (``uptime`` load is printed with the result).
@@ -39,7 +39,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from record import machine  # noqa: E402
 
-TINY = ["--scale", "0.25", "--spp", "4"]
+TINY = ["--scale", "0.125", "--spp", "4"]
 SMOKE = ["--scale", "0.25", "--spp", "4", "-s", "ggx_copper_50"]
 PHASES = ("export", "render", "verdict", "flip", "record")
 

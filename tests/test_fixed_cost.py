@@ -198,3 +198,43 @@ def test_judge_deferring_collects_flip_when_the_verdict_breaks(tmp_path):
         jobs.KINDS_TABLE["render"] = kind
     assert not flip_isolated._LOCK.locked()  # collected: the next request does not wait for ever
     assert flip_isolated.flip_images(ref, test, tmp_path / "d.exr")[1] is None
+
+
+def _makespan(order, est):
+    """When the last verdict ends: renders one after another, verdicts in the same order, each
+    after its render and after the verdict before it (the default engine's two threads)."""
+    rendered = judged = 0.0
+    for j in order:
+        r, v = est[j["scene_name"]]
+        rendered += r
+        judged = max(judged, rendered) + v
+    return judged
+
+
+def test_overlap_order_is_johnsons_rule_and_ignores_a_bad_record(golden, tmp_path):
+    """plan.overlap_order: the order with the soonest last verdict (Johnson 1954) for the
+    estimates it is given, checked against every permutation of six jobs of different kinds; a
+    reference record whose time is not a number falls back to the default cost, naming nothing."""
+    import itertools
+    from spectral_bench.batch.jobs import job as jobs, plan
+    names = ["fluorescent_sphere_lone", "ggx_glass", "ggx_copper_50_isolated", "dispersion_prism",
+             "iridescent_spheres_film", "macbeth_chart_D65"]
+    js = [jobs.make("render", n, golden[n], "mitsuba", "m", golden[n]["render"]["spp"], tmp_path, n,
+                    verdict={"flip": True}) for n in names]
+    est = {j["scene_name"]: plan.estimated_seconds(j) for j in js}
+    assert len({round(r / v, 3) for r, v in est.values()}) == len(names)  # no ties: one best order
+    assert est["ggx_glass"][0] > est["ggx_glass"][1] and est["fluorescent_sphere_lone"][0] < est["fluorescent_sphere_lone"][1]
+    best = min(_makespan(p, est) for p in itertools.permutations(js))
+    ordered = plan.overlap_order(js)
+    assert sorted(j["scene_name"] for j in ordered) == sorted(names)
+    assert _makespan(ordered, est) == pytest.approx(best, rel=1e-12)
+    assert _makespan(js, est) > best  # the planned (alphabetical) order is not already the best
+    # a record whose time is not a number: the default cost per sample, no error
+    refs = tmp_path / "refs"
+    refs.mkdir()
+    (refs / "ggx_glass.json").write_text(json.dumps({"fingerprint": "x", "spp": 4, "resolution": [2, 2],
+                                                     "time_s": "soon"}))
+    bad = jobs.make("render", "ggx_glass", golden["ggx_glass"], "mitsuba", "m", 16, tmp_path, "g",
+                    verdict={"flip": True, "references": [str(refs)]})
+    r = golden["ggx_glass"]["render"]
+    assert plan.estimated_seconds(bad)[0] == pytest.approx(plan.RENDER_S_PER_SAMPLE * r["width"] * r["height"] * 16)

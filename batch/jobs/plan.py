@@ -267,3 +267,52 @@ def resumed_options(opts, given=None):
         merged[key] = value
     merged["out"] = opts["resume"]
     return merged
+
+
+# Seconds per pixel of a verdict (the verdict thread's share; FLIP computes beside it in its own
+# child) on this project's 2-core machine: the default suite's 65 s of verdicts over 27 jobs of
+# ~0.22 Mpixel (benchmarks/ENGINES.md); and per sample and pixel of a render whose reference
+# records no time. Only the *order* of the jobs depends on them (``overlap_order``), never a result.
+VERDICT_S_PER_PIXEL = 1.1e-5
+RENDER_S_PER_SAMPLE = 1.4e-7
+
+
+def estimated_seconds(job):
+    """(render, verdict) seconds of a render job, estimated for ordering: the render from its
+    scene's reference record (the seconds it took for its samples and pixels, scaled to the job's;
+    RENDER_S_PER_SAMPLE without one), the verdict from the job's pixels."""
+    from ..verdict import references
+    r = job["scene"]["render"]
+    pixels = r["width"] * r["height"]
+    per_sample = RENDER_S_PER_SAMPLE
+    for folder in references.directories(job["verdict"].get("references")):
+        meta, bad = references.read_record(folder / f"{job['scene_name']}.json")
+        if meta is None:
+            continue
+        try:
+            seconds, (w, h) = float(meta.get("time_s")), meta["resolution"]
+            if math.isfinite(seconds) and seconds > 0 and w > 0 and h > 0:
+                per_sample = seconds / (meta["spp"] * w * h)
+        except (TypeError, ValueError, KeyError):  # a record without a usable time: the default
+            pass
+        break
+    return per_sample * pixels * job["spp"], pixels * VERDICT_S_PER_PIXEL
+
+
+def overlap_order(job_list):
+    """The jobs in the order that lets the verdicts (one thread, judging job k while job k+1
+    renders: batch/jobs/engines.py) finish soonest after the last render: Johnson's rule for a
+    two-stage flow shop (S. M. Johnson, "Optimal two- and three-stage production schedules with
+    setup times included", Naval Research Logistics Quarterly 1(1), 1954): jobs whose render is
+    shorter than their verdict first, by render time ascending; then the rest by verdict time
+    descending. Long renders late absorb the verdicts queued behind short ones, and the last job
+    has a short verdict. Render jobs only (other kinds keep their place after them); ties keep
+    the planned order. No result depends on the order: a job's seeds are its own (--seed and
+    its pass index), and each render starts from its own scene."""
+    renders = [j for j in job_list if j.get("kind") == "render"]
+    if len(renders) < 2:
+        return list(job_list)
+    est = {id(j): estimated_seconds(j) for j in renders}
+    first = sorted((j for j in renders if est[id(j)][0] < est[id(j)][1]), key=lambda j: est[id(j)][0])
+    last = sorted((j for j in renders if est[id(j)][0] >= est[id(j)][1]), key=lambda j: -est[id(j)][1])
+    return first + last + [j for j in job_list if j.get("kind") != "render"]

@@ -308,7 +308,7 @@ class Run:
             log.info("resuming %s: %d jobs kept, %d to run", self.out, len(job_list) - len(todo), len(todo))
         self.progress = Progress(len(todo))
         try:
-            engine.map(todo, self.record)
+            engine.map(planning.overlap_order(todo), self.record)
         finally:
             self.progress.close()
             self.finish_studies()
