@@ -50,14 +50,22 @@ def applies(obj):
 
 
 @remembered()
-def colour_table(bsdf, radiance, obs=colorimetry.GROUND_TRUTH):
-    """(theta grid, linear sRGB of R(theta, l) L(l) per angle) for a filmed conductor."""
+def reflectance_table(bsdf):
+    """(theta grid, wavelengths, Airy reflectance R(theta, l)) of a filmed conductor: the costly
+    part of its colour table, the same for every light and observer."""
     wl = spectra.cie_1931_cmfs()[0]
     film = bsdf["thin_film"]
     n3 = spectra.evaluate(bsdf["eta"], wl) + 1j * spectra.evaluate(bsdf["k"], wl)
     theta = np.linspace(0.0, np.pi / 2, THETA_TABLE)
     refl = airy.unpolarized_reflectance(np.cos(theta)[:, None], wl[None, :], film.get("ext_ior", 1.0),
                                         film["ior"], film["thickness"], n3[None, :])
+    return theta, wl, refl
+
+
+@remembered()
+def colour_table(bsdf, radiance, obs=colorimetry.GROUND_TRUTH):
+    """(theta grid, linear sRGB of R(theta, l) L(l) per angle) for a filmed conductor."""
+    theta, wl, refl = reflectance_table(bsdf)
     light = spectra.evaluate(radiance, wl)
     xyz = colorimetry.xyz_rows(refl * light[None, :], obs)
     return theta, colorimetry.xyz_to_srgb(xyz)
@@ -66,15 +74,22 @@ def colour_table(bsdf, radiance, obs=colorimetry.GROUND_TRUTH):
 def expected_image(scene, index, width, height, sub=None, obs=colorimetry.GROUND_TRUTH):
     """(expected linear sRGB per pixel (H, W, 3), mask of pixels fully on the sphere with every
     reflected ray reaching the environment) for object ``index``."""
+    images, mask = expected_images(scene, index, width, height, (obs,), sub)
+    return images[obs], mask
+
+
+def expected_images(scene, index, width, height, observers=(colorimetry.GROUND_TRUTH,), sub=None):
+    """({observer: expected linear sRGB per pixel (H, W, 3)}, mask) as ``expected_image``, the
+    rays traced once for every observer."""
     objs, cam = scene["objects"], scene["camera"]
     obj = objs[index]
     sub = sub or supersampling(width, height)
-    theta_grid, rgb_grid = colour_table(obj["bsdf"], scene["environment"]["radiance"], obs)
+    tables = {o: colour_table(obj["bsdf"], scene["environment"]["radiance"], o) for o in observers}
     origin, corners = raycast.camera_rays(cam, width, height, "corners")
     who_c, _ = raycast.nearest(objs, origin, corners)
     on = who_c == index
     mask = on[:-1, :-1] & on[1:, :-1] & on[:-1, 1:] & on[1:, 1:]
-    expected = np.zeros((height, width, 3))
+    images = {o: np.zeros((height, width, 3)) for o in observers}
     centre = np.asarray(obj["shape"]["center"], dtype=np.float64)
     others = [o for j, o in enumerate(objs) if j != index]
     rows = max(1, 262144 // (width * sub * sub))  # pixel rows per chunk (bounded memory)
@@ -92,11 +107,13 @@ def expected_image(scene, index, width, height, sub=None, obs=colorimetry.GROUND
             refl = dirs + 2.0 * cos_i[..., None] * n
             who_r, _ = raycast.nearest(others, p + 1e-6 * n, refl)
             ok &= who_r == -1
-        rgb = np.stack([np.interp(np.arccos(cos_i), theta_grid, rgb_grid[:, c]) for c in range(3)], axis=-1)
+        theta = np.arccos(cos_i)
         shape = (r1 - r0, sub, width, sub)
-        expected[r0:r1] = rgb.reshape(shape + (3,)).mean(axis=(1, 3))
+        for o, (theta_grid, rgb_grid) in tables.items():
+            rgb = np.stack([np.interp(theta, theta_grid, rgb_grid[:, c]) for c in range(3)], axis=-1)
+            images[o][r0:r1] = rgb.reshape(shape + (3,)).mean(axis=(1, 3))
         mask[r0:r1] &= ok.reshape(shape).all(axis=(1, 3))
-    return expected, mask
+    return images, mask
 
 
 def tiles(mask, size=None, min_pixels=None):
@@ -164,14 +181,15 @@ def smooth_film(m, alpha=stats.ALPHA):
             out.append(_probe(name, None, None, None, "sigma", None,
                               note="a named conductor's eta/k are the renderer's own table: no independent truth"))
             continue
-        expected, mask = expected_image(scene, i, w, h)
+        images, mask = expected_images(scene, i, w, h, (colorimetry.GROUND_TRUTH, *observers))
+        expected = images[colorimetry.GROUND_TRUTH]
         blocks = tiles(mask)
         if mask.sum() < MIN_PIXELS or not blocks:
             out.append(_probe(name, None, None, None, "sigma", None, pixels=int(mask.sum()),
                               note="needs whole pixels of the sphere"))
             continue
         stat = _tile_stat(rgb, expected, blocks, alpha)
-        alternatives = {o: _tile_stat(rgb, expected_image(scene, i, w, h, obs=o)[0], blocks, alpha) for o in observers}
+        alternatives = {o: _tile_stat(rgb, images[o], blocks, alpha) for o in observers}
         used = np.zeros_like(mask)
         for ys, xs in blocks:
             used[ys, xs] = True
