@@ -120,7 +120,7 @@ def power_curve(threshold, dof=None, shape=()):
     """``shifted_power`` as a function of the shift alone, for shifts of ``shape``: the critical
     values t* are computed once, and F is scipy.special's stdtr (Student's t) and ndtr (normal),
     the functions scipy.stats' t.cdf and norm.cdf evaluate (same values, without their argument
-    handling: a bisection calls this some fifty times per test, issue 23)."""
+    handling: a bisection calls this some twenty times per test, issue 23)."""
     d = np.broadcast_to(np.asarray(np.inf if dof is None else dof, dtype=np.float64), shape)
     small = np.isfinite(d) & (d < 1e7)
     dd = np.where(small, np.maximum(d, 1.0), 1e7)
@@ -138,13 +138,19 @@ def power_curve(threshold, dof=None, shape=()):
     return power
 
 
-def smallest_detectable(power_of, power=0.9, hi=1.0, steps=50):
+def smallest_detectable(power_of, power=0.9, hi=1.0, rtol=1e-4):
     """The smallest eps in (0, hi] with power_of(eps) >= power (power_of grows with eps), by
-    bisection; None when even ``hi`` is not detected with that power."""
+    bisection to a relative width ``rtol`` (the figure is shown to three digits; the power it
+    rests on is itself a location-shift approximation), returning the upper end: power_of of
+    the result is >= power. None when even ``hi`` is not detected with that power. About 20
+    evaluations for a figure of 1 %, instead of a fixed 50 (issue 23: each evaluates the cdf of
+    every block of the image)."""
     if power_of(hi) < power:
         return None
     lo = 0.0
-    for _ in range(steps):
+    for _ in range(64):  # at most 2^-64 when every eps is detected (no noise)
+        if hi - lo <= rtol * hi:
+            break
         mid = (lo + hi) / 2
         lo, hi = (lo, mid) if power_of(mid) >= power else (mid, hi)
     return hi
