@@ -67,7 +67,7 @@ def render_verdict(entry, scene, rendered, image, res_dir, settings, deviations)
                                           stderr=stderr, passes=entry["passes"], observers=observers, maps=maps)
         previews.write_probe_residual(res_dir, maps.get("residual_map"))  # the report's "probe residual" view
     except BaseException:
-        for finish in later:  # a verdict that breaks still collects its FLIP (the next one waits for it)
+        for finish in later:  # a verdict that breaks still collects its FLIP (its child is free for the next)
             finish()
         raise
     for finish in later:  # FLIP, now or (the default engine: flip_isolated.deferred) after this verdict
