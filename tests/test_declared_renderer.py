@@ -261,7 +261,7 @@ def test_example_renderer_ok_brighter_failed_polarisation_unsupported(tmp_path):
     settings (full resolution, 2 passes); its version line is in metrics.json; a scene needing
     polarisation is unsupported naming the need. The same renderer with its output 1 % brighter
     fails: judged in a second run at a quarter of the resolution (1/16 of the cost), where its own
-    ``detectable`` figure (about 0.5 %) shows it still has the power to see 1 %."""
+    ``detectable`` figure (0.5-0.6 %) shows it still has the power to see 1 %."""
     common = ["--renderers", str(EXAMPLE / "toy.toml"), "--renderers", str(EXAMPLE / "toy_brighter.toml"),
               "-s", "ggx_copper_50", "-s", "ggx_copper_70", "-s", "polarizing_plane_0"]
     proc, runs = run_batch(tmp_path / "out", *common, "-r", "toy")
@@ -285,19 +285,22 @@ def test_example_renderer_writing_spectral_exr(tmp_path):
     0.1-0.2 % darker than the Mitsuba-made references (whose film is 0.1 % bright: a recorded
     Mitsuba deviation), which the scale test resolves at default settings (full resolution, 2
     passes: it detects 0.13 %): the example's own known deviation
-    (examples/your_renderer/known_deviations.toml) makes it `known`. 1 % brighter still fails:
-    judged in a second run at a quarter of the resolution, whose own ``detectable`` figure (about
-    0.5 %) shows the power to see 1 % (the full-resolution brighter renders cost 45 s of CPU)."""
+    (examples/your_renderer/known_deviations.toml) makes it `known`. That half renders
+    ggx_copper_50 alone: the deviation is one scale for every copper scene (0.9986 +- 0.0003,
+    measured on ggx_copper_50 and ggx_copper_70: its evidence), so ggx_copper_70 at full
+    resolution repeated the same measurement for 22 s of CPU. 1 % brighter still fails on both
+    copper scenes: judged in a second run at a quarter of the resolution, whose own
+    ``detectable`` figure (about 0.6-0.7 %) shows the power to see 1 % (the full-resolution
+    brighter renders cost 45 s of CPU)."""
     common = ["--known", str(EXAMPLE / "known_deviations.toml"), "--renderers", str(EXAMPLE / "toy.toml"),
-              "--renderers", str(EXAMPLE / "toy_brighter.toml"), "-s", "ggx_copper_50", "-s", "ggx_copper_70",
-              "-s", "polarizing_plane_0"]
+              "--renderers", str(EXAMPLE / "toy_brighter.toml"), "-s", "ggx_copper_50", "-s", "polarizing_plane_0"]
     proc, runs = run_batch(tmp_path / "out", *common, "-r", "toy_spectral")
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]  # known and unsupported: no failure
-    for name in ("ggx_copper_50", "ggx_copper_70"):
-        ok = runs[(name, "toy_spectral")]
-        assert ok["status"] == "known" and ok["mode"] == "spectral" and ok["resolution"] == [512, 512], ok
-        assert ok["known"] == ["toy-spectral-cie-against-mitsuba-references"] and ok["test"]["block_pass"], ok
+    ok = runs[("ggx_copper_50", "toy_spectral")]
+    assert ok["status"] == "known" and ok["mode"] == "spectral" and ok["resolution"] == [512, 512], ok
+    assert ok["known"] == ["toy-spectral-cie-against-mitsuba-references"] and ok["test"]["block_pass"], ok
     assert runs[("polarizing_plane_0", "toy_spectral")]["status"] == "unsupported"
-    proc, bright = run_batch(tmp_path / "bright", *common, "-r", "toy_spectral_brighter", "--scale", BRIGHTER_SCALE)
+    proc, bright = run_batch(tmp_path / "bright", *common, "-s", "ggx_copper_70", "-r", "toy_spectral_brighter",
+                             "--scale", BRIGHTER_SCALE)
     assert proc.returncode == 1, proc.stdout[-3000:] + proc.stderr[-3000:]
     assert_brighter_fails_with_power(bright, "toy_spectral_brighter")
