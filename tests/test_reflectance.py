@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 
 from conftest import REFLECTANCE, metrics, noise_test, render_with_noise, run_batch
+from spectral_bench.batch import exr
 from spectral_bench.batch.verdict import references
 
 
@@ -55,6 +56,19 @@ def _render_variant(golden, name, tmp_path, change):
     return noise_test(name, img, se, spp)
 
 
+def _batch_render(batch_run, golden, name):
+    """(names, image, standard error) of ``name`` as the module's batch run rendered it: the golden
+    scene unchanged at its default settings (full resolution, its spp, 2 passes), which is what a
+    test that changes nothing would render again."""
+    _, out, runs = batch_run
+    run = runs[name]
+    assert run["resolution"] == [golden[name]["render"]["width"], golden[name]["render"]["height"]], run["resolution"]
+    assert run["spp"] == golden[name]["render"]["spp"] and run["passes"] == 2, run
+    names, img, se = exr.read_image_and_stderr(out / name / "results" / "mitsuba" / "render.exr")
+    assert se is not None, name
+    return names, img, se
+
+
 def _set_conductor(metal):
     def change(sc):
         for obj in sc["objects"]:
@@ -65,8 +79,11 @@ def _set_conductor(metal):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["ggx_copper_50", "ggx_copper_80"])
-def test_gold_instead_of_copper_fails(golden, tmp_path, name):
-    assert _render_variant(golden, name, tmp_path / "cu", _set_conductor("Cu")).passed
+def test_gold_instead_of_copper_fails(golden, batch_run, tmp_path, name):
+    """The same noise test passes the copper scene (the batch run's render of it: the golden
+    scene at default settings) and fails it rendered with gold, at the same settings."""
+    _, img, se = _batch_render(batch_run, golden, name)
+    assert noise_test(name, img, se, golden[name]["render"]["spp"]).passed
     zt = _render_variant(golden, name, tmp_path / "au", _set_conductor("Au"))
     assert not zt.passed and zt.z_max > 10, zt
 
@@ -88,13 +105,18 @@ def test_the_ggx_probe_judges_every_lone_plate(batch_run):
     assert not any(p["name"].startswith("ggx ") for p in runs["ggx_copper_50"]["probes"])
 
 
-def _probe_variant(golden, name, tmp_path, change, form="separable"):
+def _probe_variant(golden, name, tmp_path, change, form="separable", batch_run=None):
     """Render ``name`` changed by ``change`` at its default settings; judge it with the GGX
-    probe of the unchanged scene (assuming the Smith form ``form``)."""
+    probe of the unchanged scene (assuming the Smith form ``form``). Given ``batch_run`` (and no
+    change), the batch run's render of the scene is judged instead of rendering it again."""
     from spectral_bench.batch.verdict.probes import Measurement, ggx
-    sc = copy.deepcopy(golden[name])
-    change(sc)
-    _, names, img, se = render_with_noise(sc, tmp_path, sc["render"]["spp"])
+    if batch_run is not None:
+        assert change is None
+        names, img, se = _batch_render(batch_run, golden, name)
+    else:
+        sc = copy.deepcopy(golden[name])
+        change(sc)
+        _, names, img, se = render_with_noise(sc, tmp_path, sc["render"]["spp"])
     found = ggx.plates(Measurement(golden[name], names, img, se, None, 2, ("mitsuba3",)), form=form)
     # judged as the runner does: the known deviation of Mitsuba's film (its observer) may explain
     # a failure, so a detection must fail under that observer too
@@ -106,8 +128,8 @@ def _plate(sc):
 
 
 @pytest.mark.slow
-def test_ggx_probe_passes_the_scene_as_it_is(golden, tmp_path):
-    verdict = _probe_variant(golden, "ggx_copper_grazing", tmp_path, lambda sc: None)
+def test_ggx_probe_passes_the_scene_as_it_is(golden, tmp_path, batch_run):
+    verdict = _probe_variant(golden, "ggx_copper_grazing", tmp_path, None, batch_run=batch_run)
     assert verdict["blocks"][1] and verdict["scale"][1], verdict
 
 
@@ -128,8 +150,9 @@ def test_ggx_probe_detects_a_one_percent_brighter_light(golden, tmp_path):
 
 
 @pytest.mark.slow
-def test_ggx_probe_tells_separable_from_height_correlated_smith(golden, tmp_path):
+def test_ggx_probe_tells_separable_from_height_correlated_smith(golden, tmp_path, batch_run):
     """Mitsuba uses the separable Smith G; judged by a probe that assumes the height-correlated
-    form, the grazing scene (both directions 80 degrees from the normal) must fail."""
-    verdict = _probe_variant(golden, "ggx_copper_grazing", tmp_path, lambda sc: None, form="height-correlated")
+    form, the grazing scene (both directions 80 degrees from the normal: the batch run's render of
+    it) must fail."""
+    verdict = _probe_variant(golden, "ggx_copper_grazing", tmp_path, None, form="height-correlated", batch_run=batch_run)
     assert verdict["scale"] == (False, False), verdict
