@@ -245,3 +245,28 @@ def test_overlap_order_is_johnsons_rule_and_ignores_a_bad_record(golden, tmp_pat
                     verdict={"flip": True, "references": [str(refs)]})
     r = golden["ggx_glass"]["render"]
     assert plan.estimated_seconds(bad)[0] == pytest.approx(plan.RENDER_S_PER_SAMPLE * r["width"] * r["height"] * 16)
+
+
+def test_prestarted_mitsuba_workers_serve_the_jobs_that_come_later(golden, tmp_path):
+    """job.prestart_workers starts the warm workers of a run's variants in the background; the
+    jobs then take those very workers (no second start), alive when their job comes: a child
+    started with PR_SET_PDEATHSIG dies with the thread that started it, so they must be started
+    by a thread that lives on (batch/backends/mitsuba/backend.py ``prestart``)."""
+    import copy
+    from spectral_bench.batch import backends
+    from spectral_bench.batch.backends.mitsuba import backend as mb
+    from spectral_bench.batch.jobs import job as jobs
+    variant = "llvm_ad_rgb"  # a variant no other test of this module keeps warm
+    mb.close_pool()
+    sc = copy.deepcopy(golden["ggx_copper_50"])
+    sc["render"].update(width=16, height=16, spp=1)
+    jobs.prestart_workers([jobs.make("render", "ggx_copper_50", sc, "mitsuba", variant, 1, tmp_path, "a")])
+    started = mb._STARTING.get(variant)
+    if started is not None:
+        assert started.wait(300)
+    pid = mb._POOL[variant].proc.pid
+    b = backends.get("mitsuba")
+    xml = b.export(sc, tmp_path / "export")
+    record = b.render(xml, variant, 1, tmp_path / "render.exr", passes=2, seed=3, timeout=300)
+    assert record["passes"] == 2 and (tmp_path / "render.exr").is_file()
+    assert mb._POOL[variant].alive() and mb._POOL[variant].proc.pid == pid  # the prestarted one rendered both passes

@@ -5,8 +5,9 @@
   previous render is judged in a second thread (reading EXRs, the noise test, probes, previews;
   FLIP in a warm child process that computes while the probes run: batch/verdict/flip_isolated.py):
   a render never waits for a verdict. While the first job renders, the verdict thread loads what
-  the verdicts need (job.warm: the verdict modules, colour-science, the FLIP child), so a job's
-  fixed cost is its own work (issue 23; benchmarks/bench_fixed_cost.py measures it per phase).
+  the verdicts need (job.warm: the verdict modules, colour-science, the FLIP child) and the
+  warm render workers of every variant the run needs start in the background
+  (job.prestart_workers), so a job's fixed cost is its own work (issue 23; benchmarks/bench_fixed_cost.py measures it per phase).
 - DaskEngine (``--cluster ADDRESS`` or ``--cluster local:N``): the jobs go to a Dask distributed
   scheduler, each job (render and verdict) on one worker; ``local:N`` starts a LocalCluster of N
   single-threaded worker processes, listening on 127.0.0.1 only, without a dashboard unless
@@ -112,6 +113,10 @@ class LocalEngine:
         finishers = cf.ThreadPoolExecutor(1, thread_name_prefix="finish")  # FLIP k while verdict k+1 runs; in order
         started = {}
         verdicts.submit(self._warm, job_list)  # a head start while the first job renders
+        try:
+            jobs.prestart_workers(job_list)  # the other variants' warm workers start beside the first job
+        except Exception:  # noqa: BLE001 - only a head start: each job starts what it needs itself
+            log.debug("starting the render workers early failed", exc_info=True)
 
         def rendered(job, fut):
             if fut.cancelled():

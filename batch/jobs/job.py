@@ -180,6 +180,20 @@ def warm(job_list):
         flip_isolated.prestart()
 
 
+def prestart_workers(job_list):
+    """Start the warm render workers that ``job_list`` will need, in the background, where a
+    backend keeps them (``prestart(modes, timeout)``: Mitsuba's one per variant). The first job
+    starts its own if it comes first; nothing waits here."""
+    by_backend = {}
+    for j in job_list:
+        if j["kind"] in ("render", "sweep", "stability", "reference"):
+            by_backend.setdefault((j["backend"], json.dumps(j["backend_options"], sort_keys=True)), []).append(j)
+    for jobs_of in by_backend.values():
+        backend = backend_of(jobs_of[0])
+        if hasattr(backend, "prestart"):
+            backend.prestart([j["mode"] for j in jobs_of], max(float(j["timeout"]) for j in jobs_of))
+
+
 def judge(job, record, deviations=None):
     """The kind's verdict on a render record: the job's result (a metrics.json entry, a sweep
     point, a stability row or a reference pass), through KINDS_TABLE."""

@@ -19,6 +19,7 @@ import atexit
 import importlib.util
 import json
 import os
+import queue
 import subprocess
 import sys
 import tempfile
@@ -144,6 +145,11 @@ class MitsubaBackend:
                 log, {"versions": {"mitsuba": executable_version(self.executable), "route": "executable"}})
         return WarmWorker(xml_path, variant, log)
 
+    def prestart(self, variants, timeout):
+        """Warm workers of ``variants`` started in the background (the Python route only)."""
+        if not self.executable:
+            prestart(sorted(set(variants)), timeout)
+
     def _pass_cli(self, xml_path, variant, spp, seed, out, timeout, log):
         cmd = [self.executable, "-m", variant, f"-Dspp={spp}", f"-Dseed={seed}", "-o", str(out), str(xml_path)]
         wall = passes_mod.run_command(cmd, timeout, log, "mitsuba", env=llvm.env())
@@ -259,7 +265,51 @@ _POOL = {}  # variant -> idle WorkerProcess (a local run renders one job at a ti
 _POOL_LOCK = threading.Lock()
 
 
+_STARTING = {}  # variant -> Event set once its worker started by ``prestart`` is in the pool (or failed)
+_STARTER = queue.Queue()  # (variant, timeout, Event) for the one thread that starts them
+_STARTER_THREAD = []
+
+
+def prestart(variants, timeout):
+    """Start an idle worker of each of ``variants`` that the pool lacks, one after another in a
+    thread of their own, and return at once: a run knows its variants once planned, so the second
+    and third variants' Python start and Mitsuba import (about half a second each) overlap the
+    first jobs instead of holding up the render thread when their first job comes (issue 23). The
+    thread lives as long as this process: a child started with PR_SET_PDEATHSIG dies with the
+    *thread* that started it (batch/backends/child.py). A worker that fails to start is dropped:
+    its first job starts one itself and reports why."""
+    for variant in variants:
+        with _POOL_LOCK:
+            if variant in _POOL or variant in _STARTING:
+                continue
+            _STARTING[variant] = started = threading.Event()
+            if not _STARTER_THREAD:
+                _STARTER_THREAD.append(threading.Thread(target=_starter, daemon=True, name="mitsuba-workers"))
+                _STARTER_THREAD[0].start()
+        _STARTER.put((variant, timeout, started))
+
+
+def _starter():
+    while True:
+        variant, timeout, started = _STARTER.get()
+        try:
+            worker = WorkerProcess(variant, timeout)
+        except Exception:  # noqa: BLE001 - the job that needs it starts one and reports the error
+            worker = None
+        with _POOL_LOCK:
+            _STARTING.pop(variant, None)
+            if worker is not None and variant not in _POOL:
+                _POOL[variant], worker = worker, None
+        started.set()
+        if worker is not None:  # a worker of this variant came back to the pool meanwhile
+            worker.close()
+
+
 def _take(variant, timeout):
+    with _POOL_LOCK:
+        starting = _STARTING.get(variant)
+    if starting is not None:  # started by prestart: wait for it rather than start a second one
+        starting.wait(timeout)
     with _POOL_LOCK:
         worker = _POOL.pop(variant, None)
     if worker is not None and worker.alive():
