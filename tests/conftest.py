@@ -1,5 +1,6 @@
 import copy
 import json
+import logging
 import re
 import subprocess
 import sys
@@ -213,3 +214,36 @@ def pytest_xdist_make_scheduler(config, log):
     if LoadScopeScheduling is not None and config.getvalue("dist") == "loadscope":
         return ModuleOrTestScheduling(config, log)
     return None
+
+
+# -- the command line in this process ----------------------------------------------------------------
+@pytest.fixture
+def run_batch_here(monkeypatch, capsys):
+    """batch/run.py's ``main(argv)`` called in this process, as run_batch starts it in a child
+    (working directory ROOT): returns a subprocess.CompletedProcess with its exit status (returned,
+    or argparse's SystemExit) and what it wrote to standard output and error (argparse's messages
+    and the logged errors: setup_logging's handler writes to sys.stderr, here capsys's).
+
+    A child costs a Python start and the runner's imports (0.3-0.4 s of CPU) each time; where a
+    test is about what the runner decides and writes, not the process boundary, this checks the
+    same exit status, messages and files. Each module that uses it keeps a real child for the
+    same kind of run. The "spectral_bench" logger that main() sets up is put back afterwards."""
+    from spectral_bench.batch import run
+    logger = logging.getLogger("spectral_bench")
+    saved = logger.level, list(logger.handlers), logger.propagate
+    monkeypatch.chdir(ROOT)
+
+    def call(*args):
+        argv = ["batch/run.py", *map(str, args)]
+        capsys.readouterr()
+        try:
+            code = run.main(argv)
+        except SystemExit as exc:
+            code = exc.code
+        out, err = capsys.readouterr()
+        return subprocess.CompletedProcess(argv, code, out, err)
+
+    yield call
+    logger.setLevel(saved[0])
+    logger.handlers[:] = saved[1]
+    logger.propagate = saved[2]
