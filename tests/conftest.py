@@ -1,5 +1,6 @@
 import copy
 import json
+import logging
 import re
 import subprocess
 import sys
@@ -180,20 +181,33 @@ except ImportError:  # pytest-xdist not installed: the suite runs in one process
 
 if LoadScopeScheduling is not None:
     class ModuleOrTestScheduling(LoadScopeScheduling):
-        """loadscope whose unit is the module where the module shares a fixture and the test elsewhere;
-        a worker gets its next unit when it has one test left (loadscope: two), so at most one test
-        waits queued on a busy worker while the other may fall idle."""
+        """loadscope whose unit is the module where the module shares a fixture and the test elsewhere,
+        the modules handed out before the single tests; a worker gets its next unit when it has one
+        test left (loadscope: two), so at most one test waits queued on a busy worker while the
+        other may fall idle."""
 
         def __init__(self, config, log=None):
             super().__init__(config, log)
             self._whole = {}  # module path -> shares a fixture (read once)
             self._root = Path(str(config.rootpath))
+            self._ordered = False  # the work queue put in order (_assign_work_unit), once
 
         def _split_scope(self, nodeid):
             module = nodeid.split("::", 1)[0]
             if module not in self._whole:
                 self._whole[module] = shares_a_fixture(self._root / module)
             return module if self._whole[module] else nodeid
+
+        def _assign_work_unit(self, node):
+            """loadscope's, with the whole-module units first (in loadscope's order: most tests
+            first), then the single tests: a module's shared fixture (a batch run, a render) is
+            the longest work there is, and one started last keeps the other workers idle at the end."""
+            if not self._ordered:
+                self._ordered = True
+                units = sorted(self.workqueue.items(), key=lambda unit: "::" in unit[0])  # stable: False (modules) first
+                self.workqueue.clear()
+                self.workqueue.update(units)
+            super()._assign_work_unit(node)
 
         def _reschedule(self, node):
             """loadscope's, with one test waiting behind the running one instead of two (a worker
@@ -213,3 +227,39 @@ def pytest_xdist_make_scheduler(config, log):
     if LoadScopeScheduling is not None and config.getvalue("dist") == "loadscope":
         return ModuleOrTestScheduling(config, log)
     return None
+
+
+# -- the command line in this process ----------------------------------------------------------------
+@pytest.fixture
+def run_batch_here(monkeypatch, capsys):
+    """batch/run.py's ``main(argv)`` called in this process, as run_batch starts it in a child
+    (working directory ROOT): returns a subprocess.CompletedProcess with its exit status (returned,
+    or argparse's SystemExit) and what it wrote to standard output and error (argparse's messages
+    and the logged errors: setup_logging's handler writes to sys.stderr, here capsys's).
+
+    A child costs a Python start and the runner's imports (0.3-0.4 s of CPU) each time; where a
+    test is about what the runner decides and writes, not the process boundary, this checks the
+    same exit status, messages and files. Each module that uses it keeps a real child for the
+    same kind of run. The "spectral_bench" logger that main() sets up is put back afterwards."""
+    from spectral_bench.batch import run
+    logger = logging.getLogger("spectral_bench")
+    saved = logger.level, list(logger.handlers), logger.propagate
+    monkeypatch.chdir(ROOT)
+
+    def call(*args):
+        argv = ["batch/run.py", *map(str, args)]
+        capsys.readouterr()
+        try:
+            code = run.main(argv)
+        except SystemExit as exc:
+            code = exc.code
+        out, err = capsys.readouterr()
+        return subprocess.CompletedProcess(argv, code, out, err)
+
+    yield call
+    for handler in logger.handlers:
+        if handler not in saved[1]:
+            handler.close()  # -l FILE's file handler
+    logger.setLevel(saved[0])
+    logger.handlers[:] = saved[1]
+    logger.propagate = saved[2]

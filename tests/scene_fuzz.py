@@ -108,8 +108,13 @@ def mutated_scenes(draw):
 
 
 def schema_scenes():
-    from hypothesis_jsonschema import from_schema
-    return from_schema(validate.schema())
+    """The schema's scenes, the strategy built when first drawn from (st.deferred): building it
+    (hypothesis-jsonschema's from_schema) takes about 0.5 s, which every pytest-xdist worker paid
+    while collecting tests/test_fuzz_scenes.py, where it is an argument of @given."""
+    def build():
+        from hypothesis_jsonschema import from_schema
+        return from_schema(validate.schema())
+    return st.deferred(build)
 
 
 def scene_text(scene):

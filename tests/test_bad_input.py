@@ -78,17 +78,31 @@ def test_not_json_at_all(tmp_path):
         ir_json.load(p)
 
 
-def test_batch_goes_on_after_bad_scenes_and_exit_status_says_so(golden, tmp_path):
+@pytest.fixture(scope="module")
+def mixed_run(golden, tmp_path_factory):
+    """One Mitsuba run (a run costs about 2 s of CPU whatever it renders) of five inputs: two bad
+    scenes around a good one, then two good scenes of one name ("twin", from two folders); the two
+    tests below check it: (inputs, out, the finished process)."""
+    tmp_path = tmp_path_factory.mktemp("mixed")
     good = write_scene(tmp_path, golden["ggx_glass"])
     bad_paths = []
     for how in ("roughness", "named"):
         sc, _, _ = broken(golden, how)
         sc["name"] = f"bad_{how}"
         bad_paths.append(ir_json.write(sc, tmp_path / f"bad_{how}.json"))
+    a = write_scene(tmp_path / "a", golden["ggx_copper_50"], name="twin")
+    b = write_scene(tmp_path / "b", golden["ggx_copper_60"], name="twin")
     out = tmp_path / "out"
-    proc = run_batch("-r", "mitsuba", "-i", bad_paths[0], good, bad_paths[1], "--scale", 0.125, "--spp", 16, "--no-flip", "-o", out)
+    proc = run_batch("-r", "mitsuba", "-i", bad_paths[0], good, bad_paths[1], a, b, "--scale", 0.125, "--spp", 16,
+                     "--no-flip", "-o", out)
+    return {"twin_a": a, "twin_b": b}, out, proc
+
+
+def test_batch_goes_on_after_bad_scenes_and_exit_status_says_so(mixed_run):
+    _, out, proc = mixed_run
     assert proc.returncode == 1, proc.stderr[-2000:]
-    runs = {r["scene"]: r for r in metrics(out)["runs"]}
+    runs = {r["scene"]: r for r in metrics(out)["runs"] if r["scene"] != "twin"}
+    assert sorted(runs) == ["bad_named", "bad_roughness", "ggx_glass"], runs
     assert runs["ggx_glass"]["status"] == "ok", runs["ggx_glass"]
     for how, field in (("roughness", "bsdf.roughness.alpha"), ("named", "emitter.radiance.name")):
         r = runs[f"bad_{how}"]
@@ -105,15 +119,13 @@ def test_existing_results_are_never_overwritten(golden, tmp_path):
     assert json.loads((out / "metrics.json").read_text()) == {"runs": ["earlier"]}
 
 
-def test_two_inputs_with_one_scene_name_keep_apart(golden, tmp_path):
+def test_two_inputs_with_one_scene_name_keep_apart(mixed_run):
     """Outputs are written per scene name: the second scene of a name fails with the reason, the
     first renders, nothing is mixed."""
-    a = write_scene(tmp_path / "a", golden["ggx_copper_50"], name="twin")
-    b = write_scene(tmp_path / "b", golden["ggx_copper_60"], name="twin")
-    out = tmp_path / "out"
-    proc = run_batch("-i", a, b, "-r", "mitsuba", "--scale", 0.0625, "--no-flip", "-o", out)
-    runs = metrics(out)["runs"]
-    assert [r["scene"] for r in runs] == ["twin", "twin"]
+    inputs, out, proc = mixed_run
+    a = inputs["twin_a"]
+    runs = [r for r in metrics(out)["runs"] if r["scene"] == "twin"]
+    assert len(runs) == 2, runs
     # the first (no reference, no probe for a plate on a floor) renders; the second is refused
     by_status = {r["status"]: r for r in runs}
     assert sorted(by_status) == ["failed", "unjudged"], runs

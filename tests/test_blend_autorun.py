@@ -44,9 +44,11 @@ def run_child(code, timeout=300, auto_run=True):
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
-@pytest.fixture
-def evil(tmp_path):
-    """(the hostile .blend, its marker folder): canonical scene SCENE plus the code it carries."""
+@pytest.fixture(scope="module")
+def evil_blend(tmp_path_factory):
+    """(the hostile .blend, its marker folder): canonical scene SCENE plus the code it carries;
+    built once for the module (a bpy child), read by every test (none writes to it)."""
+    tmp_path = tmp_path_factory.mktemp("evil")
     markers = tmp_path / "markers"
     markers.mkdir()
     blend = tmp_path / "evil.blend"
@@ -89,6 +91,16 @@ def evil(tmp_path):
         print(json.dumps(sorted(os.listdir({str(markers)!r}))))
     """, auto_run=False)
     assert not any(markers.iterdir())  # building it ran nothing
+    return blend, markers
+
+
+@pytest.fixture
+def evil(evil_blend):
+    """The module's hostile .blend with its marker folder emptied: each test sees only the markers
+    its own children write."""
+    blend, markers = evil_blend
+    for marker in markers.iterdir():
+        marker.unlink()
     return blend, markers
 
 

@@ -80,37 +80,21 @@ def test_copper_geometry_follows_the_thesis(extracted):
     assert sc["camera"]["fov"] == pytest.approx(34.0221, abs=1e-4)  # Mitsuba's default 50 mm camera
 
 
-def test_blender_side_errors_name_scene_object_field():
-    out = bpy_script("""
-        sc = bpy.data.scenes["ggx_copper_60"]
-        sc.objects["copper_plate_60"].active_material.spectral_bench.alpha = -0.5
-        sc.objects["floor"].active_material.spectral_bench.kind = "NONE"
-        try:
-            extract_blender.extract_scene(sc)
-            print(json.dumps(None))
-        except validate.SceneError as e:
-            print(json.dumps({"problems": e.problems, "text": str(e)}))
-    """)
-    fields = {(o, f) for o, f, _ in out["problems"]}
-    assert ("floor", "material[grey_0.5].spectral_bench.kind") in fields
-    assert "ggx_copper_60" in out["text"]
-
-
-def test_negative_roughness_from_blender_is_rejected_with_its_field():
-    out = bpy_script("""
-        sc = bpy.data.scenes["ggx_copper_60"]
-        sc.objects["copper_plate_60"].active_material.spectral_bench.alpha = -0.5
-        try:
-            extract_blender.extract_scene(sc)
-            print(json.dumps(None))
-        except validate.SceneError as e:
-            print(json.dumps({"problems": e.problems}))
-    """)
-    assert ["copper_plate_60", "bsdf.roughness.alpha", "must be a finite number >= 0, got -0.5"] in out["problems"]
-
-
-def test_mesh_objects_export_with_their_triangles_and_a_missing_mesh_is_named():
-    out = bpy_script("""
+@pytest.fixture(scope="module")
+def edited():
+    """The Blender-side edits of the tests below, made in one bpy child in this order (scenes.blend
+    read once, not once per test): a mesh object and an empty mesh in ggx_glass; then ggx_copper_60
+    with a negative roughness alone, then also with the material kind NONE on its floor (the first
+    edit is part of the second; that material, grey_0.5, is shared with ggx_glass, so that edit
+    comes last). Each step's result is its test's input."""
+    return bpy_script("""
+        def problems(sc):
+            try:
+                extract_blender.extract_scene(sc)
+                return None
+            except validate.SceneError as e:
+                return {"problems": e.problems, "text": str(e)}
+        out = {}
         sc = bpy.data.scenes["ggx_glass"]
         mesh = bpy.data.meshes.new("tri")
         mesh.from_pydata([(0, 0, 0), (1, 0, 0), (0, 1, 0), (1, 1, 0)], [], [(0, 1, 3, 2)])
@@ -123,13 +107,31 @@ def test_mesh_objects_export_with_their_triangles_and_a_missing_mesh_is_named():
         empty = bpy.data.objects.new("empty_mesh", bpy.data.meshes.new("nothing"))
         empty.data.materials.append(bpy.data.materials["grey_0.5"])
         sc.collection.objects.link(empty)
-        try:
-            extract_blender.extract_scene(sc)
-            err = None
-        except validate.SceneError as e:
-            err = e.problems
-        print(json.dumps({"quad": quad, "err": err}))
+        err = problems(sc)
+        out["mesh"] = {"quad": quad, "err": err and err["problems"]}
+        sc = bpy.data.scenes["ggx_copper_60"]
+        sc.objects["copper_plate_60"].active_material.spectral_bench.alpha = -0.5
+        out["negative_roughness"] = problems(sc)
+        sc.objects["floor"].active_material.spectral_bench.kind = "NONE"
+        out["errors"] = problems(sc)
+        print(json.dumps(out))
     """)
+
+
+def test_blender_side_errors_name_scene_object_field(edited):
+    out = edited["errors"]
+    fields = {(o, f) for o, f, _ in out["problems"]}
+    assert ("floor", "material[grey_0.5].spectral_bench.kind") in fields
+    assert "ggx_copper_60" in out["text"]
+
+
+def test_negative_roughness_from_blender_is_rejected_with_its_field(edited):
+    out = edited["negative_roughness"]
+    assert ["copper_plate_60", "bsdf.roughness.alpha", "must be a finite number >= 0, got -0.5"] in out["problems"]
+
+
+def test_mesh_objects_export_with_their_triangles_and_a_missing_mesh_is_named(edited):
+    out = edited["mesh"]
     assert out["quad"]["shape"]["type"] == "mesh"
     assert len(out["quad"]["shape"]["faces"]) == 2 and len(out["quad"]["shape"]["vertices"]) == 4
     assert out["quad"]["shape"]["to_world"][2][3] == -2.0

@@ -219,7 +219,8 @@ def test_command_line_and_settings_declare_renderers(tmp_path):
     (["--renderers", "{bad}"], "bad.toml"),
     (["--renderers", "{missing}"], "missing.toml"),
 ])
-def test_runner_refuses_unknown_renderers_with_exit_2(tmp_path, args, words):
+def test_runner_refuses_unknown_renderers_with_exit_2(tmp_path, run_batch_here, args, words):
+    """The first case through a real child, the others through batch/run.py's main() in this process."""
     bad = write_toml(tmp_path / "bad.toml", '''
         [renderers.ring]
         command = ["ring", "{scene}"]
@@ -227,8 +228,11 @@ def test_runner_refuses_unknown_renderers_with_exit_2(tmp_path, args, words):
         models = []
         ''')
     args = [a.format(bad=bad, missing=tmp_path / "missing.toml") for a in args]
-    proc = subprocess.run([sys.executable, str(RUN), *args, "--list", "-o", str(tmp_path / "out")],
-                          capture_output=True, text=True, timeout=300)
+    if args == ["-r", "ring"]:
+        proc = subprocess.run([sys.executable, str(RUN), *args, "--list", "-o", str(tmp_path / "out")],
+                              capture_output=True, text=True, timeout=300)
+    else:
+        proc = run_batch_here(*args, "--list", "-o", tmp_path / "out")
     assert proc.returncode == 2, proc.stdout + proc.stderr
     assert words in proc.stderr
 

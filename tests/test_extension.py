@@ -171,28 +171,31 @@ def test_the_documented_build_fits_with_margin_records_its_size_and_ships_every_
 
 
 
-def test_repository_manifest_validates(tmp_path):
-    out = run_bpy(f"""
-        import json, bpy
-        from bl_pkg import bl_extension_cli
-        print(json.dumps(bl_extension_cli.cli_extension_handler(["validate", {str(ROOT)!r}])))
-    """, tmp_path / "user")
-    assert out == 0
-
-
-def test_manifest_rejected_when_broken(tmp_path):
-    """The validator is a real check: a manifest with a bad field fails it."""
+@pytest.fixture(scope="module")
+def manifest_checks(tmp_path_factory):
+    """Blender's own extension validator (bl_pkg's ``validate``) on the repository and on a copy of
+    its manifest with a bad id, both in one bpy child: {"repository": exit code, "broken": exit code}."""
+    tmp_path = tmp_path_factory.mktemp("manifests")
     src = tmp_path / "ext"
     src.mkdir()
     (src / "__init__.py").write_text("def register(): pass\ndef unregister(): pass\n")
     text = (ROOT / "blender_manifest.toml").read_text().replace('id = "spectral_bench"', 'id = "spectral bench!"')
     (src / "blender_manifest.toml").write_text(text)
-    out = run_bpy(f"""
+    return run_bpy(f"""
         import json, bpy
         from bl_pkg import bl_extension_cli
-        print(json.dumps(bl_extension_cli.cli_extension_handler(["validate", {str(src)!r}])))
+        print(json.dumps({{"repository": bl_extension_cli.cli_extension_handler(["validate", {str(ROOT)!r}]),
+                          "broken": bl_extension_cli.cli_extension_handler(["validate", {str(src)!r}])}}))
     """, tmp_path / "user")
-    assert out != 0
+
+
+def test_repository_manifest_validates(manifest_checks):
+    assert manifest_checks["repository"] == 0
+
+
+def test_manifest_rejected_when_broken(manifest_checks):
+    """The validator is a real check: a manifest with a bad field fails it."""
+    assert manifest_checks["broken"] != 0
 
 
 def test_install_enable_export_unregister(extension_zip, tmp_path):

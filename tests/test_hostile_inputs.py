@@ -42,7 +42,9 @@ HOSTILE = {
 
 
 @pytest.mark.parametrize("case", sorted(HOSTILE))
-def test_a_hostile_scene_file_fails_alone_naming_file_and_field(tmp_path, case):
+def test_a_hostile_scene_file_fails_alone_naming_file_and_field(tmp_path, run_batch_here, case):
+    """Through batch/run.py's main() in this process (the same run as a child's; the real child of
+    this kind: test_repeated_input_options_accumulate, test_a_blend_file_that_is_no_blend_fails_alone)."""
     fname, content, field, label = HOSTILE[case]
     bad = tmp_path / "in" / fname
     bad.parent.mkdir()
@@ -50,7 +52,7 @@ def test_a_hostile_scene_file_fails_alone_naming_file_and_field(tmp_path, case):
     out = tmp_path / "sandbox" / "out"
     out.parent.mkdir()
     before = sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*"))
-    proc = run_batch("-i", bad, GOLDEN / f"{GOOD}.json", "--export-only", "--format", "json", "-o", out)
+    proc = run_batch_here("-i", bad, GOLDEN / f"{GOOD}.json", "--export-only", "--format", "json", "-o", out)
     assert "Traceback" not in proc.stderr, proc.stderr[-3000:]
     assert proc.returncode == 1, proc.stderr[-2000:]
     runs = metrics(out)["runs"]

@@ -49,8 +49,17 @@ def history(out):
     (["--scale", "0"], "argument --scale: '0'"),
     (["-r", "toy"], "-r toy: unknown backend or declared renderer"),  # declared nowhere
 ])
-def test_bad_options_are_usage_errors_naming_the_option(tmp_path, args, named):
-    proc = maker(*args, "--out", tmp_path / "refs", timeout=120)
+def test_bad_options_are_usage_errors_naming_the_option(tmp_path, monkeypatch, capsys, args, named):
+    """batch/make_references.py's main() in this process (a child costs a Python start each; the
+    real children of a usage error: the two tests below)."""
+    from spectral_bench.batch import make_references
+    monkeypatch.chdir(ROOT)
+    nothing = tmp_path / "no_scene.json"  # were an option let through, nothing would render in this process
+    try:
+        code = make_references.main([*map(str, args), "-i", str(nothing), "--out", str(tmp_path / "refs")])
+    except SystemExit as exc:  # argparse's own errors
+        code = exc.code
+    proc = subprocess.CompletedProcess(args, code, *capsys.readouterr())
     assert proc.returncode == 2, proc.stdout + proc.stderr
     assert named in proc.stderr
     assert not (tmp_path / "refs").exists() or not any((tmp_path / "refs").glob("*.exr"))
