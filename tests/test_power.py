@@ -62,7 +62,7 @@ def test_help_says_which_scales_are_judged():
     assert "integer" in text and "nearest scale" in text and "exit 2" in text
 
 
-def test_non_dividing_scale_renders_at_the_nearest_judged_one(tmp_path):
+def test_non_dividing_scale_renders_at_the_nearest_judged_one(tmp_path, run_batch_here):
     """--scale 0.125 does not divide 620x420: the chart renders at 0.1 (62x42), said in the log, and
     that render is judged like one asked for at --scale 0.1 (noise test, scale test, detectable
     size with the patches' colour difference); a scale above 1 is refused (exit 2, nothing written)."""
@@ -78,8 +78,8 @@ def test_non_dividing_scale_renders_at_the_nearest_judged_one(tmp_path):
     det = run["detectable"]
     assert det["power"] == 0.9 and det["alpha"] == 0.01 and 0 < det["scale"] < 1, det
     assert det["patch_de00"] > 0 and det["probes"], det
-    finer = run_batch("-i", GOLDEN / "macbeth_chart_D65.json", "-r", "mitsuba", "--scale", "2", "--spp", "4",
-                      "--no-flip", "-o", tmp_path / "finer")
+    finer = run_batch_here("-i", GOLDEN / "macbeth_chart_D65.json", "-r", "mitsuba", "--scale", "2", "--spp", "4",
+                           "--no-flip", "-o", tmp_path / "finer")  # refused before anything renders: in this process
     assert finer.returncode == 2 and "macbeth_chart_D65" in finer.stderr, finer.stderr[-2000:]
     assert not (tmp_path / "finer" / "metrics.json").exists()
 
