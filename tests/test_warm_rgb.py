@@ -1,9 +1,9 @@
-"""The warm Cycles worker (batch/backends/cycles/worker.py ``serve``, kept across jobs by
-batch/backends/warm.py; issue 23): one worker builds and renders scene after scene exactly as
-fresh child processes (the ``build`` and ``render`` subcommands) do, so no request sees another's
-data; a worker killed mid-render fails only that pass (retried on a fresh worker) or job, and the
+"""The warm Cycles and LuxCore workers (batch/backends/{cycles,luxcore}/worker.py ``serve``, kept
+across jobs by batch/backends/warm.py; issue 23): one worker builds and renders scene after scene
+as fresh child processes (the command lines a user re-runs) do - Cycles pixel for pixel, LuxCore
+within its own noise - so no request sees another's data; a worker killed mid-render fails only that pass (retried on a fresh worker) or job, and the
 next job renders on a fresh worker; a render past its time limit kills its worker. Every render
-here is real (bpy), 16x16 to 24x24 pixels."""
+here is real (bpy, pyluxcore), 16x16 to 24x24 pixels."""
 import json
 import os
 import signal
@@ -18,9 +18,14 @@ import pytest
 from spectral_bench.batch import backends, exr
 from spectral_bench.batch.backends import passes, warm
 from spectral_bench.batch.backends.cycles import backend as cycles_backend
+from spectral_bench.batch.backends.luxcore import backend as luxcore_backend
+from spectral_bench.batch.verdict import stats
 from spectral_bench.exporters import ir, rgb_scene
 
-pytestmark = pytest.mark.skipif(not backends.get("cycles").availability()[0], reason="bpy is not installed")
+RGB = [n for n in ("cycles", "luxcore") if backends.get(n).availability()[0]]
+pytestmark = pytest.mark.skipif(not RGB, reason="neither bpy nor pyluxcore is installed")
+needs_cycles = pytest.mark.skipif("cycles" not in RGB, reason="bpy is not installed")
+needs_luxcore = pytest.mark.skipif("luxcore" not in RGB, reason="pyluxcore is not installed")
 
 HUGE_SPP = 1_000_000  # minutes per pass at 24x24: a render that is surely under way when it is killed
 
@@ -81,6 +86,7 @@ def _warm(scene_json, blend, folder, spp, seed, tag):
 
 
 @pytest.mark.slow
+@needs_cycles
 def test_one_warm_worker_renders_scene_after_scene_as_fresh_children(tmp_path):
     """A, then B (same scene and object names, another albedo and lamp position), then A's .blend
     again, all on one warm worker: each image equals, pixel for pixel, the fresh children's
@@ -102,9 +108,48 @@ def test_one_warm_worker_renders_scene_after_scene_as_fresh_children(tmp_path):
     assert np.abs(other_seed - fresh_a).max() > 0  # the seed reaches the render (equality above means something)
 
 
-def _job(scene, folder):
-    """The scene exported for Cycles (on the warm worker): (blend, mode, backend)."""
-    b = backends.get("cycles")
+@pytest.mark.slow
+@needs_luxcore
+def test_one_warm_luxcore_worker_renders_scene_after_scene_as_fresh_children(tmp_path):
+    """LuxCore stops between polls, so two renders of one seed differ in their last samples: A,
+    then B, then A again on one warm worker each agree with a fresh child's render of that scene
+    in the mean over pixels, within the renders' own pixel-to-pixel noise (stats.region_mean_test
+    on the pixel differences: pixels are independent, one-pixel box and RANDOM sampler), and A's
+    render is told apart from B's by the same test."""
+    b = backends.get("luxcore")
+    scenes = {"a": _lamp_scene(0.5, 0.0), "b": _lamp_scene(0.45, 0.1)}
+    cfgs = {k: b.export(sc, tmp_path / k) for k, sc in scenes.items()}
+
+    def one(key, fresh, tag):
+        out, res = tmp_path / f"{key}_{tag}.npy", tmp_path / f"{key}_{tag}.json"
+        args = {"cfg": str(cfgs[key]), "mode": "rgb", "spp": 64, "passes": 1, "seed": 5, "timeout": 300,
+                "out": str(out), "result": str(res)}
+        if fresh:
+            cmd = [sys.executable, str(luxcore_backend.WORKER)] + [f"--{k}={v}" for k, v in args.items()]
+            proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+            assert proc.returncode == 0, proc.stderr[-2000:]
+        else:
+            warm.call("luxcore", luxcore_backend.SERVE, "LuxCore", {"render": args, "log": str(tmp_path / "warm.log")},
+                      300, "render")
+        return np.load(out)[0]
+
+    fresh = {k: one(k, True, "fresh") for k in scenes}
+    warm_a = one("a", False, "first")
+    pid = warm.idle("luxcore").pid
+    warm_renders = {"a": warm_a, "b": one("b", False, "first"), "a2": one("a", False, "again")}
+    assert warm.idle("luxcore").pid == pid  # one worker served all of them
+
+    def agree(x, y):
+        return stats.region_mean_test((x - y).reshape(-1, 3), tests=3)["pass"]
+
+    for key, img in warm_renders.items():
+        assert agree(img, fresh[key[0]]), key
+    assert not agree(warm_renders["a2"], fresh["b"])  # the test can tell the two scenes apart
+
+
+def _job(scene, folder, name="cycles"):
+    """The scene exported for ``name`` (Cycles: on the warm worker): (path, mode, backend)."""
+    b = backends.get(name)
     mode, why = b.mode_for(scene)
     assert mode, why
     blend = b.export(scene, folder / "export")
@@ -123,10 +168,11 @@ def _kill_renders(count, killed, stop):
 
 
 @pytest.mark.slow
-def test_a_worker_killed_mid_render_fails_only_that_job(tmp_path):
+@pytest.mark.parametrize("name", RGB)
+def test_a_worker_killed_mid_render_fails_only_that_job(tmp_path, name):
     """SIGKILL of the worker under a pass: the pass is retried on a fresh worker (another pid);
     killed again, the job fails naming the pass; the next job renders on a fresh worker."""
-    blend, mode, b = _job(_lamp_scene(0.5, 0.0, size=24), tmp_path / "killed")
+    blend, mode, b = _job(_lamp_scene(0.5, 0.0, size=24), tmp_path / "killed", name)
     killed, stop = [], threading.Event()
     killer = threading.Thread(target=_kill_renders, args=(2, killed, stop), daemon=True)
     killer.start()
@@ -140,21 +186,22 @@ def test_a_worker_killed_mid_render_fails_only_that_job(tmp_path):
     assert len(set(killed)) == 2, killed  # the retry ran on a fresh worker
     assert "failed twice" in str(err.value) and "exited with -9" in str(err.value), str(err.value)
     assert "timed out" not in str(err.value)
-    blend2, mode2, _ = _job(_lamp_scene(0.2, 0.4), tmp_path / "next")
+    blend2, mode2, _ = _job(_lamp_scene(0.2, 0.4), tmp_path / "next", name)
     info = b.render(blend2, mode2, 8, tmp_path / "next" / "render.exr", passes=2, log_path=tmp_path / "next" / "render.log")
     assert info["passes"] == 2 and "retried" not in info
-    assert warm.idle("cycles").pid not in killed and warm.idle("cycles").alive()
+    assert warm.idle(name).pid not in killed and warm.idle(name).alive()
 
 
 @pytest.mark.slow
-def test_a_render_past_its_time_limit_kills_the_worker_and_the_next_job_renders(tmp_path):
-    blend, mode, b = _job(_lamp_scene(0.5, 0.0, size=24), tmp_path / "slow")
+@pytest.mark.parametrize("name", RGB)
+def test_a_render_past_its_time_limit_kills_the_worker_and_the_next_job_renders(tmp_path, name):
+    blend, mode, b = _job(_lamp_scene(0.5, 0.0, size=24), tmp_path / "slow", name)
     """A pass that overruns its limit (a hang, as far as the backend can tell) fails its job
     without a retry, its worker killed and not kept; the next job renders on a fresh worker."""
     with pytest.raises(passes.BackendFailure, match="timed out"):
         b.render(blend, mode, HUGE_SPP, tmp_path / "slow" / "render.exr", passes=1, timeout=5,
                  log_path=tmp_path / "slow" / "render.log")
-    assert not warm.busy() and warm.idle("cycles") is None  # the overrunning worker was killed, not kept
-    blend2, mode2, _ = _job(_lamp_scene(0.2, 0.4), tmp_path / "next")
+    assert not warm.busy() and warm.idle(name) is None  # the overrunning worker was killed, not kept
+    blend2, mode2, _ = _job(_lamp_scene(0.2, 0.4), tmp_path / "next", name)
     info = b.render(blend2, mode2, 8, tmp_path / "next" / "render.exr", passes=2, log_path=tmp_path / "next" / "render.log")
-    assert info["passes"] == 2 and warm.idle("cycles").alive()
+    assert info["passes"] == 2 and warm.idle(name).alive()

@@ -1,11 +1,11 @@
-"""Warm worker processes of the RGB backends (Cycles; issue 23: no per-job import), kept idle in a
+"""Warm worker processes of the RGB backends (Cycles, LuxCore; issue 23: no per-job import), kept idle in a
 pool across jobs as the Mitsuba backend keeps its own (batch/backends/mitsuba/backend.py).
 
 A worker is a child process (it dies with this one: child.popen_kwargs) that answers one JSON
 line ``{"ready": true, ...}`` once started, then one JSON reply line per JSON request line; a
 request carries ``"log": path``, the file the worker appends what it prints while serving it.
 A worker that overruns a request's time limit (PassTimeout), dies (BackendFailure), or answers
-``{"ok": false, "error": ...}`` (BackendFailure) is killed and never returned to the pool: that
+``{"ok": false, "error": ...}`` (BackendFailure; with ``"timed_out": true`` PassTimeout) is killed and never returned to the pool: that
 request's pass or job fails alone, and the next request gets a fresh worker. Idle workers are
 closed at exit.
 """
@@ -48,6 +48,8 @@ class Worker:
             except (OSError, AttributeError) as exc:
                 raise BackendFailure(f"{self.label} worker stopped before {what}: {exc}") from exc
             reply = self._reply(timeout, what)
+            if reply.get("timed_out"):  # the worker stopped itself at the request's own limit
+                raise PassTimeout(f"{self.label} worker: {what}: {reply.get('error', 'timed out')}")
             if not reply.get("ok"):
                 raise BackendFailure(f"{self.label} worker failed {what}: {reply.get('error', reply)}")
             return reply
