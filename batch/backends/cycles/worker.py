@@ -252,7 +252,7 @@ def _redirect(target):
     sys.stderr.flush()
     try:
         ctypes.CDLL(None).fflush(None)  # C stdio buffers (Blender's printf) go to the old target
-    except (OSError, AttributeError):
+    except (OSError, AttributeError, TypeError):  # no C library to flush by that name (not Linux/macOS)
         pass
     fd = target if isinstance(target, int) else os.open(target, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
     os.dup2(fd, 1)

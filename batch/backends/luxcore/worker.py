@@ -104,8 +104,8 @@ def _redirect(target):
     sys.stdout.flush()
     sys.stderr.flush()
     try:
-        ctypes.CDLL(None).fflush(None)
-    except (OSError, AttributeError):
+        ctypes.CDLL(None).fflush(None)  # C stdio buffers (LuxCore's logger) go to the old target
+    except (OSError, AttributeError, TypeError):  # no C library to flush by that name (not Linux/macOS)
         pass
     fd = target if isinstance(target, int) else os.open(target, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
     os.dup2(fd, 1)
