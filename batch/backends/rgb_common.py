@@ -1,6 +1,7 @@
 """What the RGB backends (Cycles, LuxCore) share: deciding the mode from what the scene needs
-(rgb_scene.problems), exporting the reduced scene, running a child process under a time limit,
-and writing independent passes as a mean and its standard error (as mitsuba/worker.py does).
+(rgb_scene.problems), exporting the reduced scene, and writing independent passes as a mean and
+its standard error (as mitsuba/worker.py does). Their renders run in warm workers
+(batch/backends/warm.py).
 
 Modes: ``rgb`` (spectra reduced to RGB by exporters/rgb_reduction.py's rule: always, that is what
 these backends measure) and ``rgb-approx`` (``--approximate``: something the renderer cannot
@@ -10,16 +11,12 @@ and field named.
 """
 import json
 import math
-import subprocess
-import time
 from pathlib import Path
 
 import numpy as np
 
 from ...exporters import rgb_scene
 from .. import exr
-from . import child
-from .passes import BackendFailure
 
 MODE = "rgb"
 APPROX_MODE = "rgb-approx"
@@ -61,26 +58,6 @@ def reduction_of(export_path):
     """reduction.json of an exported folder (what was reduced and approximated)."""
     path = Path(export_path).parent / "reduction.json"
     return json.loads(path.read_text()) if path.is_file() else {}
-
-
-def run_child(cmd, timeout, log_path, what, env=None, cwd=None):
-    """Run a worker; BackendFailure on a time-out, a crash or a non-zero exit (with its tail)."""
-    t0 = time.perf_counter()
-    try:
-        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, env=env, cwd=cwd,
-                              **child.popen_kwargs())
-    except subprocess.TimeoutExpired as exc:
-        if log_path:
-            Path(log_path).write_text(f"$ {' '.join(map(str, cmd))}\n(timed out after {timeout} s)\n"
-                                      f"{exc.stdout or ''}\n{exc.stderr or ''}")
-        raise BackendFailure(f"{what} timed out after {timeout} s") from exc
-    if log_path:
-        Path(log_path).write_text(f"$ {' '.join(map(str, cmd))}\n{proc.stdout}\n{proc.stderr}")
-    if proc.returncode != 0:
-        lines = (proc.stderr.strip() or proc.stdout.strip()).splitlines()
-        tail = [l for l in lines if "Error" in l or "error" in l][-3:] or lines[-3:]
-        raise BackendFailure(f"{what} exited with {proc.returncode}: {' | '.join(tail)[-600:]}")
-    return time.perf_counter() - t0
 
 
 def expand(image, film_scale=1.0, stokes=False):

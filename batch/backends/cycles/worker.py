@@ -4,6 +4,7 @@
     python batch/backends/cycles/worker.py build --scene scene_rgb.json --blend scene.blend
     python batch/backends/cycles/worker.py render --blend scene.blend --spp 64 --passes 2 \
         --seed 0 --out render.exr --result result.json
+    python batch/backends/cycles/worker.py serve    # warm: JSON requests on stdin (``serve``)
 
 The .blend holds everything a user needs to re-render it in Blender (Cycles, CPU). How the
 reduced scene (exporters/rgb_scene.py) maps to Cycles (bpy 5.0.1; Cycles source
@@ -36,6 +37,7 @@ intern/cycles/kernel/svm/closure.h for the roughness conventions):
 import argparse
 import json
 import math
+import os
 import sys
 import tempfile
 import time
@@ -239,11 +241,70 @@ def render(args):
               "versions": {"blender": bpy.app.version_string, "cycles": "bpy " + bpy.app.version_string,
                            "numpy": np.__version__, "python": sys.version.split()[0]}}
     Path(args.result).write_text(json.dumps(result, indent=1))
+    return result
+
+
+def _redirect(target):
+    """Point this process's fds 1 and 2 (what bpy and Blender's C code print) at ``target`` (a
+    path, appended to, or an open fd), after flushing what Python and C stdio still hold for the previous target."""
+    import ctypes
+    sys.stdout.flush()
+    sys.stderr.flush()
+    try:
+        ctypes.CDLL(None).fflush(None)  # C stdio buffers (Blender's printf) go to the old target
+    except (OSError, AttributeError, TypeError):  # no C library to flush by that name (not Linux/macOS)
+        pass
+    fd = target if isinstance(target, int) else os.open(target, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+    os.dup2(fd, 1)
+    os.dup2(fd, 2)
+    if fd != target:
+        os.close(fd)
+
+
+SERVE = {"build": lambda req: build(json.loads(Path(req["scene"]).read_text()), Path(req["blend"]).resolve()),
+         "render": lambda req: render(argparse.Namespace(
+             blend=req["blend"], mode=req.get("mode", "rgb"), spp=int(req["spp"]), passes=int(req.get("passes", 1)),
+             seed=int(req.get("seed", 0)), out=req["out"], result=req["result"]))}
+
+
+def serve():
+    """A warm worker (batch/backends/cycles/backend.py keeps one across jobs): bpy is imported
+    once, then every JSON request line on stdin is answered by one JSON line on the original
+    stdout: ``{"build": {"scene": ..., "blend": ...}, "log": path}`` or ``{"render": {"blend": ...,
+    "mode": ..., "spp": ..., "passes": ..., "seed": ..., "out": ..., "result": ...}, "log": path}``
+    run exactly what the ``build`` and ``render`` subcommands run (a build starts from factory
+    settings and an empty file, a render opens its .blend: no request sees another's data) and
+    are answered ``{"ok": true, "result": ...}`` or ``{"ok": false, "error": ...}``. What bpy prints
+    during a request goes to that request's log, between requests to stderr. Ends when stdin closes."""
+    import traceback
+    reply = os.fdopen(os.dup(1), "w", buffering=1)
+    own_err = os.dup(2)
+    os.dup2(2, 1)  # whatever else prints goes to stderr, never into the replies
+    t0 = time.perf_counter()
+    _bootstrap()
+    import bpy
+    reply.write(json.dumps({"ready": True, "blender": bpy.app.version_string, "start_s": time.perf_counter() - t0}) + "\n")
+    for line in sys.stdin:
+        if not line.strip():
+            continue
+        req = json.loads(line)
+        kind = next((k for k in SERVE if k in req), None)
+        _redirect(req.get("log") or os.devnull)
+        try:
+            if kind is None:
+                raise ValueError(f"a request names none of {', '.join(SERVE)}: {sorted(req)}")
+            out = {"ok": True, "result": SERVE[kind](req[kind])}
+        except Exception as exc:  # noqa: BLE001 - reported to the backend, which fails that pass or job
+            traceback.print_exc()
+            out = {"ok": False, "error": f"{type(exc).__name__}: {exc}"}
+        _redirect(own_err)
+        reply.write(json.dumps(out) + "\n")
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser()
     sub = ap.add_subparsers(dest="cmd", required=True)
+    sub.add_parser("serve", help="warm worker: JSON requests on stdin (serve's docstring)")
     b = sub.add_parser("build")
     b.add_argument("--scene", required=True)
     b.add_argument("--blend", required=True)
@@ -256,6 +317,8 @@ def main(argv=None):
     r.add_argument("--out", required=True)
     r.add_argument("--result", required=True)
     args = ap.parse_args(argv)
+    if args.cmd == "serve":
+        return serve()
     _bootstrap()
     if args.cmd == "build":
         build(json.loads(Path(args.scene).read_text()), Path(args.blend).resolve())

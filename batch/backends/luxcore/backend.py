@@ -1,7 +1,10 @@
 """LuxCoreRender backend (``-r luxcore``): the IR reduced to RGB (exporters/rgb_reduction.py),
 written as LuxCore SDL (exporters/luxcore_writer.py: scene.scn, render.cfg, meshes/*.ply; every
-setting is listed there) and rendered on CPU by pyluxcore 2.11.2 in a child process
-(batch/backends/luxcore/worker.py), which polls the session and stops it at the time limit.
+setting is listed there) and rendered on CPU by pyluxcore 2.11.2 in a warm child process kept
+across jobs (batch/backends/luxcore/worker.py ``serve``, batch/backends/warm.py: issue 23, one
+pyluxcore import per run instead of one per pass), one pass per request; it parses each request's
+scene anew, polls the session and stops it at the time limit. A worker that fails, dies or
+overruns is killed and fails only its pass; the next pass or job gets a fresh one.
 
 LuxCore is an RGB renderer (its wavelength sampling serves only glass dispersion, not mapped yet);
 it has no Beckmann distribution and no polarisation. What a scene needs beyond that is reported
@@ -10,6 +13,7 @@ approximation.
 """
 import importlib.util
 import json
+import os
 import sys
 from pathlib import Path
 
@@ -17,10 +21,12 @@ import numpy as np
 
 from ....exporters import luxcore_writer
 from .. import passes as passes_mod
+from .. import warm
 from ..rgb_common import RgbBackend, expand, reduction_of
 
 WORKER = Path(__file__).resolve().parent / "worker.py"
 GRACE_S = 30  # the worker stops itself at the time limit; it is killed this much later
+SERVE = [sys.executable, str(WORKER), "serve"]
 
 
 class LuxCoreBackend(RgbBackend):
@@ -43,7 +49,7 @@ class LuxCoreBackend(RgbBackend):
         return passes_mod.render(self, cfg, mode, spp, out_exr, passes, seed, timeout, log_path)
 
     def session(self, cfg, mode, log):
-        """One pyluxcore child process per pass."""
+        """One request to the warm pyluxcore worker per pass."""
         meta = reduction_of(cfg)
         return passes_mod.OneProcessPerPass(
             lambda spp, seed, out, timeout, log: self._pass(cfg, mode, spp, seed, out, timeout, log, meta),
@@ -52,16 +58,13 @@ class LuxCoreBackend(RgbBackend):
     def _pass(self, cfg, mode, spp, seed, out, timeout, log, meta):
         result = Path(out).with_suffix(".result.json")
         stack = Path(out).with_suffix(".npy")
-        cmd = [sys.executable, str(WORKER), "--cfg", str(cfg), "--mode", mode, "--spp", str(spp),
-               "--passes", "1", "--seed", str(seed), "--timeout", str(timeout),
-               "--out", str(stack), "--result", str(result)]
-        try:
-            passes_mod.run_command(cmd, timeout + GRACE_S, log, "LuxCore render")
-        except passes_mod.BackendFailure as exc:
-            if "exited with 3" in str(exc):  # the worker's own time limit (luxcore/worker.py TIMEOUT_EXIT)
-                raise passes_mod.PassTimeout(f"LuxCore render timed out after {timeout} s") from exc
-            raise
-        info = json.loads(result.read_text())
+        request = {"cfg": str(cfg), "mode": mode, "spp": spp, "passes": 1, "seed": seed, "timeout": timeout,
+                   "out": str(stack), "result": str(result)}
+        log.write(f"# warm LuxCore worker ({' '.join(SERVE)}): {json.dumps(request)}\n")
+        log.flush()
+        name = getattr(log, "name", None)
+        info = warm.call("luxcore", SERVE, "LuxCore", {"render": request, "log": name if isinstance(name, str) else os.devnull},
+                         timeout + GRACE_S, f"rendering {spp} spp with seed {seed}")["result"]
         names, img = expand(np.load(stack)[0], meta.get("film_scale", 1.0), meta.get("stokes", False))
         stack.unlink()
         # LuxCore stops between polls: the samples actually taken are the pass's spp (luxcore/worker.py)

@@ -3,6 +3,7 @@ passes and save them (the backend writes their mean and standard error as EXR).
 
     python batch/backends/luxcore/worker.py --cfg render.cfg --spp 64 --passes 2 --seed 0 \
         --timeout 1800 --out passes.npy --result result.json
+    python batch/backends/luxcore/worker.py serve    # warm: JSON requests on stdin (``serve``)
 
 This process imports nothing but pyluxcore and numpy, pyluxcore first: pyluxcore 2.11.2 bundles
 its own OpenEXR/TBB (tbbmalloc_proxy replaces malloc), and with the OpenEXR Python package loaded
@@ -26,6 +27,7 @@ are identical, measured.)
 import argparse
 import json
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -34,33 +36,28 @@ POLL_S = 0.001
 TIMEOUT_EXIT = 3
 
 
-def main(argv=None):
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--cfg", required=True)
-    ap.add_argument("--mode", default="rgb")
-    ap.add_argument("--spp", type=int, required=True)
-    ap.add_argument("--passes", type=int, default=1)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--timeout", type=float, default=1800)
-    ap.add_argument("--out", required=True)
-    ap.add_argument("--result", required=True)
-    args = ap.parse_args(argv)
+class TimedOut(RuntimeError):
+    """The render ran past its time limit (the process exits with TIMEOUT_EXIT; ``serve`` says so)."""
+
+
+def render(args):
+    """Render ``args.cfg`` in ``args.passes`` passes; save them (``args.out``, .npy) and the result
+    (``args.result``); returns the result. TimedOut past ``args.timeout`` seconds."""
     t0 = time.perf_counter()
     deadline = t0 + args.timeout
     import pyluxcore
     import numpy as np
 
     folder = Path(args.cfg).resolve().parent
-    pyluxcore.Init()  # LuxCore's own logger (stdout); no Python callback
     pyluxcore.ClearFileNameResolverPaths()
     pyluxcore.AddFileNameResolverPath(str(folder))
     base = pyluxcore.Properties(str(folder / Path(args.cfg).name))
     scene_props = pyluxcore.Properties(str(folder / base.Get("scene.file").GetString()))
-    scene = pyluxcore.Scene()
+    scene = pyluxcore.Scene()  # parsed anew for every render: a warm worker keeps nothing of a scene
     scene.Parse(scene_props)
     width, height = base.Get("film.width").GetInt(), base.Get("film.height").GetInt()
     per_pass = math.ceil(args.spp / max(1, args.passes))  # as mitsuba/worker.py
-    images, taken, render_s, timed_out = [], [], 0.0, False
+    images, taken, render_s = [], [], 0.0
     for k in range(args.passes):
         props = pyluxcore.Properties(base)
         props.Set(pyluxcore.Property("renderengine.seed", args.seed + k + 1))  # LuxCore's seeds start at 1
@@ -69,6 +66,7 @@ def main(argv=None):
         session = pyluxcore.RenderSession(config)
         t = time.perf_counter()
         session.Start()
+        timed_out = False
         while True:
             time.sleep(POLL_S)
             session.UpdateStats()
@@ -80,13 +78,14 @@ def main(argv=None):
         session.Stop()
         render_s += time.perf_counter() - t
         if timed_out:
-            print(f"luxcore_worker: timed out after {args.timeout} s", file=sys.stderr)
-            sys.exit(TIMEOUT_EXIT)
+            del session, config, scene
+            raise TimedOut(f"luxcore_worker: timed out after {args.timeout} s")
         taken.append(session.GetStats().Get("stats.renderengine.total.samplecount").GetFloat() / (width * height))
         buf = np.zeros(width * height * 3, dtype=np.float32)
         session.GetFilm().GetOutputFloat(pyluxcore.FilmOutputType.RGB, buf)
         images.append(buf.reshape(height, width, 3)[::-1].astype(np.float64))  # LuxCore's rows run bottom to top
         del session, config
+    del scene
     np.save(args.out, np.stack(images))
     result = {"variant": args.mode, "spp": int(round(sum(taken))), "spp_asked": per_pass * args.passes,
               "samples_per_pixel_per_pass": [round(t, 3) for t in taken], "passes": args.passes, "seed": args.seed,
@@ -95,7 +94,84 @@ def main(argv=None):
               "versions": {"pyluxcore": pyluxcore.Version(), "numpy": np.__version__,
                            "python": sys.version.split()[0]}}
     Path(args.result).write_text(json.dumps(result, indent=1))
+    return result
 
+
+def _redirect(target):
+    """Point fds 1 and 2 (LuxCore's logger, Python) at ``target`` (a path, appended to, or an open
+    fd), after flushing what Python and C stdio still hold for the previous target."""
+    import ctypes
+    sys.stdout.flush()
+    sys.stderr.flush()
+    try:
+        ctypes.CDLL(None).fflush(None)  # C stdio buffers (LuxCore's logger) go to the old target
+    except (OSError, AttributeError, TypeError):  # no C library to flush by that name (not Linux/macOS)
+        pass
+    fd = target if isinstance(target, int) else os.open(target, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+    os.dup2(fd, 1)
+    os.dup2(fd, 2)
+    if fd != target:
+        os.close(fd)
+
+
+def serve():
+    """A warm worker (batch/backends/luxcore/backend.py keeps one across jobs; batch/backends/warm.py):
+    pyluxcore is imported and initialised once, then every JSON request line on stdin
+    ``{"render": {"cfg", "mode", "spp", "passes", "seed", "timeout", "out", "result"}, "log": path}``
+    runs what the command line runs (a new Scene parsed from the request's files: nothing is kept
+    between requests) and is answered by one JSON line on the original stdout: ``{"ok": true,
+    "result": ...}``, ``{"ok": false, "timed_out": true, "error": ...}`` past its time limit, or
+    ``{"ok": false, "error": ...}``. What is printed during a request goes to its log, between
+    requests to stderr. Ends when stdin closes."""
+    import traceback
+    reply = os.fdopen(os.dup(1), "w", buffering=1)
+    own_err = os.dup(2)
+    os.dup2(2, 1)  # whatever else prints goes to stderr, never into the replies
+    t0 = time.perf_counter()
+    import pyluxcore
+    import numpy  # noqa: F401 - after pyluxcore (module docstring)
+    pyluxcore.Init()  # LuxCore's own logger (stdout); no Python callback
+    reply.write(json.dumps({"ready": True, "pyluxcore": pyluxcore.Version(), "start_s": time.perf_counter() - t0}) + "\n")
+    for line in sys.stdin:
+        if not line.strip():
+            continue
+        req = json.loads(line)
+        _redirect(req.get("log") or os.devnull)
+        try:
+            r = req["render"]
+            out = {"ok": True, "result": render(argparse.Namespace(
+                cfg=r["cfg"], mode=r.get("mode", "rgb"), spp=int(r["spp"]), passes=int(r.get("passes", 1)),
+                seed=int(r.get("seed", 0)), timeout=float(r.get("timeout", 1800)), out=r["out"], result=r["result"]))}
+        except TimedOut as exc:
+            out = {"ok": False, "timed_out": True, "error": str(exc)}
+        except Exception as exc:  # noqa: BLE001 - reported to the backend, which fails that pass
+            traceback.print_exc()
+            out = {"ok": False, "error": f"{type(exc).__name__}: {exc}"}
+        _redirect(own_err)
+        reply.write(json.dumps(out) + "\n")
+
+
+def main(argv=None):
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ["serve"]:
+        return serve()
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--cfg", required=True)
+    ap.add_argument("--mode", default="rgb")
+    ap.add_argument("--spp", type=int, required=True)
+    ap.add_argument("--passes", type=int, default=1)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--timeout", type=float, default=1800)
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--result", required=True)
+    args = ap.parse_args(argv)
+    import pyluxcore
+    pyluxcore.Init()  # LuxCore's own logger (stdout); no Python callback
+    try:
+        render(args)
+    except TimedOut as exc:
+        print(exc, file=sys.stderr)
+        sys.exit(TIMEOUT_EXIT)
 
 if __name__ == "__main__":
     main()
