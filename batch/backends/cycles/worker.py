@@ -244,23 +244,6 @@ def render(args):
     return result
 
 
-def _redirect(target):
-    """Point this process's fds 1 and 2 (what bpy and Blender's C code print) at ``target`` (a
-    path, appended to, or an open fd), after flushing what Python and C stdio still hold for the previous target."""
-    import ctypes
-    sys.stdout.flush()
-    sys.stderr.flush()
-    try:
-        ctypes.CDLL(None).fflush(None)  # C stdio buffers (Blender's printf) go to the old target
-    except (OSError, AttributeError, TypeError):  # no C library to flush by that name (not Linux/macOS)
-        pass
-    fd = target if isinstance(target, int) else os.open(target, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
-    os.dup2(fd, 1)
-    os.dup2(fd, 2)
-    if fd != target:
-        os.close(fd)
-
-
 SERVE = {"build": lambda req: build(json.loads(Path(req["scene"]).read_text()), Path(req["blend"]).resolve()),
          "render": lambda req: render(argparse.Namespace(
              blend=req["blend"], mode=req.get("mode", "rgb"), spp=int(req["spp"]), passes=int(req.get("passes", 1)),
@@ -269,36 +252,17 @@ SERVE = {"build": lambda req: build(json.loads(Path(req["scene"]).read_text()), 
 
 def serve():
     """A warm worker (batch/backends/cycles/backend.py keeps one across jobs): bpy is imported
-    once, then every JSON request line on stdin is answered by one JSON line on the original
-    stdout: ``{"build": {"scene": ..., "blend": ...}, "log": path}`` or ``{"render": {"blend": ...,
-    "mode": ..., "spp": ..., "passes": ..., "seed": ..., "out": ..., "result": ...}, "log": path}``
-    run exactly what the ``build`` and ``render`` subcommands run (a build starts from factory
-    settings and an empty file, a render opens its .blend: no request sees another's data) and
-    are answered ``{"ok": true, "result": ...}`` or ``{"ok": false, "error": ...}``. What bpy prints
-    during a request goes to that request's log, between requests to stderr. Ends when stdin closes."""
-    import traceback
-    reply = os.fdopen(os.dup(1), "w", buffering=1)
-    own_err = os.dup(2)
-    os.dup2(2, 1)  # whatever else prints goes to stderr, never into the replies
-    t0 = time.perf_counter()
+    once, then ``{"build": {"scene", "blend"}, "log": path}`` and ``{"render": {"blend", "mode",
+    "spp", "passes", "seed", "out", "result"}, "log": path}`` requests run exactly what the
+    ``build`` and ``render`` subcommands run (a build starts from factory settings and an empty
+    file, a render opens its .blend: no request sees another's data); the loop, replies and logs:
+    batch/backends/serve_requests.py."""
+    def start():
+        import bpy
+        return {"blender": bpy.app.version_string}
     _bootstrap()
-    import bpy
-    reply.write(json.dumps({"ready": True, "blender": bpy.app.version_string, "start_s": time.perf_counter() - t0}) + "\n")
-    for line in sys.stdin:
-        if not line.strip():
-            continue
-        req = json.loads(line)
-        kind = next((k for k in SERVE if k in req), None)
-        _redirect(req.get("log") or os.devnull)
-        try:
-            if kind is None:
-                raise ValueError(f"a request names none of {', '.join(SERVE)}: {sorted(req)}")
-            out = {"ok": True, "result": SERVE[kind](req[kind])}
-        except Exception as exc:  # noqa: BLE001 - reported to the backend, which fails that pass or job
-            traceback.print_exc()
-            out = {"ok": False, "error": f"{type(exc).__name__}: {exc}"}
-        _redirect(own_err)
-        reply.write(json.dumps(out) + "\n")
+    from spectral_bench.batch.backends import serve_requests
+    serve_requests.serve(start, SERVE)
 
 
 def main(argv=None):

@@ -97,58 +97,36 @@ def render(args):
     return result
 
 
-def _redirect(target):
-    """Point fds 1 and 2 (LuxCore's logger, Python) at ``target`` (a path, appended to, or an open
-    fd), after flushing what Python and C stdio still hold for the previous target."""
-    import ctypes
-    sys.stdout.flush()
-    sys.stderr.flush()
-    try:
-        ctypes.CDLL(None).fflush(None)  # C stdio buffers (LuxCore's logger) go to the old target
-    except (OSError, AttributeError, TypeError):  # no C library to flush by that name (not Linux/macOS)
-        pass
-    fd = target if isinstance(target, int) else os.open(target, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
-    os.dup2(fd, 1)
-    os.dup2(fd, 2)
-    if fd != target:
-        os.close(fd)
-
-
 def serve():
     """A warm worker (batch/backends/luxcore/backend.py keeps one across jobs; batch/backends/warm.py):
-    pyluxcore is imported and initialised once, then every JSON request line on stdin
-    ``{"render": {"cfg", "mode", "spp", "passes", "seed", "timeout", "out", "result"}, "log": path}``
-    runs what the command line runs (a new Scene parsed from the request's files: nothing is kept
-    between requests) and is answered by one JSON line on the original stdout: ``{"ok": true,
-    "result": ...}``, ``{"ok": false, "timed_out": true, "error": ...}`` past its time limit, or
-    ``{"ok": false, "error": ...}``. What is printed during a request goes to its log, between
-    requests to stderr. Ends when stdin closes."""
-    import traceback
-    reply = os.fdopen(os.dup(1), "w", buffering=1)
-    own_err = os.dup(2)
-    os.dup2(2, 1)  # whatever else prints goes to stderr, never into the replies
-    t0 = time.perf_counter()
-    import pyluxcore
-    import numpy  # noqa: F401 - after pyluxcore (module docstring)
-    pyluxcore.Init()  # LuxCore's own logger (stdout); no Python callback
-    reply.write(json.dumps({"ready": True, "pyluxcore": pyluxcore.Version(), "start_s": time.perf_counter() - t0}) + "\n")
-    for line in sys.stdin:
-        if not line.strip():
-            continue
-        req = json.loads(line)
-        _redirect(req.get("log") or os.devnull)
-        try:
-            r = req["render"]
-            out = {"ok": True, "result": render(argparse.Namespace(
-                cfg=r["cfg"], mode=r.get("mode", "rgb"), spp=int(r["spp"]), passes=int(r.get("passes", 1)),
-                seed=int(r.get("seed", 0)), timeout=float(r.get("timeout", 1800)), out=r["out"], result=r["result"]))}
-        except TimedOut as exc:
-            out = {"ok": False, "timed_out": True, "error": str(exc)}
-        except Exception as exc:  # noqa: BLE001 - reported to the backend, which fails that pass
-            traceback.print_exc()
-            out = {"ok": False, "error": f"{type(exc).__name__}: {exc}"}
-        _redirect(own_err)
-        reply.write(json.dumps(out) + "\n")
+    pyluxcore is imported and initialised once, then every ``{"render": {"cfg", "mode", "spp",
+    "passes", "seed", "timeout", "out", "result"}, "log": path}`` request runs what the command
+    line runs (a new Scene parsed from the request's files: nothing is kept between requests),
+    answered ``timed_out`` past its time limit; the loop, replies and logs:
+    batch/backends/serve_requests.py (loaded by path: this process imports pyluxcore first)."""
+    loop = _serve_requests()
+
+    def start():
+        import pyluxcore
+        import numpy  # noqa: F401 - after pyluxcore (module docstring)
+        pyluxcore.Init()  # LuxCore's own logger (stdout); no Python callback
+        return {"pyluxcore": pyluxcore.Version()}
+
+    def render_request(r):
+        return render(argparse.Namespace(
+            cfg=r["cfg"], mode=r.get("mode", "rgb"), spp=int(r["spp"]), passes=int(r.get("passes", 1)),
+            seed=int(r.get("seed", 0)), timeout=float(r.get("timeout", 1800)), out=r["out"], result=r["result"]))
+    loop.serve(start, {"render": render_request}, timed_out=(TimedOut,))
+
+
+def _serve_requests():
+    """batch/backends/serve_requests.py, by path (it imports nothing of the project)."""
+    import importlib.util
+    path = Path(__file__).resolve().parents[1] / "serve_requests.py"
+    spec = importlib.util.spec_from_file_location("serve_requests", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 def main(argv=None):
