@@ -11,32 +11,24 @@ closed at exit.
 """
 import atexit
 import json
-import selectors
-import subprocess
-import tempfile
 import threading
 
 from . import child
 from .passes import BackendFailure, PassTimeout, tail
 
 
-class Worker:
+class Worker(child.KeptChild):
     """One started worker process (``cmd``), named ``label`` in errors."""
 
     def __init__(self, key, cmd, label, timeout):
+        super().__init__(cmd)
         self.key, self.label = key, label
-        self.stderr = tempfile.TemporaryFile()  # what it prints outside requests (start-up errors)
-        self.proc = subprocess.Popen([str(c) for c in cmd], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                     stderr=self.stderr, **child.popen_kwargs())
         self.asking = None  # what the request under way is (None: idle)
         self.ready = self._reply(timeout, "starting")
 
     @property
     def pid(self):
         return self.proc.pid if self.proc is not None else None
-
-    def alive(self):
-        return self.proc is not None and self.proc.poll() is None
 
     def ask(self, request, timeout, what):
         """``request``'s reply within ``timeout`` seconds; the worker is killed on any failure."""
@@ -60,18 +52,13 @@ class Worker:
             self.asking = None
 
     def _reply(self, timeout, what):
-        sel = selectors.DefaultSelector()
-        sel.register(self.proc.stdout, selectors.EVENT_READ)
-        ready = sel.select(timeout)
-        sel.close()
-        if not ready:
+        line = self.read_line(timeout)
+        if line is None:
             self.kill()
             raise PassTimeout(f"{self.label} worker: {what} took longer than {timeout} s")
-        line = self.proc.stdout.readline()
         if not line:
             code = self.proc.wait()
-            self.stderr.seek(0)
-            early = self.stderr.read().decode(errors="replace")
+            early = self.early_output()
             self.kill()
             raise BackendFailure(f"{self.label} worker exited with {code} while {what}"
                                  + (f": {tail(early)}" if early.strip() else " (its output is in the log)"))
@@ -80,14 +67,6 @@ class Worker:
         except ValueError as exc:
             self.kill()
             raise BackendFailure(f"{self.label} worker answered {line[:200]!r} while {what}") from exc
-
-    def kill(self):
-        child.kill(self.proc)
-        self.proc = None
-
-    def close(self):
-        child.close(self.proc)
-        self.proc = None
 
 
 _POOL = {}  # key -> idle Worker (a local run renders one job at a time)

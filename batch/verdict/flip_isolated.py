@@ -27,9 +27,7 @@ import concurrent.futures as cf
 import json
 import os
 import queue
-import subprocess
 import sys
-import tempfile
 import threading
 from pathlib import Path
 
@@ -52,17 +50,19 @@ def prepare(img):
 
 
 class FlipWorker:
-    """One warm ``--serve`` child (dies with this process: batch/backends/child.py)."""
+    """One warm ``--serve`` child (dies with this process: batch/backends/child.py KeptChild)."""
 
     def __init__(self):
         from ..backends import child
-        self.stderr = tempfile.TemporaryFile()
-        self.proc = subprocess.Popen([sys.executable, str(Path(__file__).resolve()), "--serve"],
-                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self.stderr,
-                                     env=dict(os.environ, **OPENMP), **child.popen_kwargs())
+        self.child = child.KeptChild([sys.executable, Path(__file__).resolve(), "--serve"],
+                                     env=dict(os.environ, **OPENMP))
+
+    @property
+    def proc(self):
+        return self.child.proc
 
     def alive(self):
-        return self.proc is not None and self.proc.poll() is None
+        return self.child.alive()
 
     def send(self, ref, test, map_path):
         """Send one request (the reply is read by ``receive``); None, or the error when the child is gone."""
@@ -76,15 +76,10 @@ class FlipWorker:
 
     def receive(self, timeout):
         """(mean, None) or (None, error); a child that dies or overruns is killed (``alive`` False)."""
-        import selectors
-        sel = selectors.DefaultSelector()
-        sel.register(self.proc.stdout, selectors.EVENT_READ)
-        ready = sel.select(timeout)
-        sel.close()
-        if not ready:
+        line = self.child.read_line(timeout)
+        if line is None:
             self.kill()
             return None, f"FLIP timed out after {timeout} s"
-        line = self.proc.stdout.readline()
         if not line:
             return None, self._died(f"FLIP failed (exit {self.proc.wait()})")
         try:
@@ -96,20 +91,15 @@ class FlipWorker:
         return reply["flip"], None
 
     def _died(self, what):
+        said = self.child.early_output().strip()
         self.kill()
-        self.stderr.seek(0)
-        said = self.stderr.read().decode(errors="replace").strip()
         return what + (f": {said[-500:]}" if said else "")
 
     def kill(self):
-        from ..backends import child
-        child.kill(self.proc)
-        self.proc = None
+        self.child.kill()
 
     def close(self):
-        from ..backends import child
-        child.close(self.proc)
-        self.proc = None
+        self.child.close()
 
 
 _WORKER = []  # the process's one warm FlipWorker (at most)

@@ -22,7 +22,6 @@ import os
 import queue
 import subprocess
 import sys
-import tempfile
 import threading
 import time
 from functools import lru_cache
@@ -208,26 +207,19 @@ def executable_version(executable):
     return m.group(1) if m else "unknown"
 
 
-class WorkerProcess:
+class WorkerProcess(child.KeptChild):
     """One batch/backends/mitsuba/worker.py process of one variant: started once, then kept warm
     (``_POOL``) across passes and jobs, so a job pays neither the Python start, the Mitsuba import
     nor the JIT compilation of kernels another job of that variant already compiled."""
 
     def __init__(self, variant, timeout):
+        super().__init__([sys.executable, WORKER, "--variant", variant], env=llvm.env())
         self.variant = variant
-        self.stderr = tempfile.TemporaryFile()  # what it prints before its first scene's log takes over
-        cmd = [sys.executable, str(WORKER), "--variant", variant]
-        self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self.stderr,
-                                     env=llvm.env(), **child.popen_kwargs())
         self.versions = self.ask(None, timeout, "starting")["versions"]
-
-    def alive(self):
-        return self.proc is not None and self.proc.poll() is None
 
     def ask(self, request, timeout, what):
         """Send ``request`` (None: only wait) and return the reply within ``timeout`` seconds; a
         worker that overruns is killed (PassTimeout), one that dies is a BackendFailure."""
-        import selectors
         if request is not None:
             try:
                 self.proc.stdin.write((json.dumps(request) + "\n").encode())
@@ -235,30 +227,17 @@ class WorkerProcess:
             except OSError as exc:
                 self.kill()
                 raise BackendFailure(f"mitsuba worker stopped: {exc}") from exc
-        sel = selectors.DefaultSelector()
-        sel.register(self.proc.stdout, selectors.EVENT_READ)
-        ready = sel.select(timeout)
-        sel.close()
-        if not ready:
+        line = self.read_line(timeout)
+        if line is None:
             self.kill()
             raise passes_mod.PassTimeout(f"mitsuba worker: {what} took longer than {timeout} s")
-        line = self.proc.stdout.readline()
         if not line:
             code = self.proc.wait()
-            self.stderr.seek(0)
-            early = self.stderr.read().decode(errors="replace")
+            early = self.early_output()
             self.kill()
             raise BackendFailure(f"mitsuba worker exited with {code} while {what}"
                                  + (f": {passes_mod.tail(early)}" if early.strip() else " (its output is in render.log)"))
         return json.loads(line)
-
-    def kill(self):
-        child.kill(self.proc)
-        self.proc = None
-
-    def close(self):
-        child.close(self.proc)
-        self.proc = None
 
 
 _POOL = {}  # variant -> idle WorkerProcess (a local run renders one job at a time)
