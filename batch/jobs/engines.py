@@ -5,9 +5,10 @@
   previous render is judged in a second thread (reading EXRs, the noise test, probes, previews;
   FLIP in a warm child process that computes while the probes run: batch/verdict/flip_isolated.py):
   a render never waits for a verdict. While the first job renders, the verdict thread loads what
-  the verdicts need (job.warm: the verdict modules, colour-science, the FLIP child) and the
-  warm render workers of every variant the run needs start in the background
-  (job.prestart_workers), so a job's fixed cost is its own work (issue 23; benchmarks/bench_fixed_cost.py measures it per phase).
+  the verdicts need (job.warm: the verdict modules, colour-science, the FLIP child) and the warm
+  render workers of every variant the run needs start in the background (job.prestart_workers),
+  so a job's fixed cost is its own work (issue 23; benchmarks/bench_fixed_cost.py measures it per
+  phase). Jobs come in the order the runner gives (batch/jobs/plan.py ``overlap_order``).
 - DaskEngine (``--cluster ADDRESS`` or ``--cluster local:N``): the jobs go to a Dask distributed
   scheduler, each job (render and verdict) on one worker; ``local:N`` starts a LocalCluster of N
   single-threaded worker processes, listening on 127.0.0.1 only, without a dashboard unless

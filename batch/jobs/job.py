@@ -182,8 +182,8 @@ def warm(job_list):
 
 def prestart_workers(job_list):
     """Start the warm render workers that ``job_list`` will need, in the background, where a
-    backend keeps them (``prestart(modes, timeout)``: Mitsuba's one per variant). The first job
-    starts its own if it comes first; nothing waits here."""
+    backend keeps them (``prestart(modes, timeout)``: Mitsuba's one per variant). Nothing waits
+    here; a job whose worker is still starting waits for that one instead of starting another."""
     by_backend = {}
     for j in job_list:
         if j["kind"] in ("render", "sweep", "stability", "reference"):

@@ -286,7 +286,7 @@ def estimated_seconds(job):
     pixels = r["width"] * r["height"]
     per_sample = RENDER_S_PER_SAMPLE
     for folder in references.directories(job["verdict"].get("references")):
-        meta, bad = references.read_record(folder / f"{job['scene_name']}.json")
+        meta, _problem = references.read_record(folder / f"{job['scene_name']}.json")
         if meta is None:
             continue
         try:
