@@ -59,22 +59,25 @@ def test_flip_child_is_warm_and_gives_flip_evaluators_value(tmp_path):
     assert set(fmap) == {"Y"} and fmap["Y"].shape == ref.shape[:2] and abs(float(np.mean(fmap["Y"])) - first) < 1e-2 * first + 1e-4
 
 
-def test_a_flip_child_that_dies_during_a_request_fails_that_request_alone(tmp_path):
+def test_a_flip_child_that_dies_during_a_request_fails_that_request_alone(tmp_path, monkeypatch):
+    import threading
     ref, test = _images(2, (8, 8))
     assert flip_isolated.flip_images(ref, test, tmp_path / "f.exr")[1] is None
     worker = flip_isolated._WORKER[0]
     os.kill(worker.proc.pid, signal.SIGSTOP)  # it cannot answer: the request below waits in its pipe
+    sent = threading.Event()  # set once the request is in the stopped child (requests queue first)
+    real_send = flip_isolated.FlipWorker.send
+
+    def send_and_tell(self, *args):
+        error = real_send(self, *args)
+        sent.set()
+        return error
+    monkeypatch.setattr(flip_isolated.FlipWorker, "send", send_and_tell)
     pending = flip_isolated.start(ref, test, tmp_path / "f.exr")
-    # the request is taken from the queue and handed to the stopped child (its thread holds the
-    # lock while the child has it): only then does the child die under it
-    import time
-    for _ in range(6000):
-        if flip_isolated._QUEUE.empty() and flip_isolated._LOCK.locked():
-            break
-        time.sleep(0.01)
-    os.kill(worker.proc.pid, signal.SIGKILL)
+    assert sent.wait(120)
+    os.kill(worker.proc.pid, signal.SIGKILL)  # the child dies with the request in it
     value, err = pending.result()
-    assert value is None and ("FLIP failed (exit -9)" in err or "FLIP worker stopped" in err), err
+    assert value is None and "FLIP failed (exit -9)" in err, err
     again, err = flip_isolated.flip_images(ref, test, tmp_path / "g.exr")  # the next request: a fresh child
     assert err is None and again == _flip_in_a_fresh_process(tmp_path, ref, test)
     assert flip_isolated._WORKER[0] is not worker
