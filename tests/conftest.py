@@ -263,3 +263,15 @@ def run_batch_here(monkeypatch, capsys):
     logger.setLevel(saved[0])
     logger.handlers[:] = saved[1]
     logger.propagate = saved[2]
+
+
+def camera_over_plane():
+    """The to_world (4x4 array) of the camera at (0, -2, 2) whose frame's z axis runs from the
+    origin to it and x along world x: the small plane scenes of the RGB and warm-worker tests."""
+    import numpy as np
+    cam = np.eye(4)
+    pos = np.array([0.0, -2.0, 2.0])
+    z = pos / np.linalg.norm(pos)
+    x = np.array([1.0, 0.0, 0.0])
+    cam[:3, 0], cam[:3, 1], cam[:3, 2], cam[:3, 3] = x, np.cross(z, x), z, pos
+    return cam

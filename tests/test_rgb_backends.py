@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import metrics, run_batch
+from conftest import camera_over_plane, metrics, run_batch
 from spectral_bench.batch import backends, exr
 from spectral_bench.batch.studies import rgb_error
 from spectral_bench.batch.verdict import compare, stats
@@ -135,11 +135,7 @@ def test_luxcore_has_no_beckmann_and_writes_its_sdl(golden, tmp_path):
 # -- units: a grey Lambertian plane under a uniform white environment ---------------------------
 
 def _units_scene(env_scale=1.0):
-    cam = np.eye(4)
-    pos = np.array([0.0, -2.0, 2.0])
-    z = pos / np.linalg.norm(pos)
-    x = np.array([1.0, 0.0, 0.0])
-    cam[:3, 0], cam[:3, 1], cam[:3, 2], cam[:3, 3] = x, np.cross(z, x), z, pos
+    cam = camera_over_plane()
     sc = {"format": ir.FORMAT, "version": ir.VERSION, "name": "units", "case": "custom", "needs": [],
           "render": {"spp": 64, "width": 32, "height": 32, "max_depth": 64, "filter": "box", "integrator": "path"},
           "camera": {"to_world": cam.tolist(), "fov": 30.0, "fov_axis": "x"},

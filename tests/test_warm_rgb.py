@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from conftest import camera_over_plane
 from spectral_bench.batch import backends, exr
 from spectral_bench.batch.backends import passes, warm
 from spectral_bench.batch.backends.cycles import backend as cycles_backend
@@ -34,11 +35,7 @@ def _lamp_scene(albedo, lamp_x, size=16):
     """A diffuse plane lit by a small area light (direct-light sampling: every pixel is noisy, so a
     wrong seed or a stale scene shows in every pixel). Every variant has the same scene name and
     object names, so a worker that kept anything of the previous scene would render it."""
-    cam = np.eye(4)
-    pos = np.array([0.0, -2.0, 2.0])
-    z = pos / np.linalg.norm(pos)
-    x = np.array([1.0, 0.0, 0.0])
-    cam[:3, 0], cam[:3, 1], cam[:3, 2], cam[:3, 3] = x, np.cross(z, x), z, pos
+    cam = camera_over_plane()
     sc = {"format": ir.FORMAT, "version": ir.VERSION, "name": "warm", "case": "custom", "needs": [],
           "render": {"spp": 16, "width": size, "height": size, "max_depth": 4, "filter": "box", "integrator": "path"},
           "camera": {"to_world": cam.tolist(), "fov": 30.0, "fov_axis": "x"}, "environment": None,
@@ -195,9 +192,9 @@ def test_a_worker_killed_mid_render_fails_only_that_job(tmp_path, name):
 @pytest.mark.slow
 @pytest.mark.parametrize("name", RGB)
 def test_a_render_past_its_time_limit_kills_the_worker_and_the_next_job_renders(tmp_path, name):
-    blend, mode, b = _job(_lamp_scene(0.5, 0.0, size=24), tmp_path / "slow", name)
     """A pass that overruns its limit (a hang, as far as the backend can tell) fails its job
     without a retry, its worker killed and not kept; the next job renders on a fresh worker."""
+    blend, mode, b = _job(_lamp_scene(0.5, 0.0, size=24), tmp_path / "slow", name)
     with pytest.raises(passes.BackendFailure, match="timed out"):
         b.render(blend, mode, HUGE_SPP, tmp_path / "slow" / "render.exr", passes=1, timeout=5,
                  log_path=tmp_path / "slow" / "render.log")

@@ -18,10 +18,13 @@ from .passes import BackendFailure, PassTimeout, tail
 
 
 class Worker(child.KeptChild):
-    """One started worker process (``cmd``), named ``label`` in errors."""
+    """One started worker process (``cmd``, environment ``env``), named ``label`` in errors; the
+    reply to its start is ``ready``. Mitsuba's workers are these too (batch/backends/mitsuba/
+    backend.py), with their own replies (``exchange``)."""
+    log_hint = "the log"  # where what it printed while serving a request went
 
-    def __init__(self, key, cmd, label, timeout):
-        super().__init__(cmd)
+    def __init__(self, key, cmd, label, timeout, env=None):
+        super().__init__(cmd, env=env)
         self.key, self.label = key, label
         self.asking = None  # what the request under way is (None: idle)
         self.ready = self._reply(timeout, "starting")
@@ -30,26 +33,34 @@ class Worker(child.KeptChild):
     def pid(self):
         return self.proc.pid if self.proc is not None else None
 
-    def ask(self, request, timeout, what):
-        """``request``'s reply within ``timeout`` seconds; the worker is killed on any failure."""
+    def exchange(self, request, timeout, what):
+        """Send ``request`` and return its reply (any JSON) within ``timeout`` seconds; a worker
+        that overruns (PassTimeout), dies or cannot be written to (BackendFailure) is killed."""
         self.asking = what
         try:
             try:
                 self.proc.stdin.write((json.dumps(request) + "\n").encode())
                 self.proc.stdin.flush()
             except (OSError, AttributeError) as exc:
+                self.kill()
                 raise BackendFailure(f"{self.label} worker stopped before {what}: {exc}") from exc
-            reply = self._reply(timeout, what)
+            return self._reply(timeout, what)
+        finally:
+            self.asking = None
+
+    def ask(self, request, timeout, what):
+        """``exchange``, where the reply says ``ok`` (batch/backends/serve_requests.py): a reply that
+        is not ok fails the request too (``timed_out``: PassTimeout), and the worker is killed."""
+        reply = self.exchange(request, timeout, what)
+        try:
             if reply.get("timed_out"):  # the worker stopped itself at the request's own limit
                 raise PassTimeout(f"{self.label} worker: {what}: {reply.get('error', 'timed out')}")
             if not reply.get("ok"):
                 raise BackendFailure(f"{self.label} worker failed {what}: {reply.get('error', reply)}")
-            return reply
         except BackendFailure:
             self.kill()
             raise
-        finally:
-            self.asking = None
+        return reply
 
     def _reply(self, timeout, what):
         line = self.read_line(timeout)
@@ -61,7 +72,7 @@ class Worker(child.KeptChild):
             early = self.early_output()
             self.kill()
             raise BackendFailure(f"{self.label} worker exited with {code} while {what}"
-                                 + (f": {tail(early)}" if early.strip() else " (its output is in the log)"))
+                                 + (f": {tail(early)}" if early.strip() else f" (its output is in {self.log_hint})"))
         try:
             return json.loads(line)
         except ValueError as exc:

@@ -31,7 +31,7 @@ import numpy as np
 
 from ....exporters import camera_filter, colorimetry, mitsuba_writer
 from ... import exr
-from .. import child
+from .. import warm
 from . import cuda, llvm
 from .. import passes as passes_mod
 from ..passes import BackendFailure
@@ -207,37 +207,20 @@ def executable_version(executable):
     return m.group(1) if m else "unknown"
 
 
-class WorkerProcess(child.KeptChild):
+class WorkerProcess(warm.Worker):
     """One batch/backends/mitsuba/worker.py process of one variant: started once, then kept warm
     (``_POOL``) across passes and jobs, so a job pays neither the Python start, the Mitsuba import
-    nor the JIT compilation of kernels another job of that variant already compiled."""
+    nor the JIT compilation of kernels another job of that variant already compiled. Its replies
+    are its own (no ``ok``: a failure ends the worker), so a request is an ``exchange``."""
+    log_hint = "render.log"
 
     def __init__(self, variant, timeout):
-        super().__init__([sys.executable, WORKER, "--variant", variant], env=llvm.env())
+        super().__init__(variant, [sys.executable, WORKER, "--variant", variant], "mitsuba", timeout, env=llvm.env())
         self.variant = variant
-        self.versions = self.ask(None, timeout, "starting")["versions"]
+        self.versions = self.ready["versions"]
 
     def ask(self, request, timeout, what):
-        """Send ``request`` (None: only wait) and return the reply within ``timeout`` seconds; a
-        worker that overruns is killed (PassTimeout), one that dies is a BackendFailure."""
-        if request is not None:
-            try:
-                self.proc.stdin.write((json.dumps(request) + "\n").encode())
-                self.proc.stdin.flush()
-            except OSError as exc:
-                self.kill()
-                raise BackendFailure(f"mitsuba worker stopped: {exc}") from exc
-        line = self.read_line(timeout)
-        if line is None:
-            self.kill()
-            raise passes_mod.PassTimeout(f"mitsuba worker: {what} took longer than {timeout} s")
-        if not line:
-            code = self.proc.wait()
-            early = self.early_output()
-            self.kill()
-            raise BackendFailure(f"mitsuba worker exited with {code} while {what}"
-                                 + (f": {passes_mod.tail(early)}" if early.strip() else " (its output is in render.log)"))
-        return json.loads(line)
+        return self.exchange(request, timeout, what)
 
 
 _POOL = {}  # variant -> idle WorkerProcess (a local run renders one job at a time)
