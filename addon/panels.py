@@ -288,6 +288,9 @@ class SPECTRAL_BENCH_PT_benchmark_results(_Base, bpy.types.Panel):
                     box.label(text=str(base[0]["reason"])[:200])
             if run.get("reason"):
                 box.label(text=run["reason"][:160], icon="ERROR" if results.judged_without_reference(run) else "NONE")
+            if results.judged_by(run):  # what judged it; a renderer's own reference alone is said so
+                box.label(text=f"judged by: {results.judged_by(run)}"[:200],
+                          icon="INFO" if results.checked_against_itself(run) else "NONE")
             for text in results.reference_problems(run):  # every reference passed over, with its file
                 box.label(text=f"reference problem: {text}"[:200], icon="ERROR")
             ref = run.get("reference") or {}

@@ -31,6 +31,21 @@ def setup_logging(log_file=None):
     return logger
 
 
+def list_jobs(runner, opts):
+    """--list: each job as scene, case and backend; a scene that cannot be loaded is listed as
+    ``ERROR`` with why (file, object and field) and makes the exit status 2."""
+    jobs, scenes = runner.plan(opts)
+    errors = {name: str(sc) for name, sc in scenes if isinstance(sc, Exception)}
+    for scene, case, backend in jobs:
+        if scene not in errors:
+            print(f"{scene}\t{case}\t{backend}")
+    for scene, why in errors.items():
+        print(f"{scene}\tERROR\t{' '.join(why.split())[:500]}")
+    if errors:
+        print(f"error: {len(errors)} scene(s) could not be loaded (listed as ERROR)", file=sys.stderr)
+    return 2 if errors else 0
+
+
 def main(argv=None):
     pkg_bootstrap.package()
     from spectral_bench.batch import cli
@@ -46,10 +61,7 @@ def main(argv=None):
         print(f"error: --log {opts['log']}: {exc.strerror or exc}", file=sys.stderr)
         return 2
     if opts["list"]:
-        jobs, _ = runner.plan(opts)
-        for scene, case, backend in jobs:
-            print(f"{scene}\t{case}\t{backend}")
-        return 0
+        return list_jobs(runner, opts)
     try:
         code = runner.run(opts)  # sets opts["out"] to the folder it used
     except (runner.UsageError, engines.ClusterError, cli.UsageError) as exc:

@@ -182,6 +182,7 @@ def test_every_panel_draws_with_real_data(tmp_path):
             "status_order": [t.split(": ", 1)[1] for t in results if t and t.startswith("scene_") and "/" in t][:8],
             "reference_labels": [t for t in results if t and t.startswith("reference (")],
             "noise_labels": sorted({{t for t in results if t and t.startswith("noise test:")}}),
+            "judged_labels": sorted({{t for t in results if t and t.startswith("judged by:")}}),
             "load_kinds": sorted({{c[2]["properties"].get("kind") for p, c in calls
                                  if c[1] == "operator" and c[2]["operator"] == "spectral_bench.load_result"}}),
             "backend_buttons": sorted(set(texts("SPECTRAL_BENCH_PT_benchmark", "operator")) - {{None}}),
@@ -202,6 +203,14 @@ def test_every_panel_draws_with_real_data(tmp_path):
     # the noise test in the words of summary.md and report.html (batch/records.py noise_test_text)
     assert out["noise_labels"] == ["noise test: " + records.noise_test_text(
         {"p_min": 0.5, "threshold": 0.001, "z_max": 1.2, "pass": True})] == ["noise test: pass: p_min 0.5 (threshold 0.001), z_max 1.20"]
+    # what judged each run, in the words of summary.md, report.html and JUnit (batch/report/results.py):
+    # scene_2_fixed's only probe was not measured, so its own renderer's reference alone judged it
+    assert out["judged_labels"][:2] == [  # known and failed: their probe failed; ok: it passed
+        "judged by: 1 probe (0 passed); reference by mitsuba llvm_ad_spectral, 4096 spp, 2026-11-22",
+        "judged by: 1 probe (1 passed); reference by mitsuba llvm_ad_spectral, 4096 spp, 2026-11-22"], out["judged_labels"]
+    assert [t for t in out["judged_labels"] if "checked against itself: detects change, not error" in t] == [
+        "judged by: no probe; reference by mitsuba llvm_ad_spectral, 4096 spp, 2026-11-22 "
+        "(checked against itself: detects change, not error)"]
     assert out["reference_labels"] and all(t.startswith("reference (extension): mitsuba llvm_ad_spectral 4096 spp")
                                            for t in out["reference_labels"])
     assert out["load_kinds"] == sorted(["render", "reference", "diff_abs", "diff_rel", "flip", "zscore",

@@ -31,7 +31,7 @@ import numpy as np
 
 from .. import exr, previews, records
 from ..verdict.status import ORDER
-from . import grouping
+from . import grouping, results
 
 STOKES_VIEWS = ["S0", "S1", "S2", "S3", "DoP", "AoP"]
 DATA_JS = "view.js"
@@ -108,7 +108,8 @@ def _summary_rows(runs, anchors, listed=None):
                      "backend": _text(r.get("backend")), "mode": _text(r.get("mode")), "status": _text(r.get("status")),
                      "spp": _text(r.get("spp") or ""), "time": _fmt(r.get("time_s"), "{:.2f}"),
                      "rmse": _fmt(m.get("rmse")), "relmse": _fmt(m.get("relmse")), "mape": _fmt(m.get("mape")),
-                     "flip": _fmt(m.get("flip")), "probes": probes, "reason": _text(r.get("reason")),
+                     "flip": _fmt(m.get("flip")), "probes": probes or ("none" if r.get("status") in results.JUDGED else ""),
+                     "reason": _text(r.get("reason")), "self_check": results.checked_against_itself(r),
                      "reference_problems": _reference_problems(r)})
     return rows
 
@@ -490,6 +491,7 @@ def _viewer(out, run, deviations=None):
             "status": status, "css": _css(run.get("status")), "views": views, "first": first,
             "src": data, "ref": ref_data or "", "checks": lines, "extras": _extras(run),
             "reason": _text(run.get("reason")), "known": _known_lines(run, deviations or {}),
+            "judged_by": _text(results.judged_by(run)), "self_check": results.checked_against_itself(run),
             "tev": _tev(run, folder, ref if ref_url else None, out), "regions": json.dumps(regions),
             "marks": json.dumps(_prism_marks(run)), "prism": _prism_line(run), "baseline": _baseline(out, run),
             "numbers": [f"{_text(k)}: {_fmt(v)}" for k, v in _dict(run.get("metrics")).items()],

@@ -11,7 +11,9 @@ systems read it (testsuites > testsuite > testcase; failure and skipped carry a 
   known, fixed, ok        -> passed; known and fixed name their deviation ids in the test case's
                              <properties> (property "known" / "fixed")
 
-Every test case also has properties "status" and, where the run has them, "baseline" (the
+Every test case also has properties "status", "judged by" (the probes measured and who made the
+reference; "checked against itself: detects change, not error" where a renderer's own reference was
+its only judge: batch/report/results.py) and, where the run has them, "baseline" (the
 --baseline verdict) and "noise test" (batch/records.py noise_test_text), and its reason and
 noise test in <system-out>. Written with xml.etree (attribute and text escaping is the library's);
 characters XML 1.0 cannot carry (control characters, lone surrogates) are replaced first, since
@@ -23,6 +25,7 @@ from pathlib import Path
 from xml.etree import ElementTree as ET
 
 from ..records import noise_test_text
+from .results import judged_by
 
 # status -> (element under the test case or None for a pass, its message prefix)
 OUTCOME = {"failed": ("failure", ""), "skipped": ("skipped", "skipped: "), "unsupported": ("skipped", "unsupported: "),
@@ -55,6 +58,8 @@ def testcase(run):
                       time=_seconds(run.get("time_s")))
     props = ET.SubElement(case, "properties")
     _property(props, "status", status)
+    if judged_by(run):
+        _property(props, "judged by", judged_by(run))
     for key in ("known", "fixed"):
         ids = run.get(key)
         if isinstance(ids, list) and ids:
@@ -72,7 +77,7 @@ def testcase(run):
     elif element == "skipped":
         ET.SubElement(case, "skipped", message=prefix + reason)
     out = [f"status: {_text(status)}"] + ([f"reason: {reason}"] if reason else []) + \
-          ([f"noise test: {_text(test)}"] if test else [])
+          ([f"noise test: {_text(test)}"] if test else []) + ([f"judged by: {_text(judged_by(run))}"] if judged_by(run) else [])
     ET.SubElement(case, "system-out").text = "\n".join(out)
     return case
 

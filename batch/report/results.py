@@ -110,3 +110,51 @@ def judged_without_reference(run):
     """True for a render judged (by its probes) although no usable reference was found: never a
     plain ok (its reason says why the reference could not be used)."""
     return bool(run.get("reference_problem")) and run.get("status") not in ("unjudged", "skipped", "unsupported")
+
+
+# -- issue 35: what judged a render. A render judged only against a reference its own renderer made
+# (no probe measured) is a regression check: it sees a change of that renderer, never its error.
+JUDGED = ("ok", "failed", "known", "fixed")
+SELF_CHECK = "checked against itself: detects change, not error"
+
+
+def probes_measured(run):
+    """(measured, passed) probe counts of a run entry: a probe too small to measure at the render's
+    resolution (``pass`` None) judged nothing."""
+    probes = run.get("probes") if isinstance(run.get("probes"), list) else []  # metrics.json may come from anyone
+    probes = [p for p in probes if isinstance(p, dict) and isinstance(p.get("pass"), bool)]
+    return len(probes), sum(p["pass"] is True for p in probes)
+
+
+def reference_maker(run):
+    """Who made the reference a run entry was judged against: "mitsuba llvm_ad_spectral, 4096 spp,
+    2026-11-22", or "" when it had none."""
+    ref = run.get("reference")
+    if not isinstance(ref, dict) or not ref.get("backend"):
+        return ""
+    spp = ref.get("spp")
+    parts = [" ".join(str(ref[k]) for k in ("backend", "mode") if ref.get(k)),
+             f"{spp} spp" if isinstance(spp, int) and not isinstance(spp, bool) else "",
+             str(ref.get("date") or "")[:10]]
+    return ", ".join(p for p in parts if p)
+
+
+def checked_against_itself(run):
+    """True for a judged render whose only judge was a reference made by the same renderer (its
+    backend), with no probe measured: the verdict says whether the renderer changed, not whether it
+    is right."""
+    ref = run.get("reference")
+    return (run.get("status") in JUDGED and probes_measured(run)[0] == 0 and isinstance(ref, dict)
+            and ref.get("backend") is not None and ref.get("backend") == run.get("backend"))
+
+
+def judged_by(run):
+    """One line naming what judged a run entry (summary, report, panel and JUnit say the same)."""
+    if run.get("status") not in JUDGED:
+        return ""
+    measured, passed = probes_measured(run)
+    maker = reference_maker(run)
+    parts = [f"{measured} probe{'s' if measured != 1 else ''} ({passed} passed)" if measured else "no probe"]
+    parts.append(f"reference by {maker}" if maker else "no reference")
+    line = "; ".join(parts)
+    return f"{line} ({SELF_CHECK})" if checked_against_itself(run) else line

@@ -3,7 +3,7 @@ from pathlib import Path
 
 from ..records import noise_test_text
 from ..verdict.status import rank
-from .results import judged_without_reference
+from .results import JUDGED, SELF_CHECK, checked_against_itself, judged_without_reference, probes_measured
 
 
 def _num(x, fmt="{:.4g}"):
@@ -15,21 +15,33 @@ def table(runs):
     one row (batch/report/grouping.py), not a row per scene."""
     from .grouping import not_run_everywhere
     runs, grouped = not_run_everywhere(runs)
-    rows = ["| status | scene | backend | mode | spp | resolution | time (s) | RMSE | relMSE | MAPE | FLIP | noise test | reason |",
-            "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    rows = ["| status | scene | backend | mode | spp | resolution | time (s) | RMSE | relMSE | MAPE | FLIP | noise test | probes | reason |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for g in grouped:
         rows.append(f"| {_cell(g['status'])} | (all {g['scenes']} scenes) | {_cell(g['backend'])} | {_cell(g.get('mode') or '')} "
-                    f"| | | | | | | | | {_cell(g['reason'] or '')[:300]} |")
+                    f"| | | | | | | | | | {_cell(g['reason'] or '')[:300]} |")
     for r in sorted(runs, key=lambda r: (rank(r["status"]), r["scene"], r["backend"])):
         m = r.get("metrics") or {}
         test = _cell(noise_test_text(r.get("test")) + detectable_cell(r))
         res = "x".join(map(str, r["resolution"])) if r.get("resolution") else ""
         reason = _cell(r.get("reason") or "")
-        shown = f"{r['status']} (without reference)" if judged_without_reference(r) else r["status"]
+        shown = (f"{r['status']} (without reference)" if judged_without_reference(r) else
+                 f"{r['status']} (checked against itself)" if checked_against_itself(r) else r["status"])
         rows.append(f"| {_cell(shown)} | {_cell(r['scene'])} | {_cell(r['backend'])} | {_cell(r.get('mode') or '')} | {_num(r.get('spp'), '{}')} "
                     f"| {res} | {_num(r.get('time_s'), '{:.2f}')} | {_num(m.get('rmse'))} | {_num(m.get('relmse'))} "
-                    f"| {_num(m.get('mape'))} | {_num(m.get('flip'))} | {test} | {reason[:300]} |")
+                    f"| {_num(m.get('mape'))} | {_num(m.get('flip'))} | {test} | {probes_cell(r)} | {reason[:300]} |")
+    if any(checked_against_itself(r) for r in runs):
+        rows += ["", f"*checked against itself*: judged only against a reference made by the same renderer, no probe "
+                     f"({SELF_CHECK.split(': ', 1)[1]}). Ground truth for these scenes needs a probe or another renderer's reference."]
     return "\n".join(rows)
+
+
+def probes_cell(run):
+    """The probes column: "25/25 pass", "1/2 pass", or "none" for a judged render no probe measured."""
+    measured, passed = probes_measured(run)
+    if measured:
+        return f"{passed}/{measured} pass"
+    return "none" if run.get("status") in JUDGED else ""
 
 
 def detectable_cell(run):
