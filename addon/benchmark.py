@@ -258,23 +258,39 @@ def scenes_to_run(context, s):
     return out
 
 
+def _active_scene(context):
+    """[(name, IR dict or SceneError)] of the scene open in Blender."""
+    try:
+        data = extract_blender.extract_scene(context.scene)
+        return [(data["name"], data)]
+    except validate.SceneError as exc:
+        return [(exc.scene, exc)]
+
+
 # -- running --------------------------------------------------------------------------------------
-def start_run(context):
-    """Export the chosen scenes and start the batch runner on them; returns the BackgroundRun."""
+STUDY_RGB = ("cycles", "luxcore")  # RGB renderers a study adds when chosen (Mitsuba renders both sides)
+
+
+def start_run(context, study=None):
+    """Export the chosen scenes and start the batch runner on them; returns the BackgroundRun.
+    ``study`` ("spectral-vs-rgb"): the open scene through that study instead (Mitsuba spectral and
+    RGB, plus the chosen RGB renderers; no reference needed)."""
     s = settings(context)
     if _ACTIVE.get("job") and _ACTIVE["job"].running():
         raise RuntimeError("a benchmark run is already in progress")
     found = declared_renderers(preferences.renderers_files(context))
     names = chosen_backends(s, found["renderers"])
+    if study:
+        names = ["mitsuba"] + [n for n in names if n in STUDY_RGB]
     if not names:
         raise RuntimeError("no available backend is selected")
     search = preferences.reference_folders(context)
-    if not search:
+    if not search and not study:
         raise RuntimeError("no references to judge against: choose a references folder in the extension's "
                            "preferences, or use the extension's own references")
     out = output_parent(s) / dt.datetime.now().strftime("outputs-%Y%m%d-%H%M%S")
     inputs, problems = [], []
-    for name, data in scenes_to_run(context, s):
+    for name, data in (_active_scene(context) if study else scenes_to_run(context, s)):
         if isinstance(data, Exception):
             problems.append(str(data))
             continue
@@ -285,7 +301,10 @@ def start_run(context):
     readable = [f["path"] for f in found["files"] if f["problem"] is None]
     args = run_arguments(s, readable, names)
     args += [a for _origin, folder in search for a in ("--references", str(folder))]
-    job = background_job.BackgroundRun(inputs, out, total_jobs=len(inputs) * len(names), extra_args=args)
+    if study:
+        args += ["--study", study]
+    per_scene = len(names) + 1 if study else len(names)  # a study: the spectral render and one per RGB route
+    job = background_job.BackgroundRun(inputs, out, total_jobs=len(inputs) * per_scene, extra_args=args)
     job.export_problems = problems
     job.renderers_problems = [f["problem"] for f in found["files"] if f["problem"]]  # files left out
     _ACTIVE["job"] = job.start()

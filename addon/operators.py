@@ -154,11 +154,20 @@ class SPECTRAL_BENCH_OT_run_benchmark(bpy.types.Operator):
     bl_label = "Run Benchmark"
     wait: BoolProperty(default=False, options={"HIDDEN", "SKIP_SAVE"},
                        description="Block until the run ends (scripts)")
+    study: StringProperty(default="", options={"HIDDEN", "SKIP_SAVE"},
+                          description="Run this study on the open scene instead (spectral-vs-rgb)")
     _timer = None
+
+    @classmethod
+    def description(cls, context, properties):
+        if properties.study == "spectral-vs-rgb":
+            return ("What does spectral rendering change for the open scene? Render it spectrally and in RGB "
+                    "(no reference needed) and map where they differ (CIEDE2000, against both renders' noise)")
+        return cls.__doc__
 
     def execute(self, context):
         try:
-            job = benchmark.start_run(context)
+            job = benchmark.start_run(context, study=self.study or None)
         except RuntimeError as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}

@@ -223,6 +223,9 @@ class SPECTRAL_BENCH_PT_benchmark(_Base, bpy.types.Panel):
         row.operator_context = "INVOKE_DEFAULT"
         row.operator("spectral_bench.run_benchmark", icon="PLAY")
         row.operator("spectral_bench.cancel_benchmark", icon="CANCEL")
+        row = layout.row()  # the open scene, spectral against RGB: no reference needed
+        row.operator_context = "INVOKE_DEFAULT"
+        row.operator("spectral_bench.run_benchmark", text="What does spectral change?", icon="COLOR").study = "spectral-vs-rgb"
         job = benchmark.active_job()
         fraction = benchmark.progress_fraction()
         if job is not None and job.running() and fraction is not None:

@@ -37,7 +37,7 @@ DEFAULTS = {
     "references": None, "known": None, "list": False, "art_ggx": False, "sweep": False, "ladder": None, "sweep_modes": None, "stability": False,
     "approximate": False, "renderers": None, "cluster": None, "cluster_timeout": DEFAULT_CLUSTER_TIMEOUT, "dashboard": None, "resume": None,
     "junit": None,
-    "baseline": None,
+    "baseline": None, "study": None, "illuminants": None, "visible_de00": 1.0,
 }
 
 
@@ -236,6 +236,23 @@ def _mode(v):
 
 
 _MODE = text_kind(_mode, "mode")
+STUDIES = ("spectral-vs-rgb",)  # --study (batch/studies/spectral_vs_rgb.py)
+
+
+def _study(v):
+    if v not in STUDIES:
+        raise ValueError(f"is not a study: one of {', '.join(STUDIES)}")
+    return v
+
+
+def _illuminant(v):
+    from .studies.spectral_vs_rgb import ILLUMINANTS
+    if v not in ILLUMINANTS:
+        raise ValueError(f"{v!r} is not an illuminant: one of {', '.join(ILLUMINANTS)}")
+    return v
+
+
+_ILLUMINANT = text_kind(_illuminant, "illuminant")
 
 
 def _device(v):
@@ -255,7 +272,8 @@ TYPES = {
     "cluster": text_kind(_cluster, "address"), "cluster_timeout": number(0, 3600, lo_open=True),
     "dashboard": text_kind(_dashboard, "[HOST]:PORT"), "resume": text_kind(_nonempty, "path"),
     "renderers": text_kind(_nonempty, "path"), "junit": text_kind(_nonempty, "path"),
-    "baseline": text_kind(_nonempty, "path"),
+    "baseline": text_kind(_nonempty, "path"), "study": text_kind(_study, "study"),
+    "illuminants": _comma_list(_ILLUMINANT, "NAME,..."), "visible_de00": number(0, 100, lo_open=True),
 }
 
 
@@ -340,6 +358,16 @@ def parser():
                     help="sample counts of the sweep (default 4,16,64,256)")
     ap.add_argument("--sweep-modes", type=T["sweep_modes"], metavar="MODE,...",
                     help="backend modes to sweep (e.g. llvm_ad_spectral,scalar_spectral,llvm_ad_rgb)")
+    ap.add_argument("--study", type=T["study"], metavar="NAME",
+                    help="run a study instead of the judged jobs: spectral-vs-rgb renders each scene spectrally and in "
+                         "RGB (Mitsuba's variants; Cycles/LuxCore when -r names them), no reference needed, and maps "
+                         "where and how much they differ (CIEDE2000, against both renders' noise)")
+    ap.add_argument("--illuminants", type=T["illuminants"], metavar="NAME,...",
+                    help="--study spectral-vs-rgb: also with every light's spectrum swapped for these CIE illuminants "
+                         "at the same luminance (A, D50, D55, D65, D75, E, F2, F7, F8, F11, LED-B1..B5, LED-BH1, "
+                         "LED-RGB1, LED-V1, LED-V2)")
+    ap.add_argument("--visible-de00", type=T["visible_de00"], metavar="DE",
+                    help="--study spectral-vs-rgb: the CIEDE2000 95th percentile that counts as visible (default 1.0)")
     ap.add_argument("--stability", action="store_true",
                     help="also run the stability case (grazing GGX, roughness and IOR furnaces, Malus)")
     ap.add_argument("--approximate", action="store_true",

@@ -38,6 +38,7 @@ PATHS = {
     "runs": ("image", "export", "reference.path", "reference.image", "reference_problems[].file", "baseline.zmap"),  # baseline.image: relative to the baseline run
     "jobs": ("image", "image_path", "row.image", "point.reference_problems[].file"),
     "sweeps": ("chart", "points[].reference_problems[].file"),
+    "studies": ("images.spectral", "images.rgb", "images.de00"),
 }
 
 
@@ -145,21 +146,21 @@ def _map_field(holder, steps, fn):
 
 
 # -- writing ---------------------------------------------------------------------------------------
-def document(folder, started, options, runs, jobs=None, sweeps=None, stability=None):
+def document(folder, started, options, runs, jobs=None, sweeps=None, stability=None, studies=None):
     """The metrics.json content of a run in ``folder``: versioned, paths relative to the folder."""
     data = {"schema_version": SCHEMA_VERSION, "tool": dict(tool_info()), "started": started,
             "options": dict(options), "runs": list(runs)}
-    for key, value in (("jobs", jobs), ("sweeps", sweeps), ("stability", stability)):
+    for key, value in (("jobs", jobs), ("sweeps", sweeps), ("stability", stability), ("studies", studies)):
         if value:
             data[key] = list(value)
     data = json.loads(json.dumps(data, default=str))  # a copy of plain JSON data: the caller's records stay as they are
     return _map_paths(data, lambda v: relative(v, folder))
 
 
-def write(folder, started, options, runs, jobs=None, sweeps=None, stability=None):
+def write(folder, started, options, runs, jobs=None, sweeps=None, stability=None, studies=None):
     """Write ``folder``/metrics.json atomically (a reader never sees half a file); returns its path."""
     folder = Path(folder)
-    data = document(folder, started, options, runs, jobs, sweeps, stability)
+    data = document(folder, started, options, runs, jobs, sweeps, stability, studies)
     tmp = folder / (FILE_NAME + ".tmp")
     tmp.write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
     tmp.replace(folder / FILE_NAME)
@@ -190,7 +191,7 @@ class Run(dict):
         return _map_paths(out, lambda v: absolute(v, self.folder))
 
     def entries(self, section="runs"):
-        """The dict items of runs (or jobs, sweeps, stability); anything else is passed over."""
+        """The dict items of runs (or jobs, sweeps, stability, studies); anything else is passed over."""
         items = self.get(section)
         return [r for r in items if isinstance(r, dict)] if isinstance(items, list) else []
 

@@ -21,7 +21,7 @@ from pathlib import Path
 
 
 
-KINDS = ("render", "sweep", "stability", "reference")  # KINDS_TABLE below says what each does
+KINDS = ("render", "sweep", "stability", "study", "reference")  # KINDS_TABLE below says what each does
 
 
 class RenderCrashed(RuntimeError):
@@ -162,6 +162,7 @@ KINDS_TABLE = {
     "render": Kind(_judge_render),
     "sweep": Kind("..verdict.judge:sweep_point", "point"),  # one rung of a speed/accuracy ladder
     "stability": Kind("..studies.stability:judge_value", "row"),  # one value of a stability strip
+    "study": Kind(None),  # one render of --study spectral-vs-rgb (studies/spectral_vs_rgb.py compares the pairs)
     "reference": Kind(None),  # one pass of a reference (batch/make_references.py merges them)
 }
 

@@ -179,7 +179,7 @@ class Run:
         deviations (default: load --known)."""
         self.opts = opts
         self.out = out if out is not None else output_dir(opts)
-        self.runs, self.results, self.sweeps, self.stability = [], [], [], []
+        self.runs, self.results, self.sweeps, self.stability, self.studies = [], [], [], [], []
         self.started = _dt.datetime.now().isoformat(timespec="seconds")
         self.deviations = deviations if deviations is not None else load_known(opts.get("known"))
         self.previous = self._previous() if opts.get("resume") else {}
@@ -200,7 +200,8 @@ class Run:
 
     def save(self):
         """metrics.json, rewritten atomically (batch/records.py: versioned, paths relative to OUT)."""
-        records.write(self.out, self.started, self.opts, self.runs, self.results, self.sweeps, self.stability)
+        records.write(self.out, self.started, self.opts, self.runs, self.results, self.sweeps, self.stability,
+                      self.studies)
 
     def add(self, entry, quiet=False):
         if self.base is not None:  # judged against the previous run too (--baseline); the status stays
@@ -265,7 +266,13 @@ class Run:
         if "mitsuba" in made and made["mitsuba"].availability()[0]:
             log.info("%s", made["mitsuba"].llvm_message())
         settings = planning.verdict_settings(self.opts)
-        main, immediate = planning.main_jobs(scenes, made, self.opts, self.out, settings)
+        if self.opts.get("study"):  # a study instead of the judged jobs (its own words, no reference)
+            from ..studies import spectral_vs_rgb
+            main, rows = spectral_vs_rgb.jobs(scenes, made, self.opts, self.out)
+            immediate = []
+            self.studies += rows
+        else:
+            main, immediate = planning.main_jobs(scenes, made, self.opts, self.out, settings)
         job_list = list(main)
         if self.opts["sweep"]:
             sweep_jobs, lines = planning.sweep_jobs(scenes, made, self.opts, self.out, settings)
@@ -352,6 +359,10 @@ class Run:
         if sweep_results:
             self.sweeps += planning.sweep_lines(sweep_results)
             self.finish_sweeps()
+        study_results = [(j, r) for j, r in self.done if j["kind"] == "study"]
+        if study_results:
+            from ..studies import spectral_vs_rgb
+            self.studies += spectral_vs_rgb.finish(study_results, self.out, self.opts.get("visible_de00") or 1.0)
         stab_results = [(j, r) for j, r in self.done if j["kind"] == "stability"]
         if stab_results:
             from ..studies import stability
@@ -456,6 +467,12 @@ def run(opts):
         lock.release()
 
 
+def study_records(rows):
+    """A study's rows as statuses of the exit code: its words (differs visibly, ...) are findings,
+    not failures; a render that failed is failed, a route that could not run is skipped/unsupported."""
+    return [{"status": r["status"] if r.get("status") in ("failed", "skipped", "unsupported") else "ok"} for r in rows]
+
+
 def _run(opts, out, deviations, t0):
     _jobs, scenes = plan(opts)
     if not opts["export_only"] and (why := planning.scale_problem(scenes, opts.get("scale"))):
@@ -483,13 +500,13 @@ def _run(opts, out, deviations, t0):
         log.error("interrupted: finished jobs are in %s/metrics.json; --resume %s finishes the run", batch.out, batch.out)
         code = 130
     batch.save()
-    text = summary.write(batch.out, batch.runs, time.perf_counter() - t0, batch.sweeps, batch.stability)
+    text = summary.write(batch.out, batch.runs, time.perf_counter() - t0, batch.sweeps, batch.stability, batch.studies)
     report.write(batch.out)
     print(text)
     if opts.get("junit"):
         write_junit(opts["junit"], batch)
     if code is None:
-        code = status.exit_code(batch.runs + batch.stability)
+        code = status.exit_code(batch.runs + batch.stability + study_records(batch.studies))
         if code == status.EXIT_NOTHING_RAN:
             log.error("nothing was rendered: every job was skipped or unsupported (exit %d)", code)
     return code

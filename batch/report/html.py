@@ -523,6 +523,27 @@ def _stability(out, stab):
     return sections
 
 
+def _studies(out, rows):
+    """--study spectral-vs-rgb: per render pair, the two renders at one exposure and the dE00 map
+    side by side, with the numbers of summary.md (batch/studies/spectral_vs_rgb.py)."""
+    pairs = []
+    for r in (r for r in rows if isinstance(r, dict)):
+        images = _dict(r.get("images"))
+        srcs = {k: _local_url(out, images[k]) for k in ("spectral", "rgb", "de00") if isinstance(images.get(k), str)}
+        d, t = _dict(r.get("de00")), _dict(r.get("test"))
+        numbers = (f"CIEDE2000 over {_text(d.get('blocks'))} blocks of {_text(d.get('block'))} px: mean {_fmt(d.get('mean'), '{:.2f}')}, "
+                   f"95th percentile {_fmt(d.get('p95'), '{:.2f}')}, max {_fmt(d.get('max'), '{:.2f}')} (noise alone: "
+                   f"{_fmt(d.get('noise_p95'), '{:.2f}')}; visible from {_fmt(d.get('visible'))}); beyond noise: "
+                   f"{'yes' if t.get('beyond_noise') else 'no'} (p {_fmt(t.get('p_min'), '{:.2g}')}, threshold "
+                   f"{_fmt(t.get('threshold'), '{:.2g}')})") if d else ""
+        pairs.append({"scene": _text(r.get("scene")), "light": _text(r.get("light")),
+                      "rgb": _text(" ".join(str(x) for x in (r.get("rgb"), r.get("rgb_mode")) if x)),
+                      "status": _text(r.get("status")), "verdict": _text(r.get("verdict") or r.get("status")),
+                      "reason": _text(r.get("reason")), "numbers": numbers, "top": _fmt(images.get("de00_top"), "{:.2g}"),
+                      "srcs": srcs if len(srcs) == 3 else {}})
+    return pairs
+
+
 def _ids(runs, viewers):
     """A unique, safe element id per viewer: SCENE--BACKEND when that is safe, else run-N."""
     ids, taken = {}, set()
@@ -575,7 +596,8 @@ def render(out_dir):
         not_run=[{k: _text(v) for k, v in g.items()} for g in not_run], viewer_js=VIEWER_JS,
         rgb=_section(summary_text, "RGB renderers against the spectral references"), charts=charts,
         sweep_text=_section(summary_text, "Speed against accuracy (sweeps)"),
-        stability=_stability(out, stab), viewers=[viewers[i] for i in shown])
+        stability=_stability(out, stab), studies=_studies(out, _list(data.get("studies"))),
+        viewers=[viewers[i] for i in shown])
 
 
 def write(out_dir):

@@ -173,7 +173,36 @@ def _against_baseline(runs):
     return section.lstrip("\n") if section else ""
 
 
-def write(out_dir, runs, elapsed_s, sweeps=None, stability=None):
+def studies_table(rows):
+    """--study spectral-vs-rgb: per scene, light and RGB route, the verdict in the study's words,
+    the CIEDE2000 over the noise test's blocks and whether the difference is beyond noise."""
+    if not rows:
+        return ""
+    out = ["", "## What spectral rendering changes (--study spectral-vs-rgb)", "",
+           "Each scene rendered spectrally (Mitsuba) and in RGB by the same renderer, no reference: CIEDE2000 between "
+           "the two over the noise test's blocks (in CIELAB of the light's white), and whether the difference is "
+           "beyond both renders' noise (block test, Sidak). Maps: `studies/spectral_vs_rgb/<scene>/<light>/`.", "",
+           "| scene | light | RGB route | verdict | dE00 mean | dE00 p95 | dE00 max | noise alone p95 | beyond noise | reason |",
+           "|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        d, t = r.get("de00") or {}, r.get("test") or {}
+        beyond = "" if not t else (f"yes (p {t['p_min']:.2g} < {t['threshold']:.2g})" if t.get("beyond_noise")
+                                   else f"no (p {t['p_min']:.2g} >= {t['threshold']:.2g})")
+        route = " ".join(str(x) for x in (r.get("rgb"), r.get("rgb_mode")) if x)
+        out.append(f"| {_cell(r.get('scene', ''))} | {_cell(r.get('light', ''))} | {_cell(route)} "
+                   f"| {_cell(r.get('verdict') or r.get('status', ''))} | {_num(d.get('mean'), '{:.2f}')} "
+                   f"| {_num(d.get('p95'), '{:.2f}')} | {_num(d.get('max'), '{:.2f}')} | {_num(d.get('noise_p95'), '{:.2f}')} "
+                   f"| {beyond} | {_cell(r.get('reason') or '')[:300]} |")
+    return "\n".join(out) + "\n"
+
+
+def write(out_dir, runs, elapsed_s, sweeps=None, stability=None, studies=None):
+    if studies and not runs:  # a study instead of the judged jobs
+        pairs = [r for r in studies if r.get("de00")]
+        text = (f"# Spectral benchmark study\n\n{len(pairs)} render pair{'s' if len(pairs) != 1 else ''} compared in "
+                f"{elapsed_s:.1f} s.\n" + studies_table(studies))
+        Path(out_dir, "summary.md").write_text(text)
+        return text
     c = counts(runs)
     head = ", ".join(f"{n} {s}" for s, n in sorted(c.items(), key=lambda kv: rank(kv[0])))
     without = sum(1 for r in runs if judged_without_reference(r))
@@ -184,6 +213,7 @@ def write(out_dir, runs, elapsed_s, sweeps=None, stability=None):
             "the reference's; block test, Sidak-corrected) and the analytic probes (ground truth from no renderer). "
             "known: fails exactly as a recorded deviation (known_deviations.toml); unjudged: nothing could judge it. "
             "Images and diffs: `<scene>/results/<backend>/`; all numbers: `metrics.json`.\n\n"
-            + _against_baseline(runs) + table(runs) + "\n" + reference_problems_table(runs) + rgb_comparison(runs) + sweeps_table(sweeps) + stability_table(stability))
+            + _against_baseline(runs) + table(runs) + "\n" + reference_problems_table(runs) + rgb_comparison(runs) + sweeps_table(sweeps) + stability_table(stability)
+            + studies_table(studies))
     Path(out_dir, "summary.md").write_text(text)
     return text

@@ -1,0 +1,106 @@
+"""--study spectral-vs-rgb (batch/studies/spectral_vs_rgb.py): what spectral rendering changes for
+a scene, in its own words, with no reference. A ColorChecker-red sphere under a uniform sky renders
+alike spectrally and in RGB under D65 (the sRGB white) and visibly differently under F11 (a line
+spectrum: the product of spectra is not the product of their RGBs)."""
+import json
+
+import numpy as np
+import pytest
+
+from conftest import GOLDEN, ROOT, metrics, run_batch, run_bpy
+
+EXAMPLE = ROOT / "examples" / "scenes" / "red_sphere.json"
+
+
+@pytest.fixture(scope="module")
+def study(tmp_path_factory):
+    out = tmp_path_factory.mktemp("study") / "out"
+    proc = run_batch("--study", "spectral-vs-rgb", "-i", EXAMPLE, "-r", "mitsuba", "--illuminants", "F11",
+                     "--spp", "1024", "-o", out)
+    return proc, out
+
+
+def test_a_study_exits_0_with_its_own_words_and_a_map_per_pair(study):
+    proc, out = study
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    rows = {r["light"]: r for r in metrics(out).entries("studies")}
+    assert set(rows) == {"own", "F11"} and all(r["rgb"] == "mitsuba" and r["rgb_mode"].endswith("_rgb") for r in rows.values())
+    own, f11 = rows["own"], rows["F11"]
+    # power: noise alone would show far less than a visible difference, so "not visible" means something
+    assert own["de00"]["noise_p95"] < 0.5 * own["de00"]["visible"], own["de00"]
+    assert own["status"] in ("same", "below") and own["de00"]["p95"] < 1.0, own
+    assert f11["status"] == "visible" and f11["test"]["beyond_noise"] and f11["de00"]["p95"] >= 1.0, f11
+    assert f11["de00"]["p95"] > 3 * own["de00"]["p95"]
+    assert f11["verdict"].startswith("differs visibly (dE00 p95 ")
+    for r in rows.values():  # the maps beside the renders, as the report shows them
+        assert all((out / r["images"][k]).is_file() for k in ("spectral", "rgb", "de00")), r["images"]
+    summary = (out / "summary.md").read_text()
+    assert "## What spectral rendering changes" in summary and "| red_sphere | F11 | mitsuba llvm_ad_rgb | differs visibly" in summary
+    assert "failed" not in summary
+    html = (out / "report.html").read_text()
+    assert "<h2>What spectral rendering changes</h2>" in html and html.count("<figure>") == 6
+    assert "<h2>Summary</h2>" not in html  # no judged jobs, no empty table
+
+
+def test_the_verdict_follows_the_noise_and_the_size_of_the_difference():
+    """compare() on synthetic renders with known noise: the same image is not 'visible', a
+    difference of 5 % in red is beyond noise and visible, a tiny one beyond noise but not visible,
+    and a visible-sized difference drowned in noise is 'too noisy to tell'."""
+    from spectral_bench.batch.studies import spectral_vs_rgb as study
+    scene = json.loads((GOLDEN / "macbeth_chart_D65.json").read_text())
+    rng = np.random.default_rng(3)
+    mean = np.full((32, 32, 3), 0.3)
+
+    def noisy(m, se):
+        return m + rng.normal(0.0, se, m.shape), np.full(m.shape, se)
+    spp = 1024  # blocks of 8 x 8 pixels (65536 samples each, the noise test's minimum), 16 of them
+
+    def verdict(shift, se):
+        other = mean * np.array([1.0 + shift, 1.0, 1.0])
+        return study.compare(scene, noisy(mean, se), noisy(other, se), spp)[0]["status"]
+    assert verdict(0.0, 1e-4) == "same"
+    assert verdict(0.05, 1e-4) == "visible"
+    assert verdict(0.002, 1e-4) == "below"
+    assert verdict(0.05, 0.2) == "noisy"
+
+
+def test_a_swapped_illuminant_keeps_each_lights_luminance():
+    from spectral_bench.exporters import colorimetry, ir_json
+    from spectral_bench.batch.studies import spectral_vs_rgb as study
+    scene = ir_json.load(EXAMPLE)
+    for key in ("F11", "A", "LED-B3"):
+        swapped = study.under(scene, key)
+        (holder, k), = study.lights(swapped)
+        y_old = colorimetry.spectrum_xyz(scene["environment"]["radiance"])[1]
+        assert colorimetry.spectrum_xyz(holder[k])[1] == pytest.approx(y_old, rel=1e-9)
+        x, y, _ = colorimetry.spectrum_xyz(holder[k]) / sum(colorimetry.spectrum_xyz(holder[k]))
+        assert abs(x - 0.3127) > 0.01  # not D65's chromaticity: the spectrum did change
+
+
+def test_a_scene_no_rgb_variant_models_is_unsupported_naming_why(tmp_path, run_batch_here):
+    proc = run_batch_here("--study", "spectral-vs-rgb", "-i", GOLDEN / "polarizing_plane_0.json", "-r", "mitsuba",
+                          "-o", tmp_path / "out")
+    assert proc.returncode == 4, proc.stderr  # nothing ran: the only pair cannot be rendered in RGB
+    (row,) = metrics(tmp_path / "out").entries("studies")
+    assert row["status"] == "unsupported" and "cannot model polarization" in row["reason"]
+
+
+@pytest.mark.slow
+def test_the_panel_button_runs_the_study_on_the_open_scene(tmp_path):
+    out = run_bpy(f"""
+        from spectral_bench.batch import backends
+        s = bpy.context.window_manager.spectral_bench_run
+        s.backends_off = ",".join(n for n in backends.BACKENDS if n != "mitsuba")
+        s.spp, s.scale, s.passes, s.output_parent = 64, 0.1, 2, {str(tmp_path)!r}
+        with bpy.context.temp_override(scene=bpy.data.scenes["macbeth_chart_D65"]):
+            r = bpy.ops.spectral_bench.run_benchmark(study="spectral-vs-rgb", wait=True)
+        print(json.dumps({{"r": list(r), "out": s.output_dir, "status": s.status}}))
+    """)
+    assert out["r"] == ["FINISHED"] and out["status"].startswith("passed"), out
+    (row,) = metrics(out["out"]).entries("studies")
+    assert row["scene"] == "macbeth_chart_D65" and row["light"] == "own" and row["status"] in study_words()
+
+
+def study_words():
+    from spectral_bench.batch.studies import spectral_vs_rgb
+    return tuple(spectral_vs_rgb.VERDICTS)
