@@ -297,8 +297,9 @@ class CommandBackend:
             raise BackendFailure(f"{self.name} exited with 0 but wrote no {out.name} (the command's {{output}})")
         try:
             names, img = read_output(out, self.decl["writes"], self.decl.get("observer", "cie1931"))
-        except (ValueError, OSError, KeyError) as exc:
-            raise BackendFailure(f"{self.name} wrote an EXR that cannot be read as {self.decl['writes']}: {exc}") from exc
+        except Exception as exc:  # noqa: BLE001 - whatever the EXR reader raises on a corrupt file fails this pass (retried)
+            raise BackendFailure(f"{self.name} wrote {out} ({{output}}), which cannot be read as a "
+                                 f"{self.decl['writes']} EXR: {type(exc).__name__}: {str(exc)[:300]}") from exc
         if img.shape[:2] != (height, width) and width:
             raise BackendFailure(f"{self.name} wrote a {img.shape[1]}x{img.shape[0]} image; the scene is {width}x{height}")
         shutil.rmtree(work, ignore_errors=True)

@@ -191,29 +191,159 @@ class OneProcessPerPass:
         return result
 
 
+# A pass's child process: its output is kept up to OUTPUT_HEAD bytes from the start and OUTPUT_TAIL
+# from the end (the rest counted, said in render.log); after it exits, what its children still write
+# to its pipes is read for DRAIN_S at most (nothing for DRAIN_IDLE_S ends it sooner); its process
+# group is then asked to stop (SIGTERM) and killed (SIGKILL) after STOP_GRACE_S.
+OUTPUT_HEAD = OUTPUT_TAIL = 64 * 1024
+DRAIN_S, DRAIN_IDLE_S, STOP_GRACE_S = 5.0, 0.5, 2.0
+
+
+class CappedOutput:
+    """What a child wrote to one pipe, in bounded memory: the first ``head`` and the last ``tail``
+    bytes, and how many bytes between them were dropped."""
+
+    def __init__(self, head=OUTPUT_HEAD, tail=OUTPUT_TAIL):
+        self.head_max, self.tail_max = head, tail
+        self.head, self.tail, self.dropped = bytearray(), bytearray(), 0
+
+    def add(self, data):
+        room = self.head_max - len(self.head)
+        if room > 0:
+            self.head += data[:room]
+            data = data[room:]
+        self.tail += data
+        over = len(self.tail) - self.tail_max
+        if over > 0:
+            del self.tail[:over]
+            self.dropped += over
+
+    def text(self):
+        middle = (f"\n[... {self.dropped} bytes of output dropped: the first {self.head_max} and the last "
+                  f"{self.tail_max} bytes are kept ...]\n") if self.dropped else ""
+        return self.head.decode(errors="replace") + middle + self.tail.decode(errors="replace")
+
+
+def _group_alive(pgid):
+    """True while a process of group ``pgid`` other than a zombie is left (read from /proc)."""
+    for entry in os.scandir("/proc"):
+        if not entry.name.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry.name}/stat", "rb") as f:
+                stat = f.read()
+        except OSError:
+            continue
+        fields = stat[stat.rindex(b")") + 2:].split()  # state, ppid, pgrp, ... after "(comm)"
+        if int(fields[2]) == pgid and fields[0] != b"Z":
+            return True
+    return False
+
+
+def stop_group(proc):
+    """End the process group of ``proc`` (started with start_new_session: its group id is its pid):
+    SIGTERM to every member, SIGKILL after STOP_GRACE_S to whatever is left; ``proc`` is reaped."""
+    import signal
+    import subprocess
+    pgid = proc.pid
+    try:
+        os.killpg(pgid, signal.SIGTERM)
+    except (ProcessLookupError, PermissionError):
+        pass
+    deadline = time.monotonic() + STOP_GRACE_S
+    try:
+        proc.wait(timeout=STOP_GRACE_S)
+    except subprocess.TimeoutExpired:
+        pass
+    while time.monotonic() < deadline and os.path.isdir("/proc") and _group_alive(pgid):
+        time.sleep(0.02)
+    try:
+        os.killpg(pgid, signal.SIGKILL)
+    except (ProcessLookupError, PermissionError):
+        pass
+    proc.wait()
+
+
+def _collect(proc, timeout):
+    """Read the child's stdout and stderr (CappedOutput each) until it exits and its pipes are
+    drained (DRAIN_S at most after the exit: a child of the child may hold them open) or until
+    ``timeout`` seconds; returns (stdout, stderr, exited in time)."""
+    import selectors
+    outs = {proc.stdout: CappedOutput(), proc.stderr: CappedOutput()}
+    sel = selectors.DefaultSelector()
+    for pipe in outs:
+        os.set_blocking(pipe.fileno(), False)
+        sel.register(pipe, selectors.EVENT_READ)
+    pidfd = None
+    if hasattr(os, "pidfd_open"):
+        try:
+            pidfd = os.pidfd_open(proc.pid)
+            sel.register(pidfd, selectors.EVENT_READ)
+        except OSError:
+            pidfd = None
+    start = time.monotonic()
+    exited = last_data = None
+    try:
+        while True:
+            now = time.monotonic()
+            if exited is None and proc.poll() is not None:
+                exited = last_data = now
+                if pidfd is not None:
+                    sel.unregister(pidfd)
+            open_pipes = [k for k in sel.get_map().values() if k.fileobj in outs]
+            if exited is not None and (not open_pipes or now >= min(exited + DRAIN_S, last_data + DRAIN_IDLE_S)):
+                break
+            if exited is None and now >= start + timeout:
+                break
+            limit = min(exited + DRAIN_S, last_data + DRAIN_IDLE_S) if exited is not None else start + timeout
+            # without a pidfd to wake on the child's exit, look at it every 50 ms
+            wait = limit - now if pidfd is not None or exited is not None else min(limit - now, 0.05)
+            for key, _ in sel.select(max(0.0, wait)):
+                if key.fileobj is pidfd:
+                    continue  # its exit: seen by poll() above
+                data = os.read(key.fileobj.fileno(), 1 << 16)
+                if data:
+                    outs[key.fileobj].add(data)
+                    last_data = time.monotonic()
+                else:
+                    sel.unregister(key.fileobj)
+    finally:
+        sel.close()
+        if pidfd is not None:
+            os.close(pidfd)
+    return outs[proc.stdout], outs[proc.stderr], exited is not None
+
+
 def run_command(cmd, timeout, log, what, env=None, cwd=None):
-    """Run one child process (dies with this one) under ``timeout`` seconds, its command line and
-    output appended to ``log``; returns its wall seconds. PassTimeout past the limit,
-    BackendFailure on a non-zero exit (with the tail of its output) or a program not found."""
+    """Run one child process under ``timeout`` seconds, its command line and output appended to
+    ``log``; returns its wall seconds. The child runs in its own session (process group) and dies
+    with this process; when it exits (or runs past ``timeout``) its whole group is ended
+    (``stop_group``), so nothing it started outlives the pass. It is judged by its own exit status,
+    whatever its children still hold open. Its output is kept in bounded memory (CappedOutput).
+    PassTimeout past the limit, BackendFailure on a non-zero exit (with the tail of its output) or
+    a program not found."""
     import subprocess
     from . import child
     t0 = time.perf_counter()
     log.write(f"$ {' '.join(map(str, cmd))}{f'   (in {cwd})' if cwd else ''}\n")
     log.flush()
     try:
-        proc = subprocess.run([str(c) for c in cmd], capture_output=True, text=True, errors="replace", timeout=timeout,
-                              env=env, cwd=cwd, stdin=subprocess.DEVNULL, **child.popen_kwargs())
-    except subprocess.TimeoutExpired as exc:
-        log.write(f"(timed out after {timeout} s)\n{_text(exc.stdout)}\n{_text(exc.stderr)}\n")
-        raise PassTimeout(f"{what} timed out after {timeout} s") from exc
+        proc = subprocess.Popen([str(c) for c in cmd], stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, cwd=cwd,
+                                stdin=subprocess.DEVNULL, start_new_session=True, **child.popen_kwargs())
     except OSError as exc:
         raise BackendFailure(f"{what} could not start: {exc.strerror or exc}: {cmd[0]}") from exc
-    log.write(f"{proc.stdout}\n{proc.stderr}\n")
+    try:
+        out, err, finished = _collect(proc, timeout)
+    finally:
+        stop_group(proc)
+        proc.stdout.close()
+        proc.stderr.close()
+    if not finished:
+        log.write(f"(timed out after {timeout} s)\n{out.text()}\n{err.text()}\n")
+        raise PassTimeout(f"{what} timed out after {timeout} s")
+    stdout, stderr = out.text(), err.text()
+    log.write(f"{stdout}\n{stderr}\n")
     log.flush()
     if proc.returncode != 0:
-        raise BackendFailure(f"{what} exited with {proc.returncode}: {tail(proc.stderr) or tail(proc.stdout)}")
+        raise BackendFailure(f"{what} exited with {proc.returncode}: {tail(stderr) or tail(stdout)}")
     return time.perf_counter() - t0
-
-
-def _text(data):
-    return data.decode(errors="replace") if isinstance(data, bytes) else (data or "")
