@@ -1,0 +1,150 @@
+"""Declared renderers that misbehave (issue 30): real shell-script renderers whose children outlive
+them, hold their output pipe, hang, flood their output or write a corrupt EXR. Nothing a pass
+started is left in the process table afterwards (every process carrying the test's marker in its
+environment, which a renderer's children inherit, is gone or a zombie); a renderer is judged by its
+own exit; its output is kept head and tail in bounded memory; a corrupt EXR fails the pass, named.
+
+Synchronisation is by files the processes write (pid files), never by sleeping: the only clock is
+the pass time-out, which one test is about.
+"""
+import json
+import os
+import subprocess
+import sys
+import textwrap
+import uuid
+
+import psutil
+import pytest
+
+from test_declared_renderer import FAKE, ROOT, render  # noqa: F401 - the fake renderer script and the loop driver
+from spectral_bench.batch.backends import passes
+
+# A wrapper, as real renderers are often started: a shell script that runs the renderer behind it.
+# $1: what to do; then the output, spp, seed, width, height of the pass. The fake renderer (FAKE,
+# written beside it as fake.py) writes the EXR; a background child, whose pid is written to
+# $PIDS/child.<seed> by itself, keeps the wrapper's stdout and stderr open.
+WRAPPER = textwrap.dedent('''\
+    #!/bin/sh
+    what=$1; out=$2; spp=$3; seed=$4; w=$5; h=$6
+    here=$(dirname "$0")
+    child() { sh -c 'echo $$ > "$0.tmp" && mv "$0.tmp" "$0" && exec sleep 3600' "$PIDS/child.$seed" & }
+    case $what in
+      orphan)   "$PYTHON" "$here/fake.py" seed "$out" "$spp" "$seed" "$w" "$h" && child; exit 0 ;;
+      hang)     child; wait ;;
+      flood)    "$PYTHON" -c 'import sys
+    o = sys.stdout.buffer
+    o.write(b"HEAD-MARK\\n")
+    for _ in range(100): o.write(b"x" * 1048575 + b"\\n")
+    o.write(b"TAIL-MARK\\n")' && "$PYTHON" "$here/fake.py" seed "$out" "$spp" "$seed" "$w" "$h" ;;
+      corrupt)  echo "not an EXR" > "$out"; exit 0 ;;
+      truncated) "$PYTHON" "$here/fake.py" seed "$out" "$spp" "$seed" "$w" "$h" && "$PYTHON" -c 'import os, sys
+    p = sys.argv[1]; os.truncate(p, os.path.getsize(p) // 2)' "$out" ;;
+    esac
+    ''')
+
+
+@pytest.fixture
+def wrapper(tmp_path, monkeypatch):
+    """(declared options for ``render``, the marker, the pid folder) of the wrapper renderer."""
+    (tmp_path / "fake.py").write_text(FAKE)
+    (tmp_path / "wrapper.sh").write_text(WRAPPER)
+    pids = tmp_path / "pids"
+    pids.mkdir()
+    mark = uuid.uuid4().hex
+    env = {"PIDS": str(pids), "PYTHON": sys.executable, "HOSTILE_RENDERER_MARK": mark}
+    return env, mark, pids
+
+
+def declared(env, what, **extra):
+    return dict({"command": ["/bin/sh", "{here}/wrapper.sh", what, "{output}", "{spp}", "{seed}", "{width}", "{height}",
+                             "{scene}"], "env": env}, **extra)
+
+
+def leftovers(mark):
+    """Processes (not zombies) whose environment carries ``mark``: what the renderer started."""
+    found = []
+    for p in psutil.process_iter(["pid", "status"]):
+        try:
+            if p.info["status"] != psutil.STATUS_ZOMBIE and p.environ().get("HOSTILE_RENDERER_MARK") == mark:
+                found.append(p.pid)
+        except (psutil.NoSuchProcess, psutil.AccessDenied, psutil.ZombieProcess):
+            pass
+    return found
+
+
+def gone(pid):
+    try:
+        return psutil.Process(pid).status() == psutil.STATUS_ZOMBIE
+    except psutil.NoSuchProcess:
+        return True
+
+
+def test_a_renderer_that_exits_0_leaving_a_child_on_its_stdout_is_judged_by_its_exit(tmp_path, wrapper):
+    """Its child keeps the pipe open for an hour: the pass is the renderer's (exit 0, a good EXR),
+    not a time-out, and the child is ended with the pass."""
+    env, mark, pids = wrapper
+    info = render(tmp_path, "seed", passes_n=2, timeout=30, declared=declared(env, "orphan"))
+    assert info["passes"] == 2, info
+    children = sorted(pids.glob("child.*[0-9]"))
+    assert len(children) == 2  # each pass started one
+    assert all(gone(int(p.read_text())) for p in children)
+    assert leftovers(mark) == []
+
+
+def test_a_time_out_ends_the_real_renderer_behind_a_shell_wrapper(tmp_path, wrapper):
+    """The wrapper waits on its child: the pass times out, and both the wrapper and the renderer
+    behind it are gone afterwards (only the direct child used to be killed)."""
+    env, mark, pids = wrapper
+    with pytest.raises(passes.BackendFailure, match="timed out"):
+        render(tmp_path, "seed", passes_n=1, declared=declared(env, "hang", timeout=5))
+    child = pids / "child.0"
+    assert child.is_file(), "the renderer behind the wrapper had not started within the 5 s time-out"
+    assert gone(int(child.read_text()))
+    assert leftovers(mark) == []
+
+
+def test_a_renderer_flooding_its_output_is_kept_head_and_tail_in_bounded_memory(tmp_path, wrapper):
+    """100 MB on stdout: render.log keeps its first and last 64 kB and says how much was dropped;
+    the process running the pass grows by far less than the output (measured in a child: its peak
+    resident memory before and after the render)."""
+    env, mark, _pids = wrapper
+    script = textwrap.dedent(f'''
+        import json, resource, sys
+        from pathlib import Path
+        sys.path.insert(0, {str(ROOT / "tests")!r})
+        import test_declared_renderer as t
+        before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+        t.render(Path({str(tmp_path)!r}), "seed", passes_n=1, declared={declared(env, "flood")!r})
+        print(json.dumps([before, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss]))
+        ''')
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    before_kb, after_kb = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert (after_kb - before_kb) * 1024 < 30e6, (before_kb, after_kb)  # the output alone is 100 MB
+    log = (tmp_path / "render.log").read_text()
+    assert len(log) < 300_000 and "HEAD-MARK" in log and "TAIL-MARK" in log
+    assert f"[... {100 * 2 ** 20 + 20 - 2 * passes.OUTPUT_HEAD} bytes of output dropped" in log
+    assert leftovers(mark) == []
+
+
+@pytest.mark.parametrize("what", ["corrupt", "truncated"])
+def test_a_corrupt_exr_fails_the_pass_naming_the_file_and_is_retried(tmp_path, wrapper, what):
+    env, _mark, _pids = wrapper
+    with pytest.raises(passes.BackendFailure) as err:
+        render(tmp_path, "seed", passes_n=1, declared=declared(env, what))
+    text = str(err.value)
+    assert "pass 1/1 (seed 0) failed twice" in text and "pass0.exr" in text and "cannot be read" in text, text
+    assert "internal error" not in text
+    assert "failed (attempt 1)" in (tmp_path / "render.log").read_text()
+
+
+def test_capped_output_keeps_head_and_tail():
+    out = passes.CappedOutput(head=4, tail=3)
+    for chunk in (b"ab", b"cdefg", b"hij", b"", b"k"):
+        out.add(chunk)
+    assert (bytes(out.head), bytes(out.tail), out.dropped) == (b"abcd", b"ijk", 4)
+    assert out.text().startswith("abcd\n[... 4 bytes of output dropped") and out.text().endswith("...]\nijk")
+    small = passes.CappedOutput(head=4, tail=3)
+    small.add(b"abcdef")
+    assert small.text() == "abcdef"
