@@ -165,10 +165,11 @@ def test_resume_with_a_corrupt_metrics_file_is_named(tmp_path):
 
 
 @pytest.mark.slow
-def test_resume_restores_exec_and_keeps_finished_renders(tmp_path):
+def test_resume_needs_exec_again_and_keeps_finished_renders(tmp_path):
     """-e is part of a job's id: a resumed run without -e used to plan other jobs and render the
-    finished ones again, over their files. Now it takes -e from the run, keeps what finished, and
-    refuses an option that differs."""
+    finished ones again, over their files. An executable recorded in a run folder is never run
+    (issue 30: the folder is data): the resume without -e is refused saying to give it again; with
+    the same -e it keeps what finished, and refuses an option that differs."""
     exe = ROOT / ".venv" / "bin" / "mitsuba"
     if not exe.is_file():
         exe = os.path.join(os.path.dirname(sys.executable), "mitsuba")
@@ -178,13 +179,15 @@ def test_resume_restores_exec_and_keeps_finished_renders(tmp_path):
     image = out / metrics(out)["runs"][0]["image"]
     stamp = (image.stat().st_mtime_ns, image.read_bytes())
     proc = run_batch("--resume", out)
+    assert proc.returncode == 2 and "-e NAME=PATH" in proc.stderr and "'mitsuba'" in proc.stderr, proc.stderr[-2000:]
+    proc = run_batch("--resume", out, "-e", f"mitsuba={exe}")
     assert proc.returncode in (0, 3), proc.stderr[-2000:]
     assert "1 jobs kept, 0 to run" in proc.stderr, proc.stderr[-2000:]
     assert (image.stat().st_mtime_ns, image.read_bytes()) == stamp
     assert metrics(out)["options"]["exec"] == {"mitsuba": str(exe)}
     for args, option in ((["--spp", "8"], "--spp"), (["-e", "mitsuba=/elsewhere/mitsuba"], "-e"),
                          (["-r", "cycles"], "-r"), (["--passes", "3"], "--passes")):
-        proc = run_batch("--resume", out, *args)
+        proc = run_batch("--resume", out, *(args if option == "-e" else ["-e", f"mitsuba={exe}", *args]))
         assert proc.returncode == 2 and option in proc.stderr and "Traceback" not in proc.stderr, proc.stderr[-2000:]
     assert (image.stat().st_mtime_ns, image.read_bytes()) == stamp
 

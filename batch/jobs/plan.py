@@ -227,9 +227,17 @@ def read_metrics(out):
     """The metrics.json of a run being resumed (batch/records.py ``read``, strict: upgraded to the
     current version, path fields absolute), or ResumeError naming the file."""
     try:
-        data = records.read(Path(out) / records.FILE_NAME).resolved()
+        data = records.read(Path(out) / records.FILE_NAME)
     except records.RecordError as exc:
         raise ResumeError(f"cannot resume: {exc}") from None
+    # the kept results go verbatim into summary.md, report.html and the JUnit XML: every value must
+    # be of the type and range the runner writes (schemas/metrics.schema.json), or nothing runs
+    problems = records.validate(dict(data))
+    if problems:
+        more = f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""
+        raise ResumeError(f"cannot resume from {data.file}: it is not as the runner writes it "
+                          f"(schemas/metrics.schema.json): {problems[0]}{more}")
+    data = data.resolved()
     if not isinstance(data.get("options", {}), dict) \
             or not all(isinstance(data.get(k, []), list) for k in ("runs", "jobs")):
         raise ResumeError(f"cannot resume from {data.file}: not the metrics.json of a run (an object with options and runs)")
