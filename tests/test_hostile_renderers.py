@@ -148,3 +148,23 @@ def test_capped_output_keeps_head_and_tail():
     small = passes.CappedOutput(head=4, tail=3)
     small.add(b"abcdef")
     assert small.text() == "abcdef"
+
+
+def test_an_interrupted_run_ends_the_passes_under_way(tmp_path, wrapper):
+    """Ctrl-C reaches the runner, not a pass in its own session: the engine's stop_all kills the
+    groups of the passes under way, so the render thread ends (the pass stopped, not retried) and
+    nothing is left.
+    The pass is known to be under way from the pid file its renderer writes."""
+    import concurrent.futures as cf
+    import time
+    env, mark, pids = wrapper
+    with cf.ThreadPoolExecutor(1) as pool:
+        fut = pool.submit(render, tmp_path, "seed", 1, 0, 600, declared(env, "hang"))
+        deadline = time.monotonic() + 120
+        while not (pids / "child.0").is_file() and not fut.done() and time.monotonic() < deadline:
+            time.sleep(0.05)  # waiting for the marker, not for a duration: the pass is under way once it exists
+        assert (pids / "child.0").is_file(), fut.exception() if fut.done() else "no pid file in 120 s"
+        passes.stop_all()
+        with pytest.raises(passes.PassStopped, match="the run was interrupted"):
+            fut.result(timeout=60)
+    assert gone(int((pids / "child.0").read_text())) and leftovers(mark) == []

@@ -45,6 +45,10 @@ class PassTimeout(BackendFailure):
     """A pass that ran past its time limit (not retried)."""
 
 
+class PassStopped(BackendFailure):
+    """A pass ended because the run was interrupted (``stop_all``; not retried)."""
+
+
 def tail(text, lines=3, chars=600):
     """The last lines of a renderer's output that say something (errors first), for a reason."""
     all_lines = [l for l in (text or "").strip().splitlines() if l.strip()]
@@ -147,6 +151,8 @@ def _one_pass(session, k, passes, spp, seed, out, timeout, log, retried):
             return result
         except PassTimeout as exc:
             raise BackendFailure(f"{what} timed out: {exc}") from exc
+        except PassStopped:
+            raise
         except BackendFailure as exc:
             log.write(f"\n# {what} failed (attempt {attempt}): {exc}\n")
             log.flush()
@@ -222,6 +228,21 @@ class CappedOutput:
         middle = (f"\n[... {self.dropped} bytes of output dropped: the first {self.head_max} and the last "
                   f"{self.tail_max} bytes are kept ...]\n") if self.dropped else ""
         return self.head.decode(errors="replace") + middle + self.tail.decode(errors="replace")
+
+
+_RUNNING, _STOPPED = set(), set()  # the pass processes under way; those stop_all ended (on Ctrl-C)
+
+
+def stop_all():
+    """Kill the process group of every pass under way (the runner was interrupted: a pass in its own
+    session does not get the terminal's SIGINT, and the thread waiting on it would wait on)."""
+    import signal
+    for proc in list(_RUNNING):
+        _STOPPED.add(proc)
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except (ProcessLookupError, PermissionError):
+            pass
 
 
 def _group_alive(pgid):
@@ -332,10 +353,16 @@ def run_command(cmd, timeout, log, what, env=None, cwd=None):
                                 stdin=subprocess.DEVNULL, start_new_session=True, **child.popen_kwargs())
     except OSError as exc:
         raise BackendFailure(f"{what} could not start: {exc.strerror or exc}: {cmd[0]}") from exc
+    _RUNNING.add(proc)
     try:
         out, err, finished = _collect(proc, timeout)
     finally:
         stop_group(proc)
+        _RUNNING.discard(proc)
+    if proc in _STOPPED:
+        _STOPPED.discard(proc)
+        log.write(f"(stopped: the run was interrupted)\n{out.text()}\n{err.text()}\n")
+        raise PassStopped(f"{what} was stopped: the run was interrupted")
         proc.stdout.close()
         proc.stderr.close()
     if not finished:

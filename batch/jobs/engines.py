@@ -146,6 +146,8 @@ class LocalEngine:
                 on_result(job, result)
                 _test_stop_after(len(job_list) - len(remaining))
         except KeyboardInterrupt:
+            from ..backends import passes
+            passes.stop_all()  # a pass in its own session does not see the terminal's Ctrl-C
             renders.shutdown(wait=False, cancel_futures=True)
             verdicts.shutdown(wait=False, cancel_futures=True)
             finishers.shutdown(wait=False, cancel_futures=True)
