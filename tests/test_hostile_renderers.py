@@ -168,3 +168,28 @@ def test_an_interrupted_run_ends_the_passes_under_way(tmp_path, wrapper):
         with pytest.raises(passes.PassStopped, match="the run was interrupted"):
             fut.result(timeout=60)
     assert gone(int((pids / "child.0").read_text())) and leftovers(mark) == []
+
+
+def test_nothing_a_run_started_is_left_when_it_ends(tmp_path, wrapper):
+    """batch/run.py end to end with the wrapper renderer whose every pass leaves a child holding its
+    output: the run finishes its passes (judged by the renderer's exit) and, once it has exited, no
+    process carrying the renderer's marker is left in the process table."""
+    from conftest import GOLDEN, metrics, run_batch
+    env, mark, pids = wrapper
+    decl = tmp_path / "wrapped.toml"
+    decl.write_text(textwrap.dedent(f'''
+        [renderers.wrapped]
+        command = ["/bin/sh", "{{here}}/wrapper.sh", "orphan", "{{output}}", "{{spp}}", "{{seed}}", "{{width}}", "{{height}}", "{{scene}}"]
+        reads = "json"
+        models = ["spectral"]
+        timeout = 300
+        env = {{ {", ".join(f"{k} = {json.dumps(v)}" for k, v in env.items())} }}
+        '''))
+    out = tmp_path / "out"
+    proc = run_batch("-i", GOLDEN / "ggx_copper_50_isolated.json", "--renderers", decl, "-r", "wrapped",
+                     "--scale", 0.0625, "--spp", 4, "--passes", 2, "--no-flip", "-o", out, timeout=600)
+    assert proc.returncode in (0, 1, 3), proc.stderr[-3000:]
+    run = metrics(out)["runs"][0]
+    assert run["passes"] == 2 and "timed out" not in run["reason"], run
+    assert len(list(pids.glob("child.*[0-9]"))) == 2  # each pass left a child behind
+    assert leftovers(mark) == []
