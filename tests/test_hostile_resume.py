@@ -132,6 +132,18 @@ def test_a_kept_value_of_the_wrong_type_is_refused_naming_it(finished, tmp_path,
     assert snapshot(out) == before and not (tmp_path / "junit.xml").exists()
 
 
+def test_a_sweep_point_of_the_wrong_type_is_refused_naming_it(finished, tmp_path, run_batch_here):
+    """A study job's sweep point goes into summary.md's sweep table as a number (a string time
+    crashed it): typed in the schema, refused naming it."""
+    decl, _ = finished
+    point = {"spp": 4, "time_s": "<b>slow</b>", "wall_s": 1.0, "rmse": 0.1}
+    job = {"job": "0" * 20, "kind": "sweep", "scene": "ggx_copper_50_isolated", "backend": "fake", "mode": "rgb",
+           "status": "rendered", "point": point}
+    out = edited(finished, tmp_path, lambda d: (d["runs"][0].pop("interrupted"), d.update(jobs=[job])))
+    proc = run_batch_here("--resume", out, "--renderers", decl)
+    assert proc.returncode == 2 and "jobs/0/point/time_s:" in proc.stderr, proc.stderr
+
+
 def test_an_untouched_run_resumes_with_its_junit(finished, tmp_path, run_batch_here):
     """The control: the same finished run resumed as the runner wrote it keeps its job and writes
     the JUnit file."""
