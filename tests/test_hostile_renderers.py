@@ -80,7 +80,16 @@ def gone(pid):
         return True
 
 
-def test_a_renderer_that_exits_0_leaving_a_child_on_its_stdout_is_judged_by_its_exit(tmp_path, wrapper):
+@pytest.fixture(params=["select", "threads"])
+def collect(request, monkeypatch):
+    """Both ways a pass's output is read: selecting on its pipes (POSIX) and reader threads (the
+    Windows route, run here on Linux)."""
+    if request.param == "threads":
+        monkeypatch.setattr(passes, "COLLECT", passes._collect_threads)
+    return request.param
+
+
+def test_a_renderer_that_exits_0_leaving_a_child_on_its_stdout_is_judged_by_its_exit(tmp_path, wrapper, collect):
     """Its child keeps the pipe open for an hour: the pass is the renderer's (exit 0, a good EXR),
     not a time-out, and the child is ended with the pass."""
     env, mark, pids = wrapper
@@ -92,7 +101,7 @@ def test_a_renderer_that_exits_0_leaving_a_child_on_its_stdout_is_judged_by_its_
     assert leftovers(mark) == []
 
 
-def test_a_time_out_ends_the_real_renderer_behind_a_shell_wrapper(tmp_path, wrapper):
+def test_a_time_out_ends_the_real_renderer_behind_a_shell_wrapper(tmp_path, wrapper, collect):
     """The wrapper waits on its child: the pass times out, and both the wrapper and the renderer
     behind it are gone afterwards (only the direct child used to be killed)."""
     env, mark, pids = wrapper

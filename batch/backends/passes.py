@@ -266,6 +266,11 @@ def stop_group(proc):
     SIGTERM to every member, SIGKILL after STOP_GRACE_S to whatever is left; ``proc`` is reaped."""
     import signal
     import subprocess
+    if not hasattr(os, "killpg"):  # Windows: no process groups; the child alone
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait()
+        return
     pgid = proc.pid
     try:
         os.killpg(pgid, signal.SIGTERM)
@@ -283,6 +288,32 @@ def stop_group(proc):
     except (ProcessLookupError, PermissionError):
         pass
     proc.wait()
+
+
+def _collect_threads(proc, timeout):
+    """``_collect`` where pipes cannot be selected (Windows): a reader thread per pipe, the same
+    bounded drain after the child's exit."""
+    import subprocess
+    import threading
+    outs = {proc.stdout: CappedOutput(), proc.stderr: CappedOutput()}
+
+    def read(pipe):
+        try:
+            for data in iter(lambda: pipe.read1(1 << 16), b""):
+                outs[pipe].add(data)
+        except (OSError, ValueError):  # closed under it once the pass is over
+            pass
+    readers = [threading.Thread(target=read, args=(pipe,), daemon=True) for pipe in outs]
+    for t in readers:
+        t.start()
+    try:
+        proc.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        return outs[proc.stdout], outs[proc.stderr], False
+    deadline = time.monotonic() + DRAIN_S
+    for t in readers:
+        t.join(max(0.0, deadline - time.monotonic()))
+    return outs[proc.stdout], outs[proc.stderr], True
 
 
 def _collect(proc, timeout):
@@ -322,7 +353,10 @@ def _collect(proc, timeout):
             for key, _ in sel.select(max(0.0, wait)):
                 if key.fileobj is pidfd:
                     continue  # its exit: seen by poll() above
-                data = os.read(key.fileobj.fileno(), 1 << 16)
+                try:
+                    data = os.read(key.fileobj.fileno(), 1 << 16)
+                except BlockingIOError:
+                    continue
                 if data:
                     outs[key.fileobj].add(data)
                     last_data = time.monotonic()
@@ -333,6 +367,9 @@ def _collect(proc, timeout):
         if pidfd is not None:
             os.close(pidfd)
     return outs[proc.stdout], outs[proc.stderr], exited is not None
+
+
+COLLECT = _collect if os.name == "posix" else _collect_threads
 
 
 def run_command(cmd, timeout, log, what, env=None, cwd=None):
@@ -355,16 +392,17 @@ def run_command(cmd, timeout, log, what, env=None, cwd=None):
         raise BackendFailure(f"{what} could not start: {exc.strerror or exc}: {cmd[0]}") from exc
     _RUNNING.add(proc)
     try:
-        out, err, finished = _collect(proc, timeout)
+        out, err, finished = COLLECT(proc, timeout)
     finally:
         stop_group(proc)
         _RUNNING.discard(proc)
+        if COLLECT is _collect:  # (a reader thread may still hold a pipe of a child's child: left to it)
+            proc.stdout.close()
+            proc.stderr.close()
     if proc in _STOPPED:
         _STOPPED.discard(proc)
         log.write(f"(stopped: the run was interrupted)\n{out.text()}\n{err.text()}\n")
         raise PassStopped(f"{what} was stopped: the run was interrupted")
-        proc.stdout.close()
-        proc.stderr.close()
     if not finished:
         log.write(f"(timed out after {timeout} s)\n{out.text()}\n{err.text()}\n")
         raise PassTimeout(f"{what} timed out after {timeout} s")
