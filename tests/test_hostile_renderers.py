@@ -106,9 +106,9 @@ def test_a_time_out_ends_the_real_renderer_behind_a_shell_wrapper(tmp_path, wrap
     behind it are gone afterwards (only the direct child used to be killed)."""
     env, mark, pids = wrapper
     with pytest.raises(passes.BackendFailure, match="timed out"):
-        render(tmp_path, "seed", passes_n=1, declared=declared(env, "hang", timeout=5))
+        render(tmp_path, "seed", passes_n=1, declared=declared(env, "hang", timeout=3))
     child = pids / "child.0"
-    assert child.is_file(), "the renderer behind the wrapper had not started within the 5 s time-out"
+    assert child.is_file(), "the renderer behind the wrapper had not started within the 3 s time-out"
     assert gone(int(child.read_text()))
     assert leftovers(mark) == []
 
@@ -179,6 +179,7 @@ def test_an_interrupted_run_ends_the_passes_under_way(tmp_path, wrapper):
     assert gone(int((pids / "child.0").read_text())) and leftovers(mark) == []
 
 
+@pytest.mark.slow
 def test_nothing_a_run_started_is_left_when_it_ends(tmp_path, wrapper):
     """batch/run.py end to end with the wrapper renderer whose every pass leaves a child holding its
     output: the run finishes its passes (judged by the renderer's exit) and, once it has exited, no

@@ -83,6 +83,7 @@ def test_a_recorded_command_never_runs(finished, tmp_path, run_batch_here):
     assert snapshot(out) == before
 
 
+@pytest.mark.slow
 def test_the_same_declaration_given_again_resumes(finished, tmp_path, run_batch_here):
     """The run's own file, named by another path to the same file: the interrupted job renders
     again with the user's declaration; a file declaring a renderer the run did not have, or a

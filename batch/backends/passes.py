@@ -296,11 +296,13 @@ def _collect_threads(proc, timeout):
     import subprocess
     import threading
     outs = {proc.stdout: CappedOutput(), proc.stderr: CappedOutput()}
+    last_data = [time.monotonic()]
 
     def read(pipe):
         try:
             for data in iter(lambda: pipe.read1(1 << 16), b""):
                 outs[pipe].add(data)
+                last_data[0] = time.monotonic()
         except (OSError, ValueError):  # closed under it once the pass is over
             pass
     readers = [threading.Thread(target=read, args=(pipe,), daemon=True) for pipe in outs]
@@ -310,9 +312,14 @@ def _collect_threads(proc, timeout):
         proc.wait(timeout=timeout)
     except subprocess.TimeoutExpired:
         return outs[proc.stdout], outs[proc.stderr], False
-    deadline = time.monotonic() + DRAIN_S
+    exited = last_data[0] = time.monotonic()
     for t in readers:
-        t.join(max(0.0, deadline - time.monotonic()))
+        while t.is_alive():
+            now = time.monotonic()
+            limit = min(exited + DRAIN_S, last_data[0] + DRAIN_IDLE_S)
+            if now >= limit:
+                break
+            t.join(min(0.05, limit - now))
     return outs[proc.stdout], outs[proc.stderr], True
 
 
