@@ -203,3 +203,16 @@ def test_nothing_a_run_started_is_left_when_it_ends(tmp_path, wrapper):
     assert run["passes"] == 2 and "timed out" not in run["reason"], run
     assert len(list(pids.glob("child.*[0-9]"))) == 2  # each pass left a child behind
     assert leftovers(mark) == []
+
+
+def test_a_version_command_leaving_a_child_on_its_stdout_is_read_and_its_child_ended(tmp_path, wrapper):
+    """The declared ``version`` command runs like a pass: its first line is read once it exits
+    (its child holding the pipe used to make it wait for the 60 s limit and record "unknown"),
+    and the child is ended with it."""
+    from spectral_bench.batch import backends
+    from test_declared_renderer import declaration
+    env, mark, pids = wrapper
+    version = ["/bin/sh", "-c", 'echo "wrapped 1.2"; sleep 3600 & echo $! > "$PIDS/version.pid"; exit 0']
+    b = backends.get("fake_seed", declaration=declaration(tmp_path, "seed", version=version, env=env))
+    assert b.version() == "wrapped 1.2"
+    assert gone(int((pids / "version.pid").read_text())) and leftovers(mark) == []

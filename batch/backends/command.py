@@ -22,7 +22,6 @@ share of the samples, and its own output file, in its own working folder.
 import os
 import shutil
 import string
-import subprocess
 import sys
 from functools import lru_cache
 from pathlib import Path
@@ -315,16 +314,17 @@ class CommandBackend:
 @lru_cache(maxsize=None)
 def _version(cmd, here, env):
     """The first non-empty line a version command prints (stdout, else stderr), or why not."""
-    try:
-        proc = subprocess.run(list(cmd), capture_output=True, text=True, errors="replace", timeout=VERSION_TIMEOUT_S,
-                              cwd=here, env=dict(os.environ, **dict(env)), stdin=subprocess.DEVNULL)
-    except (OSError, subprocess.SubprocessError) as exc:
-        return f"unknown ({type(exc).__name__}: {exc})"[:200]
-    for text in (proc.stdout, proc.stderr):
+    try:  # in its own session, output capped, its group ended with it: as a pass (batch/backends/passes.py)
+        code, out, err = passes_mod.run_captured(list(cmd), VERSION_TIMEOUT_S, dict(os.environ, **dict(env)), here)
+    except (OSError, BackendFailure) as exc:
+        return f"unknown ({type(exc).__name__}: {exc.args[0] if exc.args else exc})"[:200]
+    if code is None:
+        return f"unknown (the version command ran past {VERSION_TIMEOUT_S} s)"
+    for text in (out.text(), err.text()):
         for line in text.splitlines():
             if line.strip():
                 return line.strip()[:200]
-    return f"unknown (the version command printed nothing, exit {proc.returncode})"
+    return f"unknown (the version command printed nothing, exit {code})"
 
 
 def read_output(path, writes, observer):

@@ -379,24 +379,17 @@ def _collect(proc, timeout):
 COLLECT = _collect if os.name == "posix" else _collect_threads
 
 
-def run_command(cmd, timeout, log, what, env=None, cwd=None):
-    """Run one child process under ``timeout`` seconds, its command line and output appended to
-    ``log``; returns its wall seconds. The child runs in its own session (process group) and dies
-    with this process; when it exits (or runs past ``timeout``) its whole group is ended
-    (``stop_group``), so nothing it started outlives the pass. It is judged by its own exit status,
-    whatever its children still hold open. Its output is kept in bounded memory (CappedOutput).
-    PassTimeout past the limit, BackendFailure on a non-zero exit (with the tail of its output) or
-    a program not found."""
+def run_captured(cmd, timeout, env=None, cwd=None):
+    """Run ``cmd`` (a list) in its own session (process group; it dies with this process) under
+    ``timeout`` seconds and end its whole group once it exits or runs past the limit
+    (``stop_group``): nothing it started outlives it. Returns (its exit status, or None past the
+    limit; stdout and stderr as CappedOutput: bounded memory, read until its exit and a bounded
+    drain, whatever its children still hold open). OSError when it cannot start; PassStopped when
+    ``stop_all`` ended it."""
     import subprocess
     from . import child
-    t0 = time.perf_counter()
-    log.write(f"$ {' '.join(map(str, cmd))}{f'   (in {cwd})' if cwd else ''}\n")
-    log.flush()
-    try:
-        proc = subprocess.Popen([str(c) for c in cmd], stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, cwd=cwd,
-                                stdin=subprocess.DEVNULL, start_new_session=True, **child.popen_kwargs())
-    except OSError as exc:
-        raise BackendFailure(f"{what} could not start: {exc.strerror or exc}: {cmd[0]}") from exc
+    proc = subprocess.Popen([str(c) for c in cmd], stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, cwd=cwd,
+                            stdin=subprocess.DEVNULL, start_new_session=True, **child.popen_kwargs())
     _RUNNING.add(proc)
     try:
         out, err, finished = COLLECT(proc, timeout)
@@ -408,14 +401,31 @@ def run_command(cmd, timeout, log, what, env=None, cwd=None):
             proc.stderr.close()
     if proc in _STOPPED:
         _STOPPED.discard(proc)
-        log.write(f"(stopped: the run was interrupted)\n{out.text()}\n{err.text()}\n")
-        raise PassStopped(f"{what} was stopped: the run was interrupted")
-    if not finished:
+        raise PassStopped("the run was interrupted", out, err)
+    return (proc.returncode if finished else None), out, err
+
+
+def run_command(cmd, timeout, log, what, env=None, cwd=None):
+    """Run one child process (``run_captured``) under ``timeout`` seconds, its command line and
+    output appended to ``log``; returns its wall seconds. It is judged by its own exit status.
+    PassTimeout past the limit, PassStopped when the run was interrupted, BackendFailure on a
+    non-zero exit (with the tail of its output) or a program not found."""
+    t0 = time.perf_counter()
+    log.write(f"$ {' '.join(map(str, cmd))}{f'   (in {cwd})' if cwd else ''}\n")
+    log.flush()
+    try:
+        code, out, err = run_captured(cmd, timeout, env, cwd)
+    except OSError as exc:
+        raise BackendFailure(f"{what} could not start: {exc.strerror or exc}: {cmd[0]}") from exc
+    except PassStopped as exc:
+        log.write(f"(stopped: the run was interrupted)\n{exc.args[1].text()}\n{exc.args[2].text()}\n")
+        raise PassStopped(f"{what} was stopped: the run was interrupted") from None
+    if code is None:
         log.write(f"(timed out after {timeout} s)\n{out.text()}\n{err.text()}\n")
         raise PassTimeout(f"{what} timed out after {timeout} s")
     stdout, stderr = out.text(), err.text()
     log.write(f"{stdout}\n{stderr}\n")
     log.flush()
-    if proc.returncode != 0:
-        raise BackendFailure(f"{what} exited with {proc.returncode}: {tail(stderr) or tail(stdout)}")
+    if code != 0:
+        raise BackendFailure(f"{what} exited with {code}: {tail(stderr) or tail(stdout)}")
     return time.perf_counter() - t0
