@@ -9,7 +9,8 @@ instead of code (README, "Add your renderer"; examples/ holds a worked one).
     version = ["ring", "--version"]   # the first line it prints is recorded (and matched by known deviations)
 
 The declaration is plain data: a job carries it (``backend_options``) and rebuilds the backend
-from it on any worker; ``--resume`` finds it in metrics.json. Every key and placeholder is
+from it on any worker; ``--resume`` compares the one the user gives again with the one metrics.json
+records and never runs a recorded one (batch/jobs/plan.py RUNS_CODE). Every key and placeholder is
 checked when the declaration is read (``parse``): an unknown key, a missing or unknown
 placeholder, a wrong type is a DeclarationError naming the file, the renderer and the key.
 The command is run without a shell, one argument per list item; placeholders are replaced inside
@@ -17,7 +18,8 @@ items (``"--spp={spp}"`` works) and ``{{``/``}}`` stand for braces.
 
 Each pass is one run of the command (batch/backends/passes.py renders the passes, retries a
 failed one once, and computes the mean and the per-pixel standard error): with its seed, its
-share of the samples, and its own output file, in its own working folder.
+share of the samples, and its own output file, in its own working folder, in its own session
+(``run_captured``: output capped, the whole process group ended with the pass).
 """
 import os
 import shutil

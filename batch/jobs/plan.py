@@ -258,7 +258,7 @@ def _given_again(key, what, again):
                 raise ResumeError(f"cannot resume {opts['resume']} with {_option_name(key)}: the run was started "
                                   "without it (finished jobs would not match); leave the option out or start a new run")
             return opts.get(key)
-        names = ", ".join(map(repr, sorted(value)))
+        names = ", ".join(_brief(n, 80) for n in sorted(value)[:10]) + (" ..." if len(value) > 10 else "")
         if key not in given or not opts.get(key):
             raise ResumeError(f"cannot resume {opts['resume']}: the run was started with {what} {names}, which a "
                               f"run folder never supplies (metrics.json is data; it is not run): {again}")
@@ -286,18 +286,24 @@ def same_source(given, recorded):
     return out
 
 
+def _brief(value, limit=200):
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit] + f"... ({len(text)} characters)"
+
+
 def _first_difference(given, recorded):
-    """The first field (``name.key``) where two {name: value or table} differ, or None."""
+    """The first field (``name.key``) where two {name: value or table} differ, or None (values shown
+    cut short: a recorded one is anyone's text)."""
     for name in sorted(set(given) | set(recorded)):
         a, b = given.get(name), recorded.get(name)
         if a is None or b is None:
-            return f"{name!r} ({'not given' if a is None else 'not in the run'})"
+            return f"{_brief(name)} ({'not given' if a is None else 'not in the run'})"
         if isinstance(a, dict) and isinstance(b, dict):
             for k in sorted(set(a) | set(b)):
                 if a.get(k) != b.get(k):
-                    return f"{name!r}.{k} ({a.get(k)!r}, the run: {b.get(k)!r})"
+                    return f"{_brief(name)}.{k} ({_brief(a.get(k))}, the run: {_brief(b.get(k))})"
         elif a != b:
-            return f"{name!r} ({a!r}, the run: {b!r})"
+            return f"{_brief(name)} ({_brief(a)}, the run: {_brief(b)})"
     return None
 
 
