@@ -216,3 +216,25 @@ def test_a_version_command_leaving_a_child_on_its_stdout_is_read_and_its_child_e
     b = backends.get("fake_seed", declaration=declaration(tmp_path, "seed", version=version, env=env))
     assert b.version() == "wrapped 1.2"
     assert gone(int((pids / "version.pid").read_text())) and leftovers(mark) == []
+
+
+@pytest.mark.slow
+def test_closing_a_local_cluster_ends_the_passes_in_its_workers(tmp_path, wrapper):
+    """A pass under way in a Dask worker (its own session: the worker's death alone would leave the
+    renderer behind a wrapper running) is ended with its group when the cluster closes (the
+    preload's teardown). Known to be under way from the pid file it writes."""
+    import time
+    from spectral_bench.batch.jobs import engines
+    env, mark, pids = wrapper
+    pid_file = pids / "child.cluster"
+    cmd = ["/bin/sh", "-c", 'sleep 3600 & echo $! > "$0.tmp" && mv "$0.tmp" "$0"; wait', str(pid_file)]
+    engine = engines.make("local:1", timeout=60)
+    try:
+        fut = engine.client.submit(passes.run_captured, cmd, 600, dict(os.environ, **env), pure=False)
+        deadline = time.monotonic() + 120
+        while not pid_file.is_file() and not fut.done() and time.monotonic() < deadline:
+            time.sleep(0.05)  # waiting for the marker, not for a duration
+        assert pid_file.is_file(), fut.exception() if fut.done() else "no pid file in 120 s"
+    finally:
+        engine.close()
+    assert gone(int(pid_file.read_text())) and leftovers(mark) == []
