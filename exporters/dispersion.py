@@ -19,6 +19,12 @@ import numpy as np
 from ..reference_code import appearance  # the formulas (tested against SCHOTT's indices)
 
 LAMBDA_MIN, LAMBDA_MAX = 360.0, 830.0  # nm: the renderers' range (spectra.py)
+# Physical bounds (docs/scene-format.md): no transparent material has an index above MAX_IOR over
+# 360-830 nm (diamond 2.4, rutile 2.9, silicon 5.6 where it is opaque); a Sellmeier B_i beyond
+# MAX_SELLMEIER_B or a C_i beyond MAX_SELLMEIER_C um^2 is no glass or crystal (the shipped ones: B < 2, C < 160)
+MAX_IOR = 10.0
+MAX_SELLMEIER_B = 100.0
+MAX_SELLMEIER_C = 1e6
 
 # Fraunhofer lines (nm): F (hydrogen), d (helium), C (hydrogen); the Abbe number is
 # v_d = (n_d - 1) / (n_F - n_C) (SCHOTT, "TIE-29: Refractive Index and Dispersion", 2016)
@@ -103,8 +109,8 @@ def _finite(x):
 def problems(value, field):
     """Yield (field, message) for an ``int_ior`` that is not a usable IOR over 360-830 nm."""
     if not is_model(value):
-        if not _finite(value) or value <= 0:
-            yield field, f"must be a finite IOR > 0, got {value!r}"
+        if not _finite(value) or not 0 < value <= MAX_IOR:
+            yield field, f"must be a finite IOR in (0, {MAX_IOR:g}], got {value!r}"
         return
     kind = value.get("type")
     if kind not in MODEL_TYPES:
@@ -129,9 +135,13 @@ def problems(value, field):
                 if not _finite(x):
                     bad = True
                     yield f"{field}.{key}[{i}]", f"must be a finite number, got {x!r}"
-                elif key == "C" and x < 0:
+                elif key == "C" and not 0 <= x <= MAX_SELLMEIER_C:
                     bad = True
-                    yield f"{field}.C[{i}]", f"must be >= 0 (a squared resonance wavelength in um^2), got {x!r}"
+                    yield f"{field}.C[{i}]", (f"must be in [0, {MAX_SELLMEIER_C:g}] (a squared resonance wavelength "
+                                              f"in um^2), got {x!r}")
+                elif key == "B" and abs(x) > MAX_SELLMEIER_B:
+                    bad = True
+                    yield f"{field}.B[{i}]", f"must be within +-{MAX_SELLMEIER_B:g} (no real glass), got {x!r}"
         if bad:
             return
     else:
@@ -150,3 +160,6 @@ def problems(value, field):
     if bad.any():
         yield field, (f"n(lambda) must be finite and > 0 over {LAMBDA_MIN:g}-{LAMBDA_MAX:g} nm; "
                       f"it is not at {grid[bad][0]:g} nm")
+    elif n.max() > MAX_IOR:
+        yield field, (f"n(lambda) reaches {n.max():.4g} at {grid[n.argmax()]:g} nm, above {MAX_IOR:g}: no "
+                      f"transparent material has such an index over {LAMBDA_MIN:g}-{LAMBDA_MAX:g} nm")

@@ -21,9 +21,57 @@ class SceneError(ValueError):
 
     def __init__(self, scene, problems):
         self.scene = scene
-        self.problems = list(problems)
-        lines = [f"scene {scene!r}, object {obj!r}, field {field!r}: {msg}" for obj, field, msg in self.problems]
+        self.problems = [(_short(obj), _short(field), _short(msg)) for obj, field, msg in problems]
+        lines = [f"scene {_short(scene)!r}, object {obj!r}, field {field!r}: {msg}"
+                 for obj, field, msg in self.problems[:MAX_PROBLEMS_SHOWN]]
+        if len(self.problems) > MAX_PROBLEMS_SHOWN:
+            lines.append(f"... and {len(self.problems) - MAX_PROBLEMS_SHOWN} more problems")
         super().__init__("; ".join(lines) if len(lines) < 2 else "\n  " + "\n  ".join(lines))
+
+
+# A reason is read by a person (the log, summary.md, report.html): each part of a problem is cut to
+# MAX_MESSAGE characters (a value shown in it can be a whole list), at most MAX_PROBLEMS_SHOWN listed
+MAX_MESSAGE = 300
+MAX_PROBLEMS_SHOWN = 20
+
+
+def _short(text):
+    text = text if isinstance(text, str) else str(text)
+    return text if len(text) <= MAX_MESSAGE else f"{text[:MAX_MESSAGE - 40]} ... ({len(text)} characters in all)"
+
+
+# The longest list each field may hold, checked before any other work (the schema's checks and
+# their messages cost time in the length of a list): a sampled spectrum's or a fluorescence grid's
+# samples, an inline mesh's vertices and faces, the objects; any other list (a transform's rows,
+# Sellmeier terms, a point) holds a handful of numbers. Every shipped scene is far below them.
+MAX_SAMPLES = 16384
+MAX_MESH_ITEMS = 1 << 22
+LIST_LIMITS = {"wavelengths": MAX_SAMPLES, "values": MAX_SAMPLES, "matrix": 1024, "matrix[]": 1024,
+               "vertices": MAX_MESH_ITEMS, "faces": MAX_MESH_ITEMS, "objects": 10000}
+MAX_OTHER_LIST = 64
+
+
+def _size_problems(data):
+    """Lists longer than their field's LIST_LIMITS (MAX_OTHER_LIST elsewhere), found without looking
+    at the items of a list that is too long; (object, field, message) with the object as validation
+    names it."""
+    stack = [(data, "", "scene", "")]
+    while stack:
+        node, key, obj, where = stack.pop()
+        if isinstance(node, dict):
+            if where.startswith("objects[") and where.count(".") == 0 and names.problem(node.get("name")) is None:
+                obj, where = node["name"], ""
+            for k, v in reversed(node.items()):  # a stack: reversed, so problems come in the file's order
+                if isinstance(v, (dict, list)):
+                    stack.append((v, str(k), obj, f"{where}.{k}" if where else str(k)))
+        elif isinstance(node, list):
+            limit = LIST_LIMITS.get(key, MAX_OTHER_LIST)
+            if len(node) > limit:
+                yield obj, where, f"holds {len(node)} items, more than {limit}: too long to be a scene's {key or 'list'}"
+                continue
+            for i, v in reversed(list(enumerate(node))):
+                if isinstance(v, (dict, list)):
+                    stack.append((v, f"{key}[]", obj, f"{where}[{i}]"))
 
 
 @lru_cache(maxsize=1)
@@ -280,7 +328,12 @@ def bsdf_problems(bsdf):
                                f"(known: {', '.join(spectra.NAMED_CONDUCTORS)})")
         for key in ("eta", "k"):
             if key in bsdf:
-                yield from spectra.check(bsdf[key], key)
+                problems = list(spectra.check(bsdf[key], key))
+                yield from problems
+                top = _spectrum_max(bsdf[key]) if not problems else None
+                if top is not None and top > MAX_CONDUCTOR_INDEX:
+                    yield key, (f"reaches {top:.4g}, above {MAX_CONDUCTOR_INDEX:g}: no real conductor has such an "
+                                f"index (shipped metals: eta < 7, k < 9 over 300-900 nm)")
         film = bsdf.get("thin_film")
         if film is not None:
             d = film["thickness"]
@@ -288,18 +341,33 @@ def bsdf_problems(bsdf):
                 yield "thin_film.thickness", f"must be a finite thickness >= 0 nm, got {d!r}"
             for key in ("ior", "ext_ior"):
                 v = film.get(key, 1.0)
-                if not _finite(v) or v <= 0:
-                    yield f"thin_film.{key}", f"must be a finite IOR > 0, got {v!r}"
+                if not _finite(v) or not 0 < v <= dispersion.MAX_IOR:
+                    yield f"thin_film.{key}", f"must be a finite IOR in (0, {dispersion.MAX_IOR:g}], got {v!r}"
+            if _finite(d) and d > MAX_FILM_NM:
+                yield "thin_film.thickness", f"must be at most {MAX_FILM_NM:g} nm (a thin film), got {d!r}"
     if kind == "dielectric":
         yield from dispersion.problems(bsdf.get("int_ior"), "int_ior")  # a number or an IOR model
         v = bsdf.get("ext_ior", ir.AIR_IOR)
-        if not _finite(v) or v <= 0:
-            yield "ext_ior", f"must be a finite IOR > 0, got {v!r}"
+        if not _finite(v) or not 0 < v <= dispersion.MAX_IOR:
+            yield "ext_ior", f"must be a finite IOR in (0, {dispersion.MAX_IOR:g}], got {v!r}"
     rough = bsdf.get("roughness")
     if rough is not None:
         a = rough["alpha"]
         if not _finite(a) or a < 0:
             yield "roughness.alpha", f"must be a finite number >= 0, got {a!r}"
+
+
+# Physical bounds (documented in docs/scene-format.md): every real material is far inside them
+MAX_CONDUCTOR_INDEX = 1000.0  # eta and k of a conductor (infrared tables of metals reach k ~ 100)
+MAX_FILM_NM = 1e6  # a thin film's thickness (1 mm)
+
+
+def _spectrum_max(spec):
+    """The largest value of a checked spectrum given by numbers (constant or sampled), else None."""
+    if spec.get("type") == "constant":
+        return float(spec["value"])
+    values = spec.get("values")
+    return float(max(values)) if isinstance(values, list) and values else None
 
 
 def check(scene):
@@ -315,6 +383,9 @@ def check(scene):
         raise SceneError(name, [("scene", "version", f"expected format {ir.FORMAT!r} version {ir.VERSION}, "
                                  f"got {scene.get('format')!r} version {scene.get('version')!r}")])
     try:
+        problems = list(_size_problems({k: v for k, v in scene.items() if not k.startswith("_")}))
+        if problems:
+            raise SceneError(name, problems)
         inline_data.apply(scene)  # a self-contained file's tables: dropped when the project's, else they win
         data = {k: v for k, v in scene.items() if not k.startswith("_")}
         problems = list(_schema_problems(data))

@@ -165,10 +165,11 @@ def test_resume_with_a_corrupt_metrics_file_is_named(tmp_path):
 
 
 @pytest.mark.slow
-def test_resume_restores_exec_and_keeps_finished_renders(tmp_path):
+def test_resume_needs_exec_again_and_keeps_finished_renders(tmp_path):
     """-e is part of a job's id: a resumed run without -e used to plan other jobs and render the
-    finished ones again, over their files. Now it takes -e from the run, keeps what finished, and
-    refuses an option that differs."""
+    finished ones again, over their files. An executable recorded in a run folder is never run
+    (issue 30: the folder is data): the resume without -e is refused saying to give it again; with
+    the same -e it keeps what finished, and refuses an option that differs."""
     exe = ROOT / ".venv" / "bin" / "mitsuba"
     if not exe.is_file():
         exe = os.path.join(os.path.dirname(sys.executable), "mitsuba")
@@ -178,13 +179,15 @@ def test_resume_restores_exec_and_keeps_finished_renders(tmp_path):
     image = out / metrics(out)["runs"][0]["image"]
     stamp = (image.stat().st_mtime_ns, image.read_bytes())
     proc = run_batch("--resume", out)
+    assert proc.returncode == 2 and "-e NAME=PATH" in proc.stderr and "'mitsuba'" in proc.stderr, proc.stderr[-2000:]
+    proc = run_batch("--resume", out, "-e", f"mitsuba={exe}")
     assert proc.returncode in (0, 3), proc.stderr[-2000:]
     assert "1 jobs kept, 0 to run" in proc.stderr, proc.stderr[-2000:]
     assert (image.stat().st_mtime_ns, image.read_bytes()) == stamp
     assert metrics(out)["options"]["exec"] == {"mitsuba": str(exe)}
     for args, option in ((["--spp", "8"], "--spp"), (["-e", "mitsuba=/elsewhere/mitsuba"], "-e"),
                          (["-r", "cycles"], "-r"), (["--passes", "3"], "--passes")):
-        proc = run_batch("--resume", out, *args)
+        proc = run_batch("--resume", out, *(args if option == "-e" else ["-e", f"mitsuba={exe}", *args]))
         assert proc.returncode == 2 and option in proc.stderr and "Traceback" not in proc.stderr, proc.stderr[-2000:]
     assert (image.stat().st_mtime_ns, image.read_bytes()) == stamp
 
@@ -237,13 +240,49 @@ def test_a_local_cluster_listens_on_loopback_without_a_dashboard():
     engine = engines.make("local:1", timeout=60)
     try:
         addresses = [engine.cluster.scheduler_address, *engine.client.scheduler_info()["workers"]]
-        assert len(addresses) == 2 and all(a.startswith("tcp://127.0.0.1:") for a in addresses), addresses
+        assert len(addresses) == 2 and all(a.startswith("tls://127.0.0.1:") for a in addresses), addresses
         assert status_page(engine) == 404
     finally:
         engine.close()
     engine = engines.make("local:1", timeout=60, dashboard="127.0.0.1:0")
     try:
         assert status_page(engine) == 200
+    finally:
+        engine.close()
+
+
+def test_a_local_cluster_takes_no_client_but_the_runs_own():
+    """local:N is TLS with the run's own temporary credentials: a plain connection (tcp:// to the
+    same port) and one with credentials of its own (another user's self-signed CA) are refused by
+    the scheduler and by a worker, where the run's credentials get an answer (the same request);
+    a plain Dask client cannot connect to the scheduler, the run's own client runs code in the workers."""
+    import asyncio
+    from distributed import Client
+    from distributed.comm import connect
+    from distributed.security import Security
+    from spectral_bench.batch.jobs import engines
+
+    async def identity(address, security):
+        comm = await connect(address, timeout=5, **security.get_connection_args("client"))
+        try:
+            await comm.write({"op": "identity"})
+            return await comm.read()
+        finally:
+            await comm.close()
+
+    engine = engines.make("local:1", timeout=60)
+    try:
+        worker = next(iter(engine.client.scheduler_info()["workers"]))
+        assert engine.client.run(os.getpid)[worker] != os.getpid()  # the run's client works
+        for address in (engine.cluster.scheduler_address, worker):
+            assert address.startswith("tls://127.0.0.1:")
+            assert asyncio.run(identity(address, engine.cluster.security))["type"] in ("Scheduler", "Worker")
+            plain = "tcp://" + address[len("tls://"):]
+            for target, security in ((plain, Security()), (address, Security.temporary())):
+                with pytest.raises((OSError, TimeoutError)):
+                    asyncio.run(identity(target, security))
+        with pytest.raises((OSError, TimeoutError)):
+            Client("tcp://" + engine.cluster.scheduler_address[len("tls://"):], timeout=5).close()
     finally:
         engine.close()
 

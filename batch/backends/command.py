@@ -9,7 +9,8 @@ instead of code (README, "Add your renderer"; examples/ holds a worked one).
     version = ["ring", "--version"]   # the first line it prints is recorded (and matched by known deviations)
 
 The declaration is plain data: a job carries it (``backend_options``) and rebuilds the backend
-from it on any worker; ``--resume`` finds it in metrics.json. Every key and placeholder is
+from it on any worker; ``--resume`` compares the one the user gives again with the one metrics.json
+records and never runs a recorded one (batch/jobs/plan.py RUNS_CODE). Every key and placeholder is
 checked when the declaration is read (``parse``): an unknown key, a missing or unknown
 placeholder, a wrong type is a DeclarationError naming the file, the renderer and the key.
 The command is run without a shell, one argument per list item; placeholders are replaced inside
@@ -17,12 +18,12 @@ items (``"--spp={spp}"`` works) and ``{{``/``}}`` stand for braces.
 
 Each pass is one run of the command (batch/backends/passes.py renders the passes, retries a
 failed one once, and computes the mean and the per-pixel standard error): with its seed, its
-share of the samples, and its own output file, in its own working folder.
+share of the samples, and its own output file, in its own working folder, in its own session
+(``run_captured``: output capped, the whole process group ended with the pass).
 """
 import os
 import shutil
 import string
-import subprocess
 import sys
 from functools import lru_cache
 from pathlib import Path
@@ -297,8 +298,9 @@ class CommandBackend:
             raise BackendFailure(f"{self.name} exited with 0 but wrote no {out.name} (the command's {{output}})")
         try:
             names, img = read_output(out, self.decl["writes"], self.decl.get("observer", "cie1931"))
-        except (ValueError, OSError, KeyError) as exc:
-            raise BackendFailure(f"{self.name} wrote an EXR that cannot be read as {self.decl['writes']}: {exc}") from exc
+        except Exception as exc:  # noqa: BLE001 - whatever the EXR reader raises on a corrupt file fails this pass (retried)
+            raise BackendFailure(f"{self.name} wrote {out} ({{output}}), which cannot be read as a "
+                                 f"{self.decl['writes']} EXR: {type(exc).__name__}: {str(exc)[:300]}") from exc
         if img.shape[:2] != (height, width) and width:
             raise BackendFailure(f"{self.name} wrote a {img.shape[1]}x{img.shape[0]} image; the scene is {width}x{height}")
         shutil.rmtree(work, ignore_errors=True)
@@ -314,16 +316,17 @@ class CommandBackend:
 @lru_cache(maxsize=None)
 def _version(cmd, here, env):
     """The first non-empty line a version command prints (stdout, else stderr), or why not."""
-    try:
-        proc = subprocess.run(list(cmd), capture_output=True, text=True, errors="replace", timeout=VERSION_TIMEOUT_S,
-                              cwd=here, env=dict(os.environ, **dict(env)), stdin=subprocess.DEVNULL)
-    except (OSError, subprocess.SubprocessError) as exc:
-        return f"unknown ({type(exc).__name__}: {exc})"[:200]
-    for text in (proc.stdout, proc.stderr):
+    try:  # in its own session, output capped, its group ended with it: as a pass (batch/backends/passes.py)
+        code, out, err = passes_mod.run_captured(list(cmd), VERSION_TIMEOUT_S, dict(os.environ, **dict(env)), here)
+    except (OSError, BackendFailure) as exc:
+        return f"unknown ({type(exc).__name__}: {exc.args[0] if exc.args else exc})"[:200]
+    if code is None:
+        return f"unknown (the version command ran past {VERSION_TIMEOUT_S} s)"
+    for text in (out.text(), err.text()):
         for line in text.splitlines():
             if line.strip():
                 return line.strip()[:200]
-    return f"unknown (the version command printed nothing, exit {proc.returncode})"
+    return f"unknown (the version command printed nothing, exit {code})"
 
 
 def read_output(path, writes, observer):

@@ -45,6 +45,10 @@ class PassTimeout(BackendFailure):
     """A pass that ran past its time limit (not retried)."""
 
 
+class PassStopped(BackendFailure):
+    """A pass ended because the run was interrupted (``stop_all``; not retried)."""
+
+
 def tail(text, lines=3, chars=600):
     """The last lines of a renderer's output that say something (errors first), for a reason."""
     all_lines = [l for l in (text or "").strip().splitlines() if l.strip()]
@@ -147,6 +151,8 @@ def _one_pass(session, k, passes, spp, seed, out, timeout, log, retried):
             return result
         except PassTimeout as exc:
             raise BackendFailure(f"{what} timed out: {exc}") from exc
+        except PassStopped:
+            raise
         except BackendFailure as exc:
             log.write(f"\n# {what} failed (attempt {attempt}): {exc}\n")
             log.flush()
@@ -191,29 +197,235 @@ class OneProcessPerPass:
         return result
 
 
-def run_command(cmd, timeout, log, what, env=None, cwd=None):
-    """Run one child process (dies with this one) under ``timeout`` seconds, its command line and
-    output appended to ``log``; returns its wall seconds. PassTimeout past the limit,
-    BackendFailure on a non-zero exit (with the tail of its output) or a program not found."""
+# A pass's child process: its output is kept up to OUTPUT_HEAD bytes from the start and OUTPUT_TAIL
+# from the end (the rest counted, said in render.log); after it exits, what its children still write
+# to its pipes is read for DRAIN_S at most (nothing for DRAIN_IDLE_S ends it sooner); its process
+# group is then asked to stop (SIGTERM) and killed (SIGKILL) after STOP_GRACE_S.
+OUTPUT_HEAD = OUTPUT_TAIL = 64 * 1024
+DRAIN_S, DRAIN_IDLE_S, STOP_GRACE_S = 5.0, 0.5, 2.0
+
+
+class CappedOutput:
+    """What a child wrote to one pipe, in bounded memory: the first ``head`` and the last ``tail``
+    bytes, and how many bytes between them were dropped."""
+
+    def __init__(self, head=OUTPUT_HEAD, tail=OUTPUT_TAIL):
+        self.head_max, self.tail_max = head, tail
+        self.head, self.tail, self.dropped = bytearray(), bytearray(), 0
+
+    def add(self, data):
+        room = self.head_max - len(self.head)
+        if room > 0:
+            self.head += data[:room]
+            data = data[room:]
+        self.tail += data
+        over = len(self.tail) - self.tail_max
+        if over > 0:
+            del self.tail[:over]
+            self.dropped += over
+
+    def text(self):
+        middle = (f"\n[... {self.dropped} bytes of output dropped: the first {self.head_max} and the last "
+                  f"{self.tail_max} bytes are kept ...]\n") if self.dropped else ""
+        return self.head.decode(errors="replace") + middle + self.tail.decode(errors="replace")
+
+
+_RUNNING, _STOPPED = set(), set()  # the pass processes under way; those stop_all ended (on Ctrl-C)
+
+
+def stop_all():
+    """Kill the process group of every pass under way (the runner was interrupted: a pass in its own
+    session does not get the terminal's SIGINT, and the thread waiting on it would wait on)."""
+    import signal
+    for proc in list(_RUNNING):
+        _STOPPED.add(proc)
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except (ProcessLookupError, PermissionError):
+            pass
+
+
+def _group_alive(pgid):
+    """True while a process of group ``pgid`` other than a zombie is left (read from /proc)."""
+    for entry in os.scandir("/proc"):
+        if not entry.name.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry.name}/stat", "rb") as f:
+                stat = f.read()
+        except OSError:
+            continue
+        fields = stat[stat.rindex(b")") + 2:].split()  # state, ppid, pgrp, ... after "(comm)"
+        if int(fields[2]) == pgid and fields[0] != b"Z":
+            return True
+    return False
+
+
+def stop_group(proc):
+    """End the process group of ``proc`` (started with start_new_session: its group id is its pid):
+    SIGTERM to every member, SIGKILL after STOP_GRACE_S to whatever is left; ``proc`` is reaped."""
+    import signal
+    import subprocess
+    if not hasattr(os, "killpg"):  # Windows: no process groups; the child alone
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait()
+        return
+    pgid = proc.pid
+    try:
+        os.killpg(pgid, signal.SIGTERM)
+    except (ProcessLookupError, PermissionError):
+        pass
+    deadline = time.monotonic() + STOP_GRACE_S
+    try:
+        proc.wait(timeout=STOP_GRACE_S)
+    except subprocess.TimeoutExpired:
+        pass
+    while time.monotonic() < deadline and os.path.isdir("/proc") and _group_alive(pgid):
+        time.sleep(0.02)
+    try:
+        os.killpg(pgid, signal.SIGKILL)
+    except (ProcessLookupError, PermissionError):
+        pass
+    proc.wait()
+
+
+def _collect_threads(proc, timeout):
+    """``_collect`` where pipes cannot be selected (Windows): a reader thread per pipe, the same
+    bounded drain after the child's exit."""
+    import subprocess
+    import threading
+    outs = {proc.stdout: CappedOutput(), proc.stderr: CappedOutput()}
+    last_data = [time.monotonic()]
+
+    def read(pipe):
+        try:
+            for data in iter(lambda: pipe.read1(1 << 16), b""):
+                outs[pipe].add(data)
+                last_data[0] = time.monotonic()
+        except (OSError, ValueError):  # closed under it once the pass is over
+            pass
+    readers = [threading.Thread(target=read, args=(pipe,), daemon=True) for pipe in outs]
+    for t in readers:
+        t.start()
+    try:
+        proc.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        return outs[proc.stdout], outs[proc.stderr], False
+    exited = last_data[0] = time.monotonic()
+    for t in readers:
+        while t.is_alive():
+            now = time.monotonic()
+            limit = min(exited + DRAIN_S, last_data[0] + DRAIN_IDLE_S)
+            if now >= limit:
+                break
+            t.join(min(0.05, limit - now))
+    return outs[proc.stdout], outs[proc.stderr], True
+
+
+def _collect(proc, timeout):
+    """Read the child's stdout and stderr (CappedOutput each) until it exits and its pipes are
+    drained (DRAIN_S at most after the exit: a child of the child may hold them open) or until
+    ``timeout`` seconds; returns (stdout, stderr, exited in time)."""
+    import selectors
+    outs = {proc.stdout: CappedOutput(), proc.stderr: CappedOutput()}
+    sel = selectors.DefaultSelector()
+    for pipe in outs:
+        os.set_blocking(pipe.fileno(), False)
+        sel.register(pipe, selectors.EVENT_READ)
+    pidfd = None
+    if hasattr(os, "pidfd_open"):
+        try:
+            pidfd = os.pidfd_open(proc.pid)
+            sel.register(pidfd, selectors.EVENT_READ)
+        except OSError:
+            pidfd = None
+    start = time.monotonic()
+    exited = last_data = None
+    try:
+        while True:
+            now = time.monotonic()
+            if exited is None and proc.poll() is not None:
+                exited = last_data = now
+                if pidfd is not None:
+                    sel.unregister(pidfd)
+            open_pipes = [k for k in sel.get_map().values() if k.fileobj in outs]
+            if exited is not None and (not open_pipes or now >= min(exited + DRAIN_S, last_data + DRAIN_IDLE_S)):
+                break
+            if exited is None and now >= start + timeout:
+                break
+            limit = min(exited + DRAIN_S, last_data + DRAIN_IDLE_S) if exited is not None else start + timeout
+            # without a pidfd to wake on the child's exit, look at it every 50 ms
+            wait = limit - now if pidfd is not None or exited is not None else min(limit - now, 0.05)
+            for key, _ in sel.select(max(0.0, wait)):
+                if key.fileobj is pidfd:
+                    continue  # its exit: seen by poll() above
+                try:
+                    data = os.read(key.fileobj.fileno(), 1 << 16)
+                except BlockingIOError:
+                    continue
+                if data:
+                    outs[key.fileobj].add(data)
+                    last_data = time.monotonic()
+                else:
+                    sel.unregister(key.fileobj)
+    finally:
+        sel.close()
+        if pidfd is not None:
+            os.close(pidfd)
+    return outs[proc.stdout], outs[proc.stderr], exited is not None
+
+
+COLLECT = _collect if os.name == "posix" else _collect_threads
+
+
+def run_captured(cmd, timeout, env=None, cwd=None):
+    """Run ``cmd`` (a list) in its own session (process group; it dies with this process) under
+    ``timeout`` seconds and end its whole group once it exits or runs past the limit
+    (``stop_group``): nothing it started outlives it. Returns (its exit status, or None past the
+    limit; stdout and stderr as CappedOutput: bounded memory, read until its exit and a bounded
+    drain, whatever its children still hold open). OSError when it cannot start; PassStopped when
+    ``stop_all`` ended it."""
     import subprocess
     from . import child
+    proc = subprocess.Popen([str(c) for c in cmd], stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, cwd=cwd,
+                            stdin=subprocess.DEVNULL, start_new_session=True, **child.popen_kwargs())
+    _RUNNING.add(proc)
+    try:
+        out, err, finished = COLLECT(proc, timeout)
+    finally:
+        stop_group(proc)
+        _RUNNING.discard(proc)
+        if COLLECT is _collect:  # (a reader thread may still hold a pipe of a child's child: left to it)
+            proc.stdout.close()
+            proc.stderr.close()
+    if proc in _STOPPED:
+        _STOPPED.discard(proc)
+        raise PassStopped("the run was interrupted", out, err)
+    return (proc.returncode if finished else None), out, err
+
+
+def run_command(cmd, timeout, log, what, env=None, cwd=None):
+    """Run one child process (``run_captured``) under ``timeout`` seconds, its command line and
+    output appended to ``log``; returns its wall seconds. It is judged by its own exit status.
+    PassTimeout past the limit, PassStopped when the run was interrupted, BackendFailure on a
+    non-zero exit (with the tail of its output) or a program not found."""
     t0 = time.perf_counter()
     log.write(f"$ {' '.join(map(str, cmd))}{f'   (in {cwd})' if cwd else ''}\n")
     log.flush()
     try:
-        proc = subprocess.run([str(c) for c in cmd], capture_output=True, text=True, errors="replace", timeout=timeout,
-                              env=env, cwd=cwd, stdin=subprocess.DEVNULL, **child.popen_kwargs())
-    except subprocess.TimeoutExpired as exc:
-        log.write(f"(timed out after {timeout} s)\n{_text(exc.stdout)}\n{_text(exc.stderr)}\n")
-        raise PassTimeout(f"{what} timed out after {timeout} s") from exc
+        code, out, err = run_captured(cmd, timeout, env, cwd)
     except OSError as exc:
         raise BackendFailure(f"{what} could not start: {exc.strerror or exc}: {cmd[0]}") from exc
-    log.write(f"{proc.stdout}\n{proc.stderr}\n")
+    except PassStopped as exc:
+        log.write(f"(stopped: the run was interrupted)\n{exc.args[1].text()}\n{exc.args[2].text()}\n")
+        raise PassStopped(f"{what} was stopped: the run was interrupted") from None
+    if code is None:
+        log.write(f"(timed out after {timeout} s)\n{out.text()}\n{err.text()}\n")
+        raise PassTimeout(f"{what} timed out after {timeout} s")
+    stdout, stderr = out.text(), err.text()
+    log.write(f"{stdout}\n{stderr}\n")
     log.flush()
-    if proc.returncode != 0:
-        raise BackendFailure(f"{what} exited with {proc.returncode}: {tail(proc.stderr) or tail(proc.stdout)}")
+    if code != 0:
+        raise BackendFailure(f"{what} exited with {code}: {tail(stderr) or tail(stdout)}")
     return time.perf_counter() - t0
-
-
-def _text(data):
-    return data.decode(errors="replace") if isinstance(data, bytes) else (data or "")

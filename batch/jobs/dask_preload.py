@@ -14,3 +14,10 @@ if str(ROOT) not in sys.path:
 import pkg_bootstrap  # noqa: E402
 
 pkg_bootstrap.package()
+
+
+def dask_teardown(worker):
+    """The worker is closing (its cluster closed, Ctrl-C): the passes under way in it are ended with
+    their whole process groups (a pass runs in its own session: batch/backends/passes.py)."""
+    from spectral_bench.batch.backends import passes
+    passes.stop_all()

@@ -11,8 +11,10 @@
   phase). Jobs come in the order the runner gives (batch/jobs/plan.py ``overlap_order``).
 - DaskEngine (``--cluster ADDRESS`` or ``--cluster local:N``): the jobs go to a Dask distributed
   scheduler, each job (render and verdict) on one worker; ``local:N`` starts a LocalCluster of N
-  single-threaded worker processes, listening on 127.0.0.1 only, without a dashboard unless
-  ``--dashboard`` asks for one. A worker needs the same repository checkout and Python
+  single-threaded worker processes, listening on 127.0.0.1 only and over TLS with credentials made
+  for the run (``Security.temporary()``: a connection without a certificate of its CA is refused, so
+  other users of the machine cannot run code in the workers), without a dashboard unless
+  ``--dashboard`` asks for one (its HTTP page is not behind TLS). A worker needs the same repository checkout and Python
   environment, and this project importable: workers load batch/jobs/dask_preload.py (README,
   "Running on a cluster"). A Dask scheduler runs whatever its clients send (pickled functions):
   a scheduler that is not on this machine and not reached over tls:// is warned about. A
@@ -146,6 +148,8 @@ class LocalEngine:
                 on_result(job, result)
                 _test_stop_after(len(job_list) - len(remaining))
         except KeyboardInterrupt:
+            from ..backends import passes
+            passes.stop_all()  # a pass in its own session does not see the terminal's Ctrl-C
             renders.shutdown(wait=False, cancel_futures=True)
             verdicts.shutdown(wait=False, cancel_futures=True)
             finishers.shutdown(wait=False, cancel_futures=True)
@@ -186,9 +190,15 @@ class DaskEngine:
                 n = 0
             if n < 1:
                 raise ClusterError(f"--cluster {address}: a local cluster needs at least one worker (local:N, N >= 1)")
+            # TLS with credentials made for this run only (a self-signed CA, in memory): the scheduler
+            # and the workers accept no connection without a certificate of that CA, so another user
+            # of this machine cannot send them code (a plain 127.0.0.1 port would run anyone's pickles)
+            from distributed.security import Security
+            security = Security.temporary()
             self.cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                        dashboard_address=dashboard, preload=[PRELOAD])
-            self.client = Client(self.cluster, timeout=timeout)
+                                        protocol="tls://", security=security, dashboard_address=dashboard,
+                                        preload=[PRELOAD])
+            self.client = Client(self.cluster, timeout=timeout, security=security)
         else:
             if plaintext_remote(address):
                 log.warning("warning: the Dask scheduler at %s runs whatever code it receives (pickles) and this "

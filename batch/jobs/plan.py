@@ -227,9 +227,17 @@ def read_metrics(out):
     """The metrics.json of a run being resumed (batch/records.py ``read``, strict: upgraded to the
     current version, path fields absolute), or ResumeError naming the file."""
     try:
-        data = records.read(Path(out) / records.FILE_NAME).resolved()
+        data = records.read(Path(out) / records.FILE_NAME)
     except records.RecordError as exc:
         raise ResumeError(f"cannot resume: {exc}") from None
+    # the kept results go verbatim into summary.md, report.html and the JUnit XML: every value must
+    # be of the type and range the runner writes (schemas/metrics.schema.json), or nothing runs
+    problems = records.validate(dict(data))
+    if problems:
+        more = f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""
+        raise ResumeError(f"cannot resume from {data.file}: it is not as the runner writes it "
+                          f"(schemas/metrics.schema.json): {problems[0]}{more}")
+    data = data.resolved()
     if not isinstance(data.get("options", {}), dict) \
             or not all(isinstance(data.get(k, []), list) for k in ("runs", "jobs")):
         raise ResumeError(f"cannot resume from {data.file}: not the metrics.json of a run (an object with options and runs)")
@@ -239,6 +247,74 @@ def read_metrics(out):
 def _option_name(key):
     return {"exec": "-e/--exec", "input": "-i/--input", "renderer": "-r/--renderer", "scene": "-s/--scene",
             "case": "-c/--case", "flip": "--no-flip"}.get(key, "--" + key.replace("_", "-"))
+
+
+def _given_again(key, what, again):
+    """A check of an option that names something to run (RUNS_CODE): the recorded ``value`` is
+    only compared with what this command gives; never used itself."""
+    def check(opts, value, given):
+        if not value:
+            if key in given and opts.get(key):
+                raise ResumeError(f"cannot resume {opts['resume']} with {_option_name(key)}: the run was started "
+                                  "without it (finished jobs would not match); leave the option out or start a new run")
+            return opts.get(key)
+        names = ", ".join(_brief(n, 80) for n in sorted(value)[:10]) + (" ..." if len(value) > 10 else "")
+        if key not in given or not opts.get(key):
+            raise ResumeError(f"cannot resume {opts['resume']}: the run was started with {what} {names}, which a "
+                              f"run folder never supplies (metrics.json is data; it is not run): {again}")
+        mine = same_source(opts[key], value) if key == "renderers" else opts[key]
+        field = _first_difference(mine, value)
+        if field is not None:
+            raise ResumeError(f"cannot resume {opts['resume']}: {_option_name(key)} differs from the run's "
+                              f"(recorded in metrics.json) at {field}; give the same {what} as the run, or start a new run")
+        return mine
+    return check
+
+
+def same_source(given, recorded):
+    """Declarations given again, each naming its file as the run recorded it where both name the same
+    file (``source`` is a label in messages, but part of the job ids: ``-o`` from another folder or
+    an absolute path to the same file keeps the finished jobs)."""
+    out = {}
+    for name, decl in given.items():
+        old = recorded.get(name) if isinstance(recorded.get(name), dict) else {}
+        try:
+            same = Path(old.get("source", "")).resolve() == Path(decl["source"]).resolve() and old.get("source")
+        except (OSError, ValueError, TypeError):
+            same = False
+        out[name] = dict(decl, source=old["source"]) if same else decl
+    return out
+
+
+def _brief(value, limit=200):
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit] + f"... ({len(text)} characters)"
+
+
+def _first_difference(given, recorded):
+    """The first field (``name.key``) where two {name: value or table} differ, or None (values shown
+    cut short: a recorded one is anyone's text)."""
+    for name in sorted(set(given) | set(recorded)):
+        a, b = given.get(name), recorded.get(name)
+        if a is None or b is None:
+            return f"{_brief(name)} ({'not given' if a is None else 'not in the run'})"
+        if isinstance(a, dict) and isinstance(b, dict):
+            for k in sorted(set(a) | set(b)):
+                if a.get(k) != b.get(k):
+                    return f"{_brief(name)}.{k} ({_brief(a.get(k))}, the run: {_brief(b.get(k))})"
+        elif a != b:
+            return f"{_brief(name)} ({_brief(a)}, the run: {_brief(b)})"
+    return None
+
+
+# Options that name something to run (a declared renderer's command, env and version; -e's
+# executables): a run folder may come from anyone, so ``--resume`` takes them from this command only,
+# compared with the recorded ones (the job ids depend on them) and refused where they differ.
+RUNS_CODE = {
+    "renderers": _given_again("renderers", "declared renderers",
+                              "give their declarations again with --renderers FILE (the same file as the run)"),
+    "exec": _given_again("exec", "executables (-e)", "give them again with -e NAME=PATH (the same paths as the run)"),
+}
 
 
 def resumed_options(opts, given=None):
@@ -260,6 +336,9 @@ def resumed_options(opts, given=None):
             value = cli.check_option(key, value)
         except cli.UsageError as exc:
             raise ResumeError(f"cannot resume from {Path(opts['resume']) / 'metrics.json'}: it records {exc}") from None
+        if key in RUNS_CODE:
+            merged[key] = RUNS_CODE[key](opts, value, given)
+            continue
         if key in given and opts.get(key) != value:
             raise ResumeError(f"cannot resume {opts['resume']} with {_option_name(key)} {opts.get(key)!r}: the run "
                               f"was started with {value!r} (finished jobs would not match); leave the option out "
