@@ -298,10 +298,21 @@ def _fsync_dir(directory):
         os.close(fd)
 
 
+def _umask():
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
 def _temp(directory, scene_name, suffix):
-    """A new, uniquely named temporary file in ``directory`` (hidden; never *.exr or *.json)."""
+    """A new, uniquely named temporary file in ``directory`` (hidden; never *.exr or *.json), with
+    the permissions a new file gets (0666 less the umask: mkstemp's 0600 would make the reference
+    private once it is renamed into place)."""
     fd, path = tempfile.mkstemp(dir=directory, prefix=f".{scene_name}.", suffix=suffix)
-    os.close(fd)
+    try:
+        os.fchmod(fd, 0o666 & ~_umask())
+    finally:
+        os.close(fd)
     return Path(path)
 
 
