@@ -29,8 +29,17 @@ def write(path, rgb, extra=None, header=None):
         channels[name] = np.ascontiguousarray(arr)
     head = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     head.update(header or {})
-    with OpenEXR.File(head, channels) as f:
-        f.write(str(path))
+    return _write_file(path, head, channels)
+
+
+def _write_file(path, head, channels):
+    """Write through OpenEXR; its RuntimeError for a failed write (a full disk: "No space left on
+    device") becomes an OSError naming the file, as any other write error."""
+    try:
+        with OpenEXR.File(head, channels) as f:
+            f.write(str(path))
+    except RuntimeError as exc:
+        raise OSError(f"{path}: cannot be written: {exc}") from exc
     return path
 
 
@@ -43,9 +52,7 @@ def write_channels(path, channels, compression=OpenEXR.ZIP_COMPRESSION):
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     data = {n: np.ascontiguousarray(a if a.dtype == np.float16 else a.astype(np.float32)) for n, a in channels.items()}
-    with OpenEXR.File({"compression": compression, "type": OpenEXR.scanlineimage}, data) as f:
-        f.write(str(path))
-    return path
+    return _write_file(path, {"compression": compression, "type": OpenEXR.scanlineimage}, data)
 
 
 # -- the header, checked before any pixel is read ------------------------------------------------------

@@ -333,6 +333,4 @@ def write(path, wavelengths_nm, planes, rgb_preview=True, extra=None, header=Non
     head.update(header or {})
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    with OpenEXR.File(head, channels) as f:
-        f.write(str(path))
-    return path
+    return exr._write_file(path, head, channels)

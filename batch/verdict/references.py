@@ -323,6 +323,17 @@ def _write_synced(path, data):
         os.fsync(f.fileno())
 
 
+def _read_back(path, names, shape):
+    """The written image read back whole before it is put in place: a write that failed without
+    saying so (a full disk under some writers) never becomes the reference. OSError naming it."""
+    try:
+        got, img, se = exr.read_image_and_stderr(path, expect=(shape[1], shape[0]))
+    except (OSError, ValueError) as exc:
+        raise OSError(f"{path}: the reference written cannot be read back ({exc})") from exc
+    if set(got) != set(names) or img.shape != tuple(shape) or se is None:
+        raise OSError(f"{path}: the reference read back is not the one written (channels {got}, shape {img.shape})")
+
+
 def _replace_pair(meta_tmp, meta_path, exr_tmp, exr_path):
     """Put a written record and image in place: the record first, then the image, the folder
     synced after each. The record carries the image's sha256, so until the second rename the pair
@@ -352,6 +363,7 @@ def save(scene, names, mean, stderr, provenance, directory=None):
             exr.write_image(exr_tmp, names, mean, extra)
             with open(exr_tmp, "rb+") as f:
                 os.fsync(f.fileno())
+            _read_back(exr_tmp, names, mean.shape)
             meta = dict(provenance, scene=name, fingerprint=fp, exr_sha256=sha256_of(exr_tmp))
             _write_synced(meta_tmp, (json.dumps(meta, indent=1, sort_keys=True) + "\n").encode())
             _replace_pair(meta_tmp, meta_path, exr_tmp, exr_path)
