@@ -10,6 +10,7 @@ interrupted run: results whose job id (batch/jobs/job.py) still matches are kept
 from collections import Counter
 import datetime as _dt
 import logging
+import os
 import time
 from pathlib import Path
 
