@@ -377,7 +377,8 @@ def _make(args, argv, out, held, backend):
             _write_reference(plan)
         except OSError as exc:  # a full disk, a folder that cannot be written: the old reference is untouched
             failed.append(name)
-            print(f"{name}: cannot write the reference: {exc.filename or out}: {exc.strerror or exc}; the old "
+            where = f"{exc.filename}: " if exc.filename else ""
+            print(f"{name}: cannot write the reference into {out}: {where}{exc.strerror or exc}; the old "
                   f"reference (if any) is left as it was and the passes are kept in {plan[4]}: run the same "
                   "command again once it can be written", flush=True)
         except ValueError as exc:  # a pass whose EXR or record is not what a pass writes

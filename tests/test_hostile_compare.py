@@ -335,7 +335,7 @@ def test_full_disk_keeps_the_old_reference_and_says_so(tmp_path):
     assert refused.returncode == 1 and "NOT replaced" in refused.stdout, refused.stdout[-2000:]
     full = make_references("--scale", "0.1", "--out", refs, "--replace", "--accept", "--seed", "7", limit=8192)
     assert full.returncode == 1 and "Traceback" not in full.stderr, full.stdout[-2000:] + full.stderr[-2000:]
-    assert "ggx_copper_50: cannot write the reference" in full.stdout and "the old reference" in full.stdout, full.stdout
+    assert f"ggx_copper_50: cannot write the reference into {refs}: " in full.stdout and "File too large" in full.stdout and "the old reference" in full.stdout, full.stdout
     assert {n: _sha(refs / n) for n in old} == old
     assert not list((refs / "history").glob("*/*")) if (refs / "history").exists() else True
     room = make_references("--scale", "0.1", "--out", refs, "--replace", "--accept", "--seed", "7")
