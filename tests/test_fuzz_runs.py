@@ -15,6 +15,9 @@ import run_fuzz
 from conftest import HAND_MADE, run_batch
 
 
+TINY = ("-r", "mitsuba", "-s", "ggx_copper_50", "--scale", "0.125", "--spp", "4", "--no-flip")
+
+
 def fuzz(examples):
     """Derandomised (the same examples on every run: CI is reproducible), no example database."""
     return settings(max_examples=examples, deadline=None, database=None, derandomize=True,
@@ -25,9 +28,10 @@ def fuzz(examples):
 def real_run(tmp_path_factory):
     """(a real run folder, a folder of things outside any run: secret.exr, user.json, user_dir/, bomb.exr)."""
     root = tmp_path_factory.mktemp("fuzz_runs")
-    proc = run_batch("-o", root / "run", "-r", "mitsuba", "-s", "ggx_copper_50", "--scale", "0.125", "--spp", "4",
-                     "--no-flip")
+    (root / "run").mkdir()
+    proc = run_batch("-o", root / "run", *TINY, "--junit", root / "run" / "junit.xml")
     assert proc.returncode in (0, 1, 3), proc.stderr[-3000:]
+    assert (root / "run" / "junit.xml").is_file()  # a new top-level *.xml in the run folder is allowed
     outside = root / "outside"
     outside.mkdir()
     shutil.copyfile(root / "run" / run_fuzz.IMAGE, outside / "secret.exr")
@@ -69,3 +73,22 @@ def test_mutated_run_folders_give_named_errors_or_correct_results(real_run, chan
 @given(run_fuzz.mutations())
 def test_mutated_run_folders_many(real_run, changes):
     assert _compare_mutated(real_run, changes, use_default_out=len(changes) % 2 == 0) in (0, 1, 2, 3)
+
+
+def test_baseline_whose_render_is_a_bomb_is_unjudged_naming_it(real_run, tmp_path):
+    """--baseline OLD where OLD's render is a 20000x20000 EXR of 2.4 MB: the run goes on, the job's
+    baseline record is ``unjudged`` naming the file and the data window (its header was refused
+    against the resolution the record gives); compare_runs exits 3 naming it."""
+    run, outside = real_run
+    old = tmp_path / "old"
+    shutil.copytree(run, old, symlinks=True)
+    (old / run_fuzz.IMAGE).unlink()
+    shutil.copyfile(outside / "bomb.exr", old / run_fuzz.IMAGE)
+    proc = run_batch("-o", tmp_path / "new", *TINY, "--baseline", old)
+    assert proc.returncode in (0, 1, 3), proc.stderr[-3000:]
+    import json
+    rec = json.loads((tmp_path / "new" / "metrics.json").read_text())["runs"][0]["baseline"]
+    assert rec["status"] == "unjudged" and f"{old / run_fuzz.IMAGE}: header: dataWindow: 20000x20000, expected 64x64" \
+        in rec["reason"], rec
+    code, text = run_fuzz.check(old, tmp_path / "new", tmp_path)
+    assert code == 3 and "dataWindow: 20000x20000" in text
