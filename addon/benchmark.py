@@ -409,12 +409,12 @@ def stokes_path(out_dir, scene, backend, component):
     if render is None:
         return None
     path = render.parent / f"stokes_{component}.exr"
-    if not path.is_file():
+    if not path.is_file() or path.is_symlink():
         try:
             rgb = exr.read_rgb(render, prefix=f"{component}.")
         except ValueError:
             return None
-        exr.write(path, rgb)
+        exr.replace_file(path, lambda tmp: exr.write(tmp, rgb))
     return path
 
 
@@ -430,14 +430,8 @@ def plain_rgb(path):
         fresh = stat.S_ISREG(os.lstat(rgb).st_mode) and os.lstat(rgb).st_mtime >= path.stat().st_mtime
     except OSError:
         fresh = False
-    if not fresh:  # written beside it as a new file renamed over the name: never through a link there
-        fd, tmp = tempfile.mkstemp(dir=rgb.parent, prefix=f".{rgb.stem}.", suffix=".exr")
-        os.close(fd)
-        try:
-            exr.write(tmp, exr.read_rgb(path))
-            os.replace(tmp, rgb)
-        finally:
-            Path(tmp).unlink(missing_ok=True)
+    if not fresh:  # a new file renamed over the name: never written through a link there
+        exr.replace_file(rgb, lambda tmp: exr.write(tmp, exr.read_rgb(path)))
     return rgb
 
 

@@ -46,6 +46,28 @@ def _write_file(path, head, channels):
 NO_COMPRESSION = OpenEXR.NO_COMPRESSION
 
 
+def replace_file(path, write):
+    """Make ``path`` by ``write(temporary path)`` in the same folder, then renaming it over the name
+    with the umask's permissions: a reader (or another job writing the same file) never sees half a
+    file, and a link planted at ``path`` (a run folder from someone else) is replaced, never
+    written through. Returns ``path``."""
+    import os
+    import tempfile
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-", suffix=path.suffix)
+    os.close(fd)
+    try:
+        write(tmp)
+        umask = os.umask(0o022)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
+        os.replace(tmp, path)
+    finally:
+        Path(tmp).unlink(missing_ok=True)
+    return path
+
+
 def write_channels(path, channels, compression=OpenEXR.ZIP_COMPRESSION):
     """Write {channel name: HxW array} as they are (float32 unless float16), e.g. a renderer's raw
     film channels or a pass that is read back at once (``NO_COMPRESSION``)."""

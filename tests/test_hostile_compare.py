@@ -364,3 +364,17 @@ def test_panel_follows_a_recorded_baseline_only_beside_the_run(tmp_path):
         got = baseline.image_path(found, "baseline_render")
         assert (got.resolve() if got else None) == (expected.resolve() if expected else None), (run, got)
         assert baseline.image_path(found, "baseline_zscore") == zmap
+
+
+def test_images_written_beside_a_render_replace_a_planted_link(tmp_path):
+    """The copies the panel writes beside a render (RGB of a layered EXR, a Stokes component) and the
+    previews: a link planted at that name (a run folder from someone else) is replaced by the new
+    file, the file it pointed at untouched, even a dangling one not created."""
+    user = tmp_path / "user.exr"
+    user.write_bytes(b"the user's file")
+    (tmp_path / "render_rgb.exr").symlink_to(user)
+    (tmp_path / "stokes_S1.exr").symlink_to(tmp_path / "nowhere.exr")
+    for name in ("render_rgb.exr", "stokes_S1.exr"):
+        exr.replace_file(tmp_path / name, lambda tmp: exr.write(tmp, np.ones((2, 2, 3), np.float32)))
+        assert not (tmp_path / name).is_symlink() and exr.read_rgb(tmp_path / name).shape == (2, 2, 3)
+    assert user.read_bytes() == b"the user's file" and not (tmp_path / "nowhere.exr").exists()
