@@ -303,7 +303,8 @@ def make_output(out_dir, fresh=False):
             if _empty_folder(path):
                 return path
         except OSError as exc:
-            raise OutputRefused(f"cannot make the output folder {path}: {exc.strerror or exc}") from None
+            raise OutputRefused(f"cannot make the output folder {path}: {exc.strerror or exc}"
+                                + (" (give another with -o DIR)" if fresh else "")) from None
     if fresh:
         raise OutputRefused(f"{out_dir} and {out_dir.name}-2 ... -{MAX_FRESH - 1} are all taken: remove earlier comparisons")
     raise OutputRefused(f"-o {out_dir}: exists and is not an empty folder; compare_runs never deletes or overwrites "
