@@ -5,7 +5,9 @@ truncated pass record and a full disk; the panel follows no recorded baseline ou
 
 Real EXR files (tests/exr_craft.py crafts the bombs from a strip OpenEXR writes), real
 subprocesses for the command lines, real renders where a run is needed."""
+import contextlib
 import hashlib
+import io
 import json
 import os
 import resource
@@ -14,6 +16,7 @@ import signal
 import subprocess
 import sys
 import tracemalloc
+import types
 
 import numpy as np
 import OpenEXR
@@ -30,9 +33,20 @@ COMPARE = ROOT / "batch" / "compare_runs.py"
 MAKE_REFERENCES = ROOT / "batch" / "make_references.py"
 
 
-def compare_runs(*args, cwd=ROOT):
+def compare_runs_cli(*args, cwd=ROOT):
+    """The real command line, in a child process."""
     return subprocess.run([sys.executable, str(COMPARE), *map(str, args)], capture_output=True, text=True,
                           timeout=600, cwd=cwd)
+
+
+def compare_runs(*args, cwd=ROOT):
+    """compare_runs' main() in this process (a child costs seconds of imports under load): its exit
+    status and what it printed, as the command line gives them."""
+    from spectral_bench.batch import compare_runs as cr
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err), contextlib.chdir(cwd):
+        code = cr.main([str(a) for a in args])
+    return types.SimpleNamespace(returncode=code, stdout=out.getvalue(), stderr=err.getvalue())
 
 
 def _pair(tmp_path):
@@ -60,11 +74,11 @@ def test_the_same_output_twice_deletes_nothing(tmp_path):
     as they were. Without -o: NEW/compare, then NEW/compare-2; the first comparison untouched."""
     old, new = _pair(tmp_path)
     out = tmp_path / "cmp"
-    first = compare_runs(old, new, "-o", out)
+    first = compare_runs_cli(old, new, "-o", out)
     assert first.returncode == 0, first.stderr
     (out / "mine.txt").write_text("the user's file in that folder\n")
     before = run_fuzz.snapshot(tmp_path)
-    second = compare_runs(old, new, "-o", out)
+    second = compare_runs_cli(old, new, "-o", out)
     assert second.returncode == 2 and str(out) in second.stderr and "not an empty folder" in second.stderr, second.stderr
     assert run_fuzz.snapshot(tmp_path) == before
 
@@ -161,7 +175,7 @@ def test_what_cannot_be_judged_exits_3_and_is_never_same(tmp_path, which, change
     job that changed as well as one not judged: exit 1 (a change is a finding)."""
     old, new = _pair(tmp_path)
     change({"old": old, "new": new}[which])
-    proc = compare_runs(old, new)
+    proc = (compare_runs_cli if change is _bomb else compare_runs)(old, new)
     assert proc.returncode == 3, proc.stdout[-2000:] + proc.stderr[-2000:]
     assert "Traceback" not in proc.stderr and words in proc.stderr and "error: a / mitsuba m: not judged" in proc.stderr
     rows = {l.split(" | ")[1]: l.split(" | ")[0] for l in proc.stdout.splitlines() if l.startswith("| ") and " | a | " in l
