@@ -171,7 +171,7 @@ def check_header(path, expect=None, max_channels=MAX_CHANNELS):
     if w < 1 or h < 1:
         raise EXRLimitError(f"{path}: header: dataWindow: {w}x{h} is empty or inverted")
     if want is not None and (w, h) != want:
-        raise EXRLimitError(f"{path}: header: dataWindow: {w}x{h}, expected {want[0]}x{want[1]} (the job's resolution)")
+        raise EXRLimitError(f"{path}: header: dataWindow: {w}x{h}, expected {want[0]}x{want[1]} (the resolution the job or record gives)")
     if w > MAX_SIDE or h > MAX_SIDE or w * h > MAX_PIXELS:
         raise EXRLimitError(f"{path}: header: dataWindow: {w}x{h} exceeds the cap of batch/exr.py ({MAX_SIDE} px "
                             f"per side, {MAX_PIXELS} pixels)")

@@ -184,7 +184,7 @@ def examine(folder, scene_name, fp=None, shape=None, names=None):
             return None, problem(exr_path, (
                 f"the image is not the one its record {meta_path.name} describes (sha256 differs): the "
                 f"pair was not replaced together (an interrupted save?); {_remake(scene_name, exr_path)}"))
-        names_, mean, stderr = exr.read_image_and_stderr(exr_path)
+        names_, mean, stderr = exr.read_image_and_stderr(exr_path, expect=meta.get("resolution"))
     except Exception as exc:  # noqa: BLE001 - any unreadable file is a problem of that file
         return None, problem(exr_path, f"unreadable EXR: {exc}")
     if stderr is None:
