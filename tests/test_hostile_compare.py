@@ -392,3 +392,39 @@ def test_images_written_beside_a_render_replace_a_planted_link(tmp_path):
         exr.replace_file(tmp_path / name, lambda tmp: exr.write(tmp, np.ones((2, 2, 3), np.float32)))
         assert not (tmp_path / name).is_symlink() and exr.read_rgb(tmp_path / name).shape == (2, 2, 3)
     assert user.read_bytes() == b"the user's file" and not (tmp_path / "nowhere.exr").exists()
+
+
+@pytest.mark.slow
+def test_results_panel_does_not_follow_a_recorded_baseline_elsewhere(tmp_path):
+    """Real bpy: a run whose --baseline record names an absolute folder elsewhere (a hand-edited
+    metrics.json) draws no button for the baseline's render and loading it is refused; the same
+    record naming the sibling run loads that run's render."""
+    from conftest import run_bpy
+    runs = tmp_path / "runs"
+    prev, cur, elsewhere = runs / "prev", runs / "cur", tmp_path / "elsewhere"
+    for folder in (prev, cur, elsewhere):
+        _run_folder(folder, 1, {"a": 1.0})
+    out = {}
+    for run in (str(elsewhere), "prev"):
+        data = json.loads((cur / "metrics.json").read_text())
+        data["runs"][0]["baseline"] = {"run": run, "status": "same", "image": "a/results/mitsuba/render.exr"}
+        (cur / "metrics.json").write_text(json.dumps(data))
+        out[run] = run_bpy(f"""
+            sys.path.insert(0, {str(ROOT / 'tests')!r})
+            import layout_recorder as lr
+            s = bpy.context.window_manager.spectral_bench_run
+            s.output_dir = {str(cur)!r}
+            calls = lr.draw(bpy.types.SPECTRAL_BENCH_PT_benchmark_results, lr.Context())
+            kinds = [c[2]["properties"]["kind"] for c in calls
+                     if c[1] == "operator" and c[2]["operator"] == "spectral_bench.load_result"]
+            try:
+                r = list(bpy.ops.spectral_bench.load_result(scene="a", backend="mitsuba", kind="baseline_render"))
+                path = bpy.data.images["a mitsuba baseline_render"].filepath
+            except RuntimeError as exc:
+                r, path = str(exc), None
+            print(json.dumps({{"kinds": kinds, "r": r, "path": path}}))
+        """)
+    far, near = out[str(elsewhere)], out["prev"]
+    assert "baseline_render" not in far["kinds"] and "render" in far["kinds"], far
+    assert far["path"] is None and "no baseline_render image" in far["r"], far
+    assert "baseline_render" in near["kinds"] and near["path"].startswith(str(prev)), near
