@@ -265,13 +265,14 @@ def check_output(out_dir, old, new, default=False):
     """OutputRefused when ``out_dir`` is OLD or NEW, contains either, or lies inside OLD (or inside
     NEW, unless it is the default NEW/compare), naming it and why."""
     o = _resolved(out_dir)
+    label = f"the output folder {out_dir} (give another with -o DIR)" if default else f"-o {out_dir}"
     for name, folder in (("OLD", _resolved(old)), ("NEW", _resolved(new))):
         if o == folder:
-            raise OutputRefused(f"-o {out_dir}: is {name} ({folder}); the comparison never writes into a run's folder")
+            raise OutputRefused(f"{label}: is {name} ({folder}); the comparison never writes into a run's folder")
         if folder.is_relative_to(o):
-            raise OutputRefused(f"-o {out_dir}: contains {name} ({folder}); give a folder of its own")
+            raise OutputRefused(f"{label}: contains {name} ({folder}); give a folder of its own")
         if o.is_relative_to(folder) and not (default and name == "NEW"):
-            raise OutputRefused(f"-o {out_dir}: lies inside {name} ({folder}); give a folder outside both runs "
+            raise OutputRefused(f"{label}: lies inside {name} ({folder}); give a folder outside both runs "
                                 "(without -o the comparison goes to NEW/compare)")
 
 
