@@ -102,6 +102,10 @@ def test_an_output_that_is_holds_or_lies_inside_a_run_is_refused(tmp_path):
         proc = compare_runs("old", "new", "-o", out, cwd=tmp_path)
         assert proc.returncode == 2 and f"-o {out}" in proc.stderr and words in proc.stderr, (out, proc.stderr)
         assert "Traceback" not in proc.stderr
+    (tmp_path / "alias").symlink_to(old, target_is_directory=True)
+    proc = compare_runs("old", "alias", cwd=tmp_path)  # NEW is OLD: its default NEW/compare would be inside OLD
+    assert proc.returncode == 2 and "the output folder alias/compare" in proc.stderr and "lies inside OLD" in proc.stderr
+    (tmp_path / "alias").unlink()
     assert run_fuzz.snapshot(tmp_path) == before
 
 
