@@ -12,6 +12,8 @@ outputs folder: the panel reads runs started from the command line the same way.
 """
 import collections
 import datetime as dt
+import os
+import stat
 import tempfile
 import time
 from pathlib import Path
@@ -386,17 +388,12 @@ def baseline_records(out_dir, baseline_dir=None):
 
 def compare_with_baseline(out_dir, baseline_dir):
     """Compare the results folder with the baseline folder (batch/compare_runs.py, written to
-    OUT/compare); returns the comparison. Raises baseline.BaselineError for a folder that is not a run."""
+    OUT/compare, or the first free OUT/compare-N: an earlier comparison is never deleted); returns the
+    comparison. Raises baseline.BaselineError for a folder that is not a run, compare_runs.OutputRefused
+    for a results folder that is the baseline or inside it."""
     from ..batch import compare_runs
-    from ..batch.verdict import baseline
     out_dir, base = Path(bpy.path.abspath(out_dir)), Path(bpy.path.abspath(baseline_dir))
-    target = out_dir / baseline.COMPARE_DIR
-    baseline.read_metrics(base)
-    baseline.read_metrics(out_dir)
-    target.mkdir(parents=True, exist_ok=True)
-    result = compare_runs.compare(base, out_dir, target)
-    compare_runs.write(result, target)
-    return result
+    return compare_runs.run(base, out_dir)[0]  # into OUT/compare, or the first free OUT/compare-N
 
 
 def baseline_line(found):
@@ -431,12 +428,12 @@ def stokes_path(out_dir, scene, backend, component):
     if render is None:
         return None
     path = render.parent / f"stokes_{component}.exr"
-    if not path.is_file():
+    if not path.is_file() or path.is_symlink():
         try:
             rgb = exr.read_rgb(render, prefix=f"{component}.")
         except ValueError:
             return None
-        exr.write(path, rgb)
+        exr.replace_file(path, lambda tmp: exr.write(tmp, rgb))
     return path
 
 
@@ -448,8 +445,12 @@ def plain_rgb(path):
     if names <= {"R", "G", "B", "A"}:
         return path
     rgb = path.with_name(f"{path.stem}_rgb.exr")
-    if not rgb.is_file() or rgb.stat().st_mtime < path.stat().st_mtime:
-        exr.write(rgb, exr.read_rgb(path))
+    try:
+        fresh = stat.S_ISREG(os.lstat(rgb).st_mode) and os.lstat(rgb).st_mtime >= path.stat().st_mtime
+    except OSError:
+        fresh = False
+    if not fresh:  # a new file renamed over the name: never written through a link there
+        exr.replace_file(rgb, lambda tmp: exr.write(tmp, exr.read_rgb(path)))
     return rgb
 
 

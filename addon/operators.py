@@ -408,11 +408,12 @@ class SPECTRAL_BENCH_OT_load_result(bpy.types.Operator):
 
 class SPECTRAL_BENCH_OT_compare_baseline(bpy.types.Operator):
     """Compare the results with the baseline folder (batch/compare_runs.py): each render against the
-    baseline's on both their noises, probes, status and time; written to the results' compare/ folder"""
+    baseline's on both their noises, probes, status and time; written to a new folder compare/ (compare-2, ...) of the results"""
     bl_idname = "spectral_bench.compare_baseline"
     bl_label = "Compare with Baseline"
 
     def execute(self, context):
+        from ..batch import compare_runs
         from ..batch.verdict import baseline
         s = benchmark.settings(context)
         if not s.output_dir or not s.baseline_dir:
@@ -420,7 +421,7 @@ class SPECTRAL_BENCH_OT_compare_baseline(bpy.types.Operator):
             return {"CANCELLED"}
         try:
             result = benchmark.compare_with_baseline(s.output_dir, s.baseline_dir)
-        except (baseline.BaselineError, OSError) as exc:
+        except (baseline.BaselineError, compare_runs.OutputRefused, OSError) as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
         changed = sum(1 for j in result["jobs"] if j["changed"])

@@ -11,15 +11,29 @@ it), and jobs new in NEW or missing from it. Prints the markdown and writes DIR/
 DIR/compare.html (standalone, Jinja2 with autoescaping, the report's environment) and
 DIR/compare.json (DIR defaults to NEW/compare; the z-maps go below it).
 
-Exit status: 0 nothing changed beyond noise; 1 something did (a job changed, or a job is new or
-missing); 2 usage error (a folder missing or not a run, a corrupt metrics.json: named). Render
-time is reported, not part of the exit status: its spread is the pass-to-pass spread within each
-run, and a machine that is busier during one whole run is not in it.
+Run folders are anyone's data (a folder received from someone else): compare_runs only reads OLD
+and NEW, and writes only into an output folder it creates itself, or one that is empty. It never
+deletes or overwrites: without ``-o`` the comparison goes to NEW/compare, or the first free
+NEW/compare-2, -3, ... when that is taken (an earlier comparison stays as it was); an ``-o DIR``
+that exists and is not empty is refused, and so is one that is OLD or NEW, contains either, or
+lies inside either. Its files are created new (O_EXCL | O_NOFOLLOW): nothing is written through a
+symbolic link.
+
+Exit status: 0 every job judged and nothing changed beyond noise; 1 something changed (a job
+changed, or a job is new or missing); 2 usage error, nothing compared (a folder missing or not a
+run, a corrupt metrics.json, an output folder refused: named); 3 nothing changed that could be
+judged, but a job could not be judged (an unreadable or oversized render, a render missing from
+its folder, one pass only: no per-pixel noise, pass times or probes that are not what a run
+writes: each named in the report and on stderr). Render time is reported, not part of the exit
+status: its spread is the pass-to-pass spread within each run, and a machine that is busier
+during one whole run is not in it.
 """
 import argparse
 import json
-import shutil
+import os
+import stat
 import sys
+import traceback
 from pathlib import Path
 
 if __name__ == "__main__" and __package__ in (None, ""):  # run as a script: this module from the package
@@ -31,16 +45,38 @@ if __name__ == "__main__" and __package__ in (None, ""):  # run as a script: thi
 
 from .verdict import baseline  # noqa: E402
 
-EXIT_SAME, EXIT_CHANGED, EXIT_USAGE = 0, 1, 2
+EXIT_SAME, EXIT_CHANGED, EXIT_USAGE, EXIT_UNJUDGED = 0, 1, 2, 3
 METRICS = ("rmse", "relmse", "mape", "flip")
+MAX_FRESH = 1000  # NEW/compare, NEW/compare-2, ... NEW/compare-999
+
+
+class OutputRefused(ValueError):
+    """An output folder compare_runs will not write into (exit 2); the message names it and why."""
 
 
 def _num(x):
     return isinstance(x, (int, float)) and not isinstance(x, bool)
 
 
+def _probes(entry):
+    p = entry.get("probes")
+    return p if isinstance(p, list) else []
+
+
 def _probe_passes(entry):
-    return {str(p.get("name")): p.get("pass") for p in entry.get("probes") or [] if isinstance(p, dict)}
+    return {str(p.get("name")): p.get("pass") for p in _probes(entry) if isinstance(p, dict)}
+
+
+def entry_problems(entry, which):
+    """Why a job record cannot be judged as a run writes it (fields of a hand-edited metrics.json),
+    as sentences naming the run and the field; empty when nothing is wrong."""
+    out = []
+    if entry.get("probes") is not None and not isinstance(entry.get("probes"), list):
+        out.append(f"{which}'s probes is {type(entry['probes']).__name__}, not a list")
+    why = baseline.times_problem(entry)
+    if why:
+        out.append(f"{which}'s {why}")
+    return out
 
 
 def _test_pass(entry):
@@ -48,10 +84,14 @@ def _test_pass(entry):
     return t.get("pass") if isinstance(t, dict) else None
 
 
-def compare_job(old, new, old_folder, new_folder, out_dir, base, settings):
-    """One matched job: its changes (a list of sentences; empty: nothing changed beyond noise), the
-    image verdict (baseline record), metric deltas and time."""
-    rec = baseline.judge_entry(new, Path(new_folder), base, settings, zmap_root=out_dir)
+def compare_job(old, new, old_folder, new_folder, out_dir, base, settings, zmap_prefix=""):
+    """One matched job: its changes (a list of sentences; empty: nothing changed beyond noise), what
+    could not be judged (``unjudged``: sentences, empty when everything was), the image verdict
+    (baseline record), metric deltas and time."""
+    rec = baseline.judge_entry(new, Path(new_folder), base, settings, zmap_root=out_dir, zmap_prefix=zmap_prefix)
+    problems = entry_problems(old, "OLD") + entry_problems(new, "NEW")
+    if rec.get("status") == "unjudged":
+        problems.insert(0, f"image not judged: {rec.get('reason')}")
     changes = []
     if old.get("status") != new.get("status"):
         changes.append(f"status {old.get('status')} -> {new.get('status')}")
@@ -75,7 +115,15 @@ def compare_job(old, new, old_folder, new_folder, out_dir, base, settings):
               for k in METRICS if isinstance(mo, dict) and isinstance(mn, dict) and (mo.get(k) is not None or mn.get(k) is not None)}
     return {"scene": new.get("scene"), "backend": new.get("backend"), "mode": new.get("mode"),
             "old_status": old.get("status"), "new_status": new.get("status"), "changes": changes,
-            "changed": bool(changes), "baseline": rec, "metrics": deltas, "time": rec.get("time")}
+            "changed": bool(changes), "unjudged": problems, "baseline": rec, "metrics": deltas, "time": rec.get("time")}
+
+
+def _failed_job(new, exc):
+    """The record of a job whose comparison broke (never the whole comparison's problem)."""
+    rec = {"status": "unjudged", "reason": f"comparison failed: {type(exc).__name__}: {exc}"}
+    return {"scene": new.get("scene"), "backend": new.get("backend"), "mode": new.get("mode"),
+            "old_status": None, "new_status": new.get("status"), "changes": [], "changed": False,
+            "unjudged": [rec["reason"]], "baseline": rec, "metrics": {}, "time": None}
 
 
 def _verdict(passed):
@@ -93,7 +141,7 @@ def compare(old_folder, new_folder, out_dir, settings=None):
          "min_samples": opts.get("min_samples") if _num(opts.get("min_samples")) else None,
          "block": opts.get("block") if _num(opts.get("block")) else None}
     s.update({k: v for k, v in (settings or {}).items() if v is not None})
-    seen, jobs, new_jobs = set(), [], []
+    seen, jobs, new_jobs, zmap_folders = set(), [], [], set()
     for e in new_data["runs"]:
         k = baseline.key_of(e)
         if k is None or k in seen:
@@ -103,13 +151,30 @@ def compare(old_folder, new_folder, out_dir, settings=None):
         if old is None:
             new_jobs.append({"scene": k[0], "backend": k[1], "mode": k[2], "status": e.get("status")})
             continue
-        jobs.append(compare_job(old, e, old_folder, new_folder, out_dir, base, s))
+        # each job's z-map in a folder of its own (two records naming one render folder: the second
+        # one's goes below _duplicate/<n>/, never over the first's)
+        image = e.get("image") if isinstance(e.get("image"), str) else ""
+        folder = str(baseline._rel_parent(image)) if baseline.inside(new_folder, image) else None
+        prefix = f"_duplicate/{len(zmap_folders)}" if folder is not None and folder in zmap_folders else ""
+        zmap_folders.add(folder)
+        try:
+            jobs.append(compare_job(old, e, old_folder, new_folder, out_dir, base, s, prefix))
+        except Exception as exc:  # noqa: BLE001 - one job that cannot be compared is that job's problem
+            jobs.append(_failed_job(e, exc))
     missing = [{"scene": k[0], "backend": k[1], "mode": k[2], "status": e.get("status")}
                for k, e in base.jobs.items() if k not in seen]
-    jobs.sort(key=lambda j: (not j["changed"], str(j["scene"]), str(j["backend"]), str(j["mode"])))
+    jobs.sort(key=lambda j: (not j["changed"], not j["unjudged"], str(j["scene"]), str(j["backend"]), str(j["mode"])))
     changed = any(j["changed"] for j in jobs) or bool(new_jobs) or bool(missing)
+    unjudged = [j for j in jobs if j["unjudged"]]
     return {"old": str(old_folder), "new": str(new_folder), "settings": s, "jobs": jobs, "new_jobs": new_jobs,
-            "missing_jobs": missing, "changed": changed}
+            "missing_jobs": missing, "changed": changed, "unjudged": len(unjudged)}
+
+
+def exit_code(result):
+    """1 when something changed, else 3 when a job could not be judged, else 0."""
+    if result["changed"]:
+        return EXIT_CHANGED
+    return EXIT_UNJUDGED if result.get("unjudged") else EXIT_SAME
 
 
 # -- output ---------------------------------------------------------------------------------------
@@ -136,29 +201,38 @@ def rows(result):
             image += f": {b.get('reason')}"
         deltas = "; ".join(f"{k} {_fmt(v[0])} -> {_fmt(v[1])}" + (f" ({v[2]:+.3g})" if v[2] is not None else "")
                            for k, v in j["metrics"].items())
-        out.append({"changed": j["changed"], "scene": str(j["scene"]), "backend": str(j["backend"]),
+        out.append({"changed": j["changed"], "unjudged": bool(j.get("unjudged")), "scene": str(j["scene"]), "backend": str(j["backend"]),
                     "mode": str(j["mode"] or ""), "status": f"{j['old_status']} -> {j['new_status']}"
                     if j["old_status"] != j["new_status"] else str(j["new_status"]),
-                    "what": "; ".join(j["changes"]) or "nothing beyond noise", "image": image,
+                    "what": "; ".join(j["changes"] + [f"NOT JUDGED: {u}" for u in j.get("unjudged") or []])
+                    or "nothing beyond noise", "image": image,
                     "how_much": baseline.how_much(b), "zmap": b.get("zmap") or "",
                     "zmap_png": (str(Path(b["zmap"]).with_name(baseline.ZMAP_PNG)) if b.get("zmap") else ""),
                     "metrics": deltas, "time": _time_text(j.get("time"))})
     return out
 
 
+def verdict_word(row):
+    """The first column: CHANGED, UNJUDGED (nothing changed that could be judged, something could
+    not be) or same."""
+    return "CHANGED" if row["changed"] else "UNJUDGED" if row["unjudged"] else "same"
+
+
 def markdown(result):
     from .report.summary import _cell
     rs = rows(result)
     n_changed = sum(r["changed"] for r in rs)
+    n_unjudged = sum(r["unjudged"] and not r["changed"] for r in rs)
     head = (f"# Changes from {_cell(result['old'])} to {_cell(result['new'])}\n\n"
-            f"{len(rs)} jobs in both: {n_changed} changed, {len(rs) - n_changed} without a change beyond noise; "
+            f"{len(rs)} jobs in both: {n_changed} changed, {n_unjudged} not judged, "
+            f"{len(rs) - n_changed - n_unjudged} without a change beyond noise; "
             f"{len(result['new_jobs'])} new, {len(result['missing_jobs'])} missing. Renders judged against each other "
             "on both their noises (two-sample block test, Sidak-corrected), probes compared; time as the ratio of "
             "the median pass times (new / old) with its spread.\n\n")
     table = ["| changed | scene | backend | mode | status | what changed | image | how much | where (z-map) | metrics | time |",
              "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rs:
-        table.append("| " + " | ".join(_cell(x) for x in ("CHANGED" if r["changed"] else "same", r["scene"], r["backend"],
+        table.append("| " + " | ".join(_cell(x) for x in (verdict_word(r), r["scene"], r["backend"],
                                                           r["mode"], r["status"], r["what"], r["image"][:300], r["how_much"],
                                                           r["zmap"], r["metrics"], r["time"])) + " |")
     text = head + "\n".join(table) + "\n"
@@ -176,18 +250,103 @@ def html_page(result, out_dir):
     rs = rows(result)
     for r in rs:
         r["zmap_src"] = html._local_url(Path(out_dir), r["zmap_png"]) if r["zmap_png"] else None
+        r["word"] = verdict_word(r)
     return html._env.get_template("compare.html").render(
         old=result["old"], new=result["new"], rows=rs, new_jobs=result["new_jobs"], missing=result["missing_jobs"],
-        changed=sum(r["changed"] for r in rs))
+        changed=sum(r["changed"] for r in rs), unjudged=sum(r["unjudged"] and not r["changed"] for r in rs))
+
+
+# -- the output folder: made here or empty, never deleted, nothing written through a link ----------
+def _resolved(path):
+    return Path(os.path.abspath(path)).resolve()
+
+
+def check_output(out_dir, old, new, default=False):
+    """OutputRefused when ``out_dir`` is OLD or NEW, contains either, or lies inside OLD (or inside
+    NEW, unless it is the default NEW/compare), naming it and why."""
+    o = _resolved(out_dir)
+    label = f"the output folder {out_dir} (give another with -o DIR)" if default else f"-o {out_dir}"
+    for name, folder in (("OLD", _resolved(old)), ("NEW", _resolved(new))):
+        if o == folder:
+            raise OutputRefused(f"{label}: is {name} ({folder}); the comparison never writes into a run's folder")
+        if folder.is_relative_to(o):
+            raise OutputRefused(f"{label}: contains {name} ({folder}); give a folder of its own")
+        if o.is_relative_to(folder) and not (default and name == "NEW"):
+            raise OutputRefused(f"{label}: lies inside {name} ({folder}); give a folder outside both runs "
+                                "(without -o the comparison goes to NEW/compare)")
+
+
+def _empty_folder(path):
+    """Whether ``path`` is a real (not linked) folder with nothing in it."""
+    try:
+        st = os.lstat(path)
+        return stat.S_ISDIR(st.st_mode) and not os.listdir(path)
+    except OSError:
+        return False
+
+
+def make_output(out_dir, fresh=False):
+    """The folder the comparison is written to: ``out_dir`` made here (its parents as needed) or
+    already there and empty; with ``fresh`` (the default NEW/compare) the first of out_dir,
+    out_dir-2, out_dir-3, ... that is new or empty. Never deletes; refuses (OutputRefused) an
+    ``out_dir`` that holds anything or is a link."""
+    out_dir = Path(out_dir)
+    try:
+        out_dir.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputRefused(f"cannot make the output folder {out_dir}: {exc.strerror or exc}") from None
+    names = [out_dir] + ([out_dir.with_name(f"{out_dir.name}-{k}") for k in range(2, MAX_FRESH)] if fresh else [])
+    for path in names:
+        try:
+            os.mkdir(path)
+            return path
+        except FileExistsError:
+            if _empty_folder(path):
+                return path
+        except OSError as exc:
+            raise OutputRefused(f"cannot make the output folder {path}: {exc.strerror or exc}"
+                                + (" (give another with -o DIR)" if fresh else "")) from None
+    if fresh:
+        raise OutputRefused(f"{out_dir} and {out_dir.name}-2 ... -{MAX_FRESH - 1} are all taken: remove earlier comparisons")
+    raise OutputRefused(f"-o {out_dir}: exists and is not an empty folder; compare_runs never deletes or overwrites "
+                        "one: remove it or give a new folder")
+
+
+def _write_new(path, text):
+    """Create ``path`` (it must not exist; a link there is not followed) and write ``text``."""
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0), 0o666)
+    with open(fd, "w", encoding="utf-8") as f:
+        f.write(text)
 
 
 def write(result, out_dir):
+    """compare.md, compare.html and compare.json, each a new file in ``out_dir`` (``make_output``)."""
     out_dir = Path(out_dir)
     text = markdown(result)
-    (out_dir / "compare.md").write_text(text, encoding="utf-8")
-    (out_dir / "compare.html").write_text(html_page(result, out_dir), encoding="utf-8")
-    (out_dir / "compare.json").write_text(json.dumps(result, indent=1, default=str) + "\n", encoding="utf-8")
+    _write_new(out_dir / "compare.md", text)
+    _write_new(out_dir / "compare.html", html_page(result, out_dir))
+    _write_new(out_dir / "compare.json", json.dumps(result, indent=1, default=str) + "\n")
     return text
+
+
+def run(old, new, out=None, settings=None):
+    """Compare the runs in ``old`` and ``new`` into ``out`` (default NEW/compare, or the first free
+    NEW/compare-N) and write the three files: (result, output folder, markdown). Raises
+    baseline.BaselineError for a folder that is not a run, OutputRefused for an output folder
+    refused (both exit 2), OSError for one that cannot be written."""
+    for folder in (old, new):
+        baseline.read_metrics(folder)
+    default = out is None
+    out_dir = Path(new) / baseline.COMPARE_DIR if default else Path(out)
+    check_output(out_dir, old, new, default)
+    out_dir = make_output(out_dir, fresh=default)
+    result = compare(old, new, out_dir, settings)
+    return result, out_dir, write(result, out_dir)
+
+
+def _printable(text):
+    """``text`` for a terminal: control characters (from a metrics.json: anyone's text) escaped."""
+    return "".join(c if c.isprintable() else ascii(c)[1:-1] for c in text)
 
 
 def main(argv=None):
@@ -204,26 +363,24 @@ def main(argv=None):
     for name in ("min_samples", "block"):
         if getattr(args, name) is not None and getattr(args, name) < 1:
             ap.error(f"--{name.replace('_', '-')} must be >= 1")
-    for folder in (args.old, args.new):
-        try:
-            baseline.read_metrics(folder)
-        except baseline.BaselineError as exc:
-            print(f"error: {exc}", file=sys.stderr)
-            return EXIT_USAGE
-    out_dir = Path(args.out) if args.out else Path(args.new) / "compare"
+    settings = {"alpha": args.alpha, "min_samples": args.min_samples, "block": args.block}
     try:
-        if out_dir.is_dir() and (out_dir / "compare.json").is_file():
-            shutil.rmtree(out_dir)  # an earlier comparison written here: replaced whole
-        out_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        print(f"error: cannot write the output folder {out_dir}: {exc.strerror or exc}", file=sys.stderr)
-        return EXIT_USAGE
-    try:
-        result = compare(args.old, args.new, out_dir, {"alpha": args.alpha, "min_samples": args.min_samples,
-                                                      "block": args.block})
-    except baseline.BaselineError as exc:
+        result, out_dir, text = run(args.old, args.new, args.out, settings)
+    except (baseline.BaselineError, OutputRefused) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_USAGE
-    print(write(result, out_dir))
-    return EXIT_CHANGED if result["changed"] else EXIT_SAME
+    except OSError as exc:
+        print(f"error: cannot write the comparison: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except Exception:  # noqa: BLE001 - a bug here must not read as exit 1 ("changed")
+        traceback.print_exc()
+        print("error: internal error while comparing (above); nothing was judged", file=sys.stderr)
+        return EXIT_USAGE
+    print(text)
+    for j in result["jobs"]:
+        for why in j["unjudged"]:
+            print(_printable(f"error: {j['scene']} / {j['backend']} {j['mode'] or ''}: not judged: {why}"[:2000]),
+                  file=sys.stderr)
+    print(f"written to {out_dir}", file=sys.stderr)
+    return exit_code(result)
 

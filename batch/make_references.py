@@ -85,20 +85,55 @@ def pass_jobs(name, scene, backend, mode, spp, passes, seed, work):
         j = jobs.make("reference", name, scene, backend.name, mode, per_pass, work, f"pass{k}", passes=1,
                       backend_options=backend.options, seed=seed + k * SEED_STRIDE, timeout=6 * 3600,
                       label=f"{name} pass {k + 1}/{passes}", extra={"pass": k})
-        done = work / f"pass{k}" / "done.json"
-        if not (done.is_file() and json.loads(done.read_text()).get("job") == jobs.job_id(j)):
+        record = read_done(work / f"pass{k}" / "done.json")
+        if not (record and record.get("job") == jobs.job_id(j)):
             todo.append(j)
     return todo, per_pass
 
 
-def merge(work, passes):
-    """(names, mean, standard error of the mean, summed render seconds, versions) of the passes."""
+def read_done(path):
+    """The record of a finished pass (``done.json``: a dict with the job id and its seconds), or None
+    when there is none; a file that is unreadable, truncated or not such a record is named on
+    stdout and its pass renders again (None)."""
+    try:
+        record = json.loads(Path(path).read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        return None
+    except (OSError, ValueError, RecursionError) as exc:
+        print(f"{path}: not a readable pass record ({exc}); that pass renders again", flush=True)
+        return None
+    ok = isinstance(record, dict) and isinstance(record.get("job"), str) and isinstance(record.get("time_s"), (int, float)) \
+        and not isinstance(record.get("time_s"), bool) and math.isfinite(record["time_s"])
+    if not ok:
+        print(f"{path}: not a pass record (no job id and seconds); that pass renders again", flush=True)
+        return None
+    return record
+
+
+def write_done(path, record):
+    """``done.json`` written whole or not at all (a new file renamed over the name): an interrupted
+    write never leaves a truncated record."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        tmp.write_text(json.dumps(record, default=str), encoding="utf-8")
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def merge(work, passes, expect=None):
+    """(names, mean, standard error of the mean, summed render seconds, versions) of the passes;
+    ``expect``: the (width, height) they were rendered at (checked in each EXR's header before its
+    pixels are read)."""
     import numpy as np
     from spectral_bench.batch import exr
     images, seconds, versions = [], 0.0, None
     for k in range(passes):
-        names, img = exr.read_image(work / f"pass{k}" / "render.exr")
-        record = json.loads((work / f"pass{k}" / "done.json").read_text())
+        names, img = exr.read_image(work / f"pass{k}" / "render.exr", expect=expect)
+        record = read_done(work / f"pass{k}" / "done.json")
+        if record is None:
+            raise ValueError(f"{work / f'pass{k}' / 'done.json'}: no pass record: run the same command again to render it")
         seconds += record["time_s"]
         versions = record.get("versions")
         images.append(img.astype(np.float64))
@@ -325,15 +360,36 @@ def _make(args, argv, out, held, backend):
         if record.get("status") != "rendered":
             print(f"{job['scene_name']}: pass {job['extra']['pass']} failed: {record.get('reason')}", flush=True)
             return
-        (work / job["folder"] / "done.json").write_text(json.dumps(dict(record, job=jobs.job_id(job)), default=str))
+        try:
+            write_done(work / job["folder"] / "done.json", dict(record, job=jobs.job_id(job)))
+        except OSError as exc:
+            print(f"{job['scene_name']}: pass {job['extra']['pass']}: cannot record it in {work / job['folder']}: "
+                  f"{exc.strerror or exc}; run the same command again to render it", flush=True)
+            return
         remaining[job["scene_name"]] -= 1
         print(f"{job['label']}: {record['time_s']:.1f} s", flush=True)
         if remaining[job["scene_name"]] == 0:
             write_reference(next(p for p in plans if p[0] == job["scene_name"]))
 
     def write_reference(plan):
+        name = plan[0]
+        try:
+            _write_reference(plan)
+        except OSError as exc:  # a full disk, a folder that cannot be written: the old reference is untouched
+            failed.append(name)
+            where = f"{exc.filename}: " if exc.filename else ""
+            print(f"{name}: cannot write the reference into {out}: {where}{exc.strerror or exc}; the old "
+                  f"reference (if any) is left as it was and the passes are kept in {plan[4]}: run the same "
+                  "command again once it can be written", flush=True)
+        except ValueError as exc:  # a pass whose EXR or record is not what a pass writes
+            failed.append(name)
+            print(f"{name}: cannot merge the passes: {exc}", flush=True)
+
+    def _write_reference(plan):
         name, scene, mode, per_pass, work, _todo = plan
-        names, mean, stderr, seconds, versions = merge(work, args.passes)
+        r = scene["render"]
+        names, mean, stderr, seconds, versions = merge(work, args.passes,
+                                                       planning.scaled_size(r["width"], r["height"], args.scale))
         prov = {"backend": backend.name, "mode": mode, "spp": per_pass * args.passes, "passes": args.passes,
                 "seed": args.seed, "resolution": [int(mean.shape[1]), int(mean.shape[0])], "scale": args.scale,
                 "time_s": round(seconds, 2), "date": dt.datetime.now().isoformat(timespec="seconds"),

@@ -23,8 +23,6 @@ noise of any render judged here):
 
 PNG writers stay for charts and strips that are pictures (stability)."""
 import contextlib
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -79,20 +77,7 @@ def write_half(path, rgb, channels="RGB"):
 def _replace(path, channels):
     """Write {channel: HxW array} to ``path`` through a temporary name and a rename (a reader, or
     another job writing the same file, never sees half a file); the umask's permissions."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(suffix=".exr", prefix=".tmp-", dir=path.parent)
-    os.close(fd)
-    try:
-        exr.write_channels(tmp, channels)
-        umask = os.umask(0o022)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
-    finally:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-    return path
+    return exr.replace_file(path, lambda tmp: exr.write_channels(tmp, channels))
 
 
 PROBE_RESIDUAL = "probe_residual.exr"

@@ -192,9 +192,17 @@ def _spectral_channels(path, names):
     return found
 
 
-def read(path):
-    """The emissive spectral image of a Fichet 2021 EXR (SpectralImage). Raises SpectralEXRError."""
+def read(path, expect=None):
+    """The emissive spectral image of a Fichet 2021 EXR (SpectralImage). Raises SpectralEXRError.
+    The header is checked before any pixel is read (batch/exr.py ``check_header``: the expected
+    (width, height) where known, else the caps there)."""
     path = str(path)
+    try:
+        exr.check_header(path, expect)
+    except OSError as exc:
+        raise SpectralEXRError(f"{path}: cannot be read ({exc.strerror or exc})") from exc
+    except exr.EXRLimitError as exc:
+        raise SpectralEXRError(str(exc)) from exc
     try:
         f = OpenEXR.File(path, separate_channels=True)
     except Exception as exc:  # the OpenEXR package raises a bare RuntimeError for unreadable files
@@ -267,18 +275,19 @@ def to_rgb(image, observer="cie1931"):
     return names, np.concatenate(parts, axis=-1)
 
 
-def read_render(path, writes="rgb", observer="cie1931"):
+def read_render(path, writes="rgb", observer="cie1931", expect=None):
     """(names, H x W x C image) of what a renderer wrote: ``writes`` "rgb" reads R, G, B then
     S0.R ... (batch/exr.py read_image), "spectral" a Fichet 2021 spectral EXR integrated with
-    ``observer`` (to_rgb)."""
+    ``observer`` (to_rgb); ``expect``: the (width, height) the job asked for, checked in the header
+    before any pixel is read."""
     if writes not in READERS:
         raise ValueError(f"writes = {writes!r}: a renderer writes one of {', '.join(READERS)}")
-    return READERS[writes](path, observer)
+    return READERS[writes](path, observer, expect)
 
 
 READERS = {
-    "rgb": lambda path, observer: exr.read_image(path),
-    "spectral": lambda path, observer: to_rgb(read(path), observer),
+    "rgb": lambda path, observer, expect: exr.read_image(path, expect=expect),
+    "spectral": lambda path, observer, expect: to_rgb(read(path, expect), observer),
 }
 
 
@@ -324,6 +333,4 @@ def write(path, wavelengths_nm, planes, rgb_preview=True, extra=None, header=Non
     head.update(header or {})
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    with OpenEXR.File(head, channels) as f:
-        f.write(str(path))
-    return path
+    return exr._write_file(path, head, channels)

@@ -127,7 +127,7 @@ def test_pass_over_its_time_limit_is_stopped_not_retried(tmp_path):
     assert (tmp_path / "render.log").read_text().count("$ ") == 1
 
 
-@pytest.mark.parametrize("mode, words", [("nan", "NaN"), ("size", "9x6 image; the scene is 8x6"),
+@pytest.mark.parametrize("mode, words", [("nan", "NaN"), ("size", "dataWindow: 9x6, expected 8x6"),
                                          ("silent", "wrote no pass0.exr")])
 def test_pass_output_is_checked(tmp_path, mode, words):
     with pytest.raises(passes.BackendFailure) as err:

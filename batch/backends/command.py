@@ -297,7 +297,8 @@ class CommandBackend:
         if not out.is_file():
             raise BackendFailure(f"{self.name} exited with 0 but wrote no {out.name} (the command's {{output}})")
         try:
-            names, img = read_output(out, self.decl["writes"], self.decl.get("observer", "cie1931"))
+            names, img = read_output(out, self.decl["writes"], self.decl.get("observer", "cie1931"),
+                                     (width, height) if width else None)
         except Exception as exc:  # noqa: BLE001 - whatever the EXR reader raises on a corrupt file fails this pass (retried)
             raise BackendFailure(f"{self.name} wrote {out} ({{output}}), which cannot be read as a "
                                  f"{self.decl['writes']} EXR: {type(exc).__name__}: {str(exc)[:300]}") from exc
@@ -329,14 +330,15 @@ def _version(cmd, here, env):
     return f"unknown (the version command printed nothing, exit {code})"
 
 
-def read_output(path, writes, observer):
+def read_output(path, writes, observer, expect=None):
     """(channel names, H x W x C) of what a pass wrote: an RGB EXR's R, G, B (+ S0.R ... S3.B), or a
-    Fichet 2021 spectral EXR integrated to the same channels (batch/spectral_exr.py)."""
+    Fichet 2021 spectral EXR integrated to the same channels (batch/spectral_exr.py). ``expect``:
+    the scene's (width, height), checked in the EXR's header before any pixel is read."""
     if writes == "spectral":
         from .. import spectral_exr
-        return spectral_exr.read_render(path, "spectral", observer)
+        return spectral_exr.read_render(path, "spectral", observer, expect)
     from .. import exr
-    names, img = exr.read_image(path)
+    names, img = exr.read_image(path, expect=expect)
     keep = [i for i, n in enumerate(names) if n not in ("A", "W")]
     return [names[i] for i in keep], img[..., keep]
 

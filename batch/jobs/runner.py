@@ -10,6 +10,7 @@ interrupted run: results whose job id (batch/jobs/job.py) still matches are kept
 from collections import Counter
 import datetime as _dt
 import logging
+import os
 import time
 from pathlib import Path
 
@@ -388,13 +389,21 @@ class Run:
 
 
 
-def check_junit(path):
-    """--junit FILE must be writable where it is asked for: checked before anything renders."""
+def check_junit(path, out=None):
+    """--junit FILE must be writable where it is asked for, and never one of the run's own files:
+    inside the output folder ``out`` (-o or --resume) only directly in it, as a *.xml file that is
+    not a link (the run writes no *.xml there). Checked before anything renders."""
     path = Path(path)
     if path.is_dir():
         raise UsageError(f"--junit {path}: is a folder (give a file name)")
     if not path.parent.is_dir():
         raise UsageError(f"--junit {path}: no such folder {path.parent}")
+    if out is None:
+        return
+    folder, target = Path(os.path.abspath(out)).resolve(), Path(os.path.abspath(path.parent)).resolve() / path.name
+    if target.is_relative_to(folder) and (target.parent != folder or target.suffix.lower() != ".xml" or path.is_symlink()):
+        raise UsageError(f"--junit {path}: inside the output folder {out}, where it would overwrite the run's own "
+                         "files; give a file outside it, or a new *.xml directly in it")
 
 
 def write_junit(path, batch):
@@ -445,7 +454,7 @@ def run(opts):
     probe_early(opts)
     deviations = None if opts.get("resume") else load_known(opts.get("known"))
     if opts.get("junit"):
-        check_junit(opts["junit"])
+        check_junit(opts["junit"], opts.get("resume") or opts.get("out"))
     if opts.get("baseline") and not opts.get("resume"):
         open_baseline(opts, opts.get("out"))  # checked before any folder is made
     if not opts.get("resume"):

@@ -214,12 +214,24 @@ def _log_median_se(times):
     return float(np.log(np.median(np.exp(t)))), se, n - 1
 
 
+PASS_SECONDS = (1e-6, 1e7)  # a pass time outside this range (a microsecond to 116 days) is not a measurement
+
+
 def _times(entry):
     t = entry.get("pass_times") if isinstance(entry, dict) else None
     if not isinstance(t, list) or not t or not all(isinstance(x, (int, float)) and not isinstance(x, bool)
-                                                    and math.isfinite(x) and x > 0 for x in t):
+                                                    and PASS_SECONDS[0] <= x <= PASS_SECONDS[1] for x in t):
         return None
     return t
+
+
+def times_problem(entry):
+    """Why a record's ``pass_times`` (present) is not what a run writes, or None (also when absent)."""
+    t = entry.get("pass_times") if isinstance(entry, dict) else None
+    if t is None or _times(entry) is not None:
+        return None
+    return (f"pass_times is not a non-empty list of seconds in [{PASS_SECONDS[0]:g}, {PASS_SECONDS[1]:g}] "
+            f"({str(t)[:80]})")
 
 
 def time_change(old_entry, new_entry, alpha=0.01):
@@ -350,8 +362,9 @@ def judge_pair(new_entry, new_folder, old_entry, old_folder, settings, zmap_path
         return _record(run_label, "changed", f"rendered now, not in the baseline (status {so}"
                        + (f": {old_entry.get('reason')}" if old_entry.get("reason") else "") + ")", **common)
     try:
-        n_names, n_img, n_se = exr.read_image_and_stderr(new_img)
-        o_names, o_img, o_se = exr.read_image_and_stderr(old_img)
+        # the header first, against the resolution each record gives (a crafted EXR is refused before its pixels)
+        n_names, n_img, n_se = exr.read_image_and_stderr(new_img, expect=new_entry.get("resolution"))
+        o_names, o_img, o_se = exr.read_image_and_stderr(old_img, expect=old_entry.get("resolution"))
     except Exception as exc:  # noqa: BLE001 - an unreadable image is that job's problem, named
         return _record(run_label, "unjudged", f"cannot read a render: {exc}", **common)
     if n_se is None or o_se is None:
@@ -490,34 +503,86 @@ def _same_folder(a, b):
         return False
 
 
+def comparisons(out_dir):
+    """The folders batch/compare_runs.py wrote into the run in ``out_dir`` (OUT/compare, OUT/compare-2,
+    ...: real folders, not links, holding compare.json), newest first."""
+    import os
+    import re
+    import stat
+    found = []
+    try:
+        entries = list(os.scandir(out_dir))
+    except OSError:
+        return []
+    for e in entries:
+        if not re.fullmatch(rf"{COMPARE_DIR}(-[0-9]{{1,4}})?", e.name):
+            continue
+        try:
+            if not stat.S_ISDIR(os.lstat(e.path).st_mode):
+                continue
+            st = os.lstat(Path(e.path) / "compare.json")
+        except OSError:
+            continue
+        if stat.S_ISREG(st.st_mode):
+            found.append((st.st_mtime_ns, e.name))
+    return [Path(out_dir) / name for _, name in sorted(found, reverse=True)]
+
+
+def recorded_baseline(out_dir, run):
+    """The baseline folder a run's --baseline record names (``run``: as the user gave it, relative
+    to where the run was started, which is not known), followed only where it cannot lead anywhere
+    a run folder does not: a relative path without '..' taken beside the run folder (the usual
+    ``--baseline out_prev -o out_new``), that holds a metrics.json. An absolute path or one with
+    '..' (a hand-edited metrics.json can name any folder) is not followed: None (the panel's
+    Baseline field names the folder then)."""
+    text = run if isinstance(run, str) else ""
+    if not text or "\0" in text or PurePosixPath(text).is_absolute() or PureWindowsPath(text).anchor:
+        return None
+    parts = PurePosixPath(text.replace("\\", "/")).parts
+    if not parts or any(p in ("", "..") for p in parts):
+        return None
+    root = Path(out_dir).parent
+    try:
+        folder = (root / Path(*parts)).resolve()
+        if not folder.is_relative_to(root.resolve()) or not (folder / "metrics.json").is_file():
+            return None
+    except (OSError, ValueError):
+        return None
+    return folder
+
+
 def records(out_dir, data, baseline_dir=None):
-    """{(scene, backend): (baseline record, folder its z-map is relative to, baseline folder)} for the
-    run in ``out_dir`` (``data``: its metrics.json). With ``baseline_dir``: the comparison that
-    batch/compare_runs.py (or the panel's Compare) wrote to OUT/compare against that folder, else
-    the records of a run made with --baseline naming that folder; without: the run's own
-    --baseline records."""
+    """{(scene, backend): (baseline record, folder its z-map is relative to, baseline folder or None)}
+    for the run in ``out_dir`` (``data``: its metrics.json). With ``baseline_dir`` (the user's
+    choice): the newest comparison that batch/compare_runs.py (or the panel's Compare) wrote to
+    OUT/compare[-N] against that folder, else the records of a run made with --baseline naming
+    that folder; without: the run's own --baseline records, their baseline folder only where
+    ``recorded_baseline`` follows it (else None: no baseline render is shown)."""
     out = {}
     out_dir = Path(out_dir)
     if baseline_dir:
-        path = out_dir / COMPARE_DIR / "compare.json"
-        try:
-            import json
-            comp = json.loads(path.read_text(encoding="utf-8")) if path.is_file() else None
-        except (OSError, ValueError, RecursionError):
-            comp = None
-        if isinstance(comp, dict) and _same_folder(comp.get("old"), baseline_dir):
-            for j in comp.get("jobs") or []:
+        import json
+        for folder in comparisons(out_dir):
+            try:
+                comp = json.loads((folder / "compare.json").read_text(encoding="utf-8"))
+            except (OSError, ValueError, RecursionError):
+                continue
+            if not (isinstance(comp, dict) and _same_folder(comp.get("old"), baseline_dir)):
+                continue
+            for j in comp.get("jobs") if isinstance(comp.get("jobs"), list) else []:
                 if isinstance(j, dict) and isinstance(j.get("baseline"), dict):
-                    out[(j.get("scene"), j.get("backend"))] = (j["baseline"], out_dir / COMPARE_DIR, Path(baseline_dir))
-            for j in comp.get("new_jobs") or []:
+                    out[(j.get("scene"), j.get("backend"))] = (j["baseline"], folder, Path(baseline_dir))
+            for j in comp.get("new_jobs") if isinstance(comp.get("new_jobs"), list) else []:
                 if isinstance(j, dict):
                     out[(j.get("scene"), j.get("backend"))] = (
                         _record(str(baseline_dir), "missing", "no such job in the baseline run"), out_dir, Path(baseline_dir))
             return out
-    for e in (data or {}).get("runs") or []:
+    runs = (data or {}).get("runs") if isinstance(data, dict) else None
+    for e in runs if isinstance(runs, list) else []:
         rec = e.get("baseline") if isinstance(e, dict) else None
         if isinstance(rec, dict) and (not baseline_dir or _same_folder(rec.get("run"), baseline_dir)):
-            out[(e.get("scene"), e.get("backend"))] = (rec, out_dir, Path(baseline_dir or rec.get("run") or "."))
+            base = Path(baseline_dir) if baseline_dir else recorded_baseline(out_dir, rec.get("run"))
+            out[(e.get("scene"), e.get("backend"))] = (rec, out_dir, base)
     return out
 
 
@@ -534,7 +599,7 @@ def image_path(found, kind):
         return None
     rec, root, base = found
     if kind == "baseline_render":
-        return inside(base, rec.get("image"))
+        return inside(base, rec.get("image")) if base is not None else None
     if kind == "baseline_zscore":
         return inside(root, rec.get("zmap"))
     return None

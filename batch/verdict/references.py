@@ -184,7 +184,7 @@ def examine(folder, scene_name, fp=None, shape=None, names=None):
             return None, problem(exr_path, (
                 f"the image is not the one its record {meta_path.name} describes (sha256 differs): the "
                 f"pair was not replaced together (an interrupted save?); {_remake(scene_name, exr_path)}"))
-        names_, mean, stderr = exr.read_image_and_stderr(exr_path)
+        names_, mean, stderr = exr.read_image_and_stderr(exr_path, expect=meta.get("resolution"))
     except Exception as exc:  # noqa: BLE001 - any unreadable file is a problem of that file
         return None, problem(exr_path, f"unreadable EXR: {exc}")
     if stderr is None:
@@ -298,10 +298,21 @@ def _fsync_dir(directory):
         os.close(fd)
 
 
+def _umask():
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
 def _temp(directory, scene_name, suffix):
-    """A new, uniquely named temporary file in ``directory`` (hidden; never *.exr or *.json)."""
+    """A new, uniquely named temporary file in ``directory`` (hidden; never *.exr or *.json), with
+    the permissions a new file gets (0666 less the umask: mkstemp's 0600 would make the reference
+    private once it is renamed into place)."""
     fd, path = tempfile.mkstemp(dir=directory, prefix=f".{scene_name}.", suffix=suffix)
-    os.close(fd)
+    try:
+        os.fchmod(fd, 0o666 & ~_umask())
+    finally:
+        os.close(fd)
     return Path(path)
 
 
@@ -310,6 +321,17 @@ def _write_synced(path, data):
         f.write(data)
         f.flush()
         os.fsync(f.fileno())
+
+
+def _read_back(path, names, shape):
+    """The written image read back whole before it is put in place: a write that failed without
+    saying so (a full disk under some writers) never becomes the reference. OSError naming it."""
+    try:
+        got, img, se = exr.read_image_and_stderr(path, expect=(shape[1], shape[0]))
+    except (OSError, ValueError) as exc:
+        raise OSError(f"{path}: the reference written cannot be read back ({exc})") from exc
+    if set(got) != set(names) or img.shape != tuple(shape) or se is None:
+        raise OSError(f"{path}: the reference read back is not the one written (channels {got}, shape {img.shape})")
 
 
 def _replace_pair(meta_tmp, meta_path, exr_tmp, exr_path):
@@ -341,6 +363,7 @@ def save(scene, names, mean, stderr, provenance, directory=None):
             exr.write_image(exr_tmp, names, mean, extra)
             with open(exr_tmp, "rb+") as f:
                 os.fsync(f.fileno())
+            _read_back(exr_tmp, names, mean.shape)
             meta = dict(provenance, scene=name, fingerprint=fp, exr_sha256=sha256_of(exr_tmp))
             _write_synced(meta_tmp, (json.dumps(meta, indent=1, sort_keys=True) + "\n").encode())
             _replace_pair(meta_tmp, meta_path, exr_tmp, exr_path)
