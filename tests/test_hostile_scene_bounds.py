@@ -112,7 +112,10 @@ def test_the_runner_records_the_short_reason_and_goes_on(tmp_path, run_batch_her
     path = tmp_path / "bad.json"
     path.write_text(json.dumps({k: v for k, v in bad.items() if not k.startswith("_")}))
     proc = run_batch_here("-i", path, GOLDEN / "ggx_copper_50_isolated.json", "-r", "mitsuba", "--list")
-    assert proc.returncode == 0, proc.stderr
+    assert proc.returncode == 2, proc.stderr  # --list shows the load error (short) and exits 2; the other scene is listed
+    (error,) = [line for line in proc.stdout.splitlines() if "\tERROR\t" in line]
+    assert len(error) < 1000 and "bsdf.int_ior.B" in error, error[:2000]
+    assert "ggx_copper_50_isolated\treflectance\tmitsuba" in proc.stdout.splitlines()
     out = tmp_path / "out"
     proc = run_batch_here("-i", path, "-r", "mitsuba", "--scale", 0.0625, "--spp", 4, "-o", out)
     runs = metrics(out)["runs"]
