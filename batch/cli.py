@@ -450,8 +450,15 @@ def check_option(key, value):
 
 class Options(dict):
     """The options (a plain dict to every reader) and which of them this command gave
-    (``given``: from the command line or a settings file)."""
+    (``given``: from the command line or a settings file); ``defaults`` and ``check`` (each
+    option through its own type) travel with them, for ``--resume`` (batch/jobs/plan.py), which
+    imports no entry point."""
     given = frozenset()
+    defaults = DEFAULTS
+
+    @staticmethod
+    def check(key, value):
+        return check_option(key, value)
 
 
 def parse(args):

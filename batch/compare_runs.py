@@ -147,7 +147,7 @@ def rows(result):
 
 
 def markdown(result):
-    from .report.summary import _cell
+    from .markdown import cell as _cell
     rs = rows(result)
     n_changed = sum(r["changed"] for r in rs)
     head = (f"# Changes from {_cell(result['old'])} to {_cell(result['new'])}\n\n"

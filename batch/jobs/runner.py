@@ -19,7 +19,7 @@ from .. import backends, records, scene_sources
 from ..verdict import baseline as baselines, known, status
 from ..report import html as report, summary
 from ..studies import sweep
-from . import engines, plan as planning
+from . import engines, job as job_mod, plan as planning
 from .progress import Progress
 
 log = logging.getLogger("spectral_bench")
@@ -279,7 +279,8 @@ class Run:
             for backend in made.values():
                 if backend.availability()[0]:
                     try:
-                        stab_jobs, rows = stability.jobs(backend, golden, self.out, "stability", timeout=self.opts["timeout"])
+                        stab_jobs, rows = stability.jobs(backend, golden, self.out, "stability", job_mod.make,
+                                                        timeout=self.opts["timeout"])
                     except Exception as exc:  # noqa: BLE001 - a base scene the strips cannot use fails the study, not the batch
                         log.exception("the stability case cannot be planned on %s", backend.name)
                         stab_jobs, rows = [], [{"sweep": "stability", "backend": backend.name, "mode": None, "problems": [],
