@@ -4,6 +4,7 @@ check, issue 31): every scene agrees with its reference on its own noise, and ea
 ``detectable`` shows it would have seen a 2 % error (copper 0.1-0.35 %, glass 1.2-1.3 %); a wrong
 material (gold for copper) fails the same test at the same settings."""
 import copy
+import json
 from pathlib import Path
 
 import pytest
@@ -110,6 +111,24 @@ def test_the_ggx_probe_judges_every_lone_plate(batch_run):
         assert runs[name]["status"] in ("ok", "known"), (name, runs[name]["reason"])
         # a plate with a floor has no closed form: no GGX probe, the reference judges it
     assert not any(p["name"].startswith("ggx ") for p in runs["ggx_copper_50"]["probes"])
+
+
+@pytest.mark.slow
+def test_the_block_arrays_of_the_probes_sit_beside_the_images(batch_run):
+    """Issue 31: the GGX probes' per-block arrays (stat and the mitsuba3 observer's) are stored in a
+    .npz beside each plate's render, not in metrics.json, and read back through batch/records.py
+    as the lists the verdict made (one value per block and channel)."""
+    _, out, runs = batch_run
+    raw = {r["scene"]: r for r in json.loads((out / "metrics.json").read_text())["runs"]}
+    for name in ISOLATED:
+        stored = next(p for p in raw[name]["probes"] if p["name"].endswith(" blocks"))
+        read = next(p for p in runs[name]["probes"] if p["name"].endswith(" blocks"))
+        for raw_stat, stat in ((stored["stat"], read["stat"]), (stored["alternatives"]["mitsuba3"], read["alternatives"]["mitsuba3"])):
+            ref = raw_stat["measured"]
+            assert set(ref) == {"array_file", "key"}, ref
+            assert (out / ref["array_file"]).parent == out / name / "results" / "mitsuba"
+            assert len(stat["measured"]) == len(stat["se"]) > 64 and all(isinstance(x, float) for x in stat["measured"])
+    assert (out / "metrics.json").stat().st_size < 100_000
 
 
 def _probe_variant(golden, name, tmp_path, change, form="separable", batch_run=None):
