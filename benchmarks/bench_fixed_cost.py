@@ -171,7 +171,14 @@ def measure(args_run, out):
         events = json.loads(trace.read_text())
     finally:
         trace.unlink(missing_ok=True)
-    runs = json.loads((Path(out) / "metrics.json").read_text())["runs"]
+    sys.path.insert(0, str(ROOT))
+    import pkg_bootstrap
+    pkg_bootstrap.package()
+    from spectral_bench.batch import records  # through the reader: the per-block arrays put back
+    runs = records.read(out)["runs"]
+    size = (Path(out) / "metrics.json").stat().st_size
+    beside = sum(p.stat().st_size for p in Path(out).rglob("probe_arrays-*.npz"))
+    events.append({"phase": "metrics.json", "job": None, "t0": 0.0, "t1": 0.0, "bytes": size, "beside": beside})
     return wall, cpu, proc.returncode, events, runs
 
 
@@ -209,6 +216,7 @@ def breakdown(wall, events, runs):
     totals = {p: sum(r.get(p, 0.0) for r in jobs.values()) for p in PHASES + ("render_s",)}
     totals["cpu"] = {p: sum(r["cpu"].get(p, 0.0) for r in jobs.values()) for p in CPU}
     totals["cpu"]["report"] = sum(e.get("cpu") or 0.0 for e in events if e["phase"] == "report")
+    totals["metrics_bytes"] = next(((e["bytes"], e["beside"]) for e in events if e["phase"] == "metrics.json"), (0, 0))
     totals["main_cpu"] = max((e.get("cpu_s") or 0.0 for e in events if e["phase"] == "exit"), default=0.0)
     totals.update(start=first, jobs_span=last_record - first, report=report, wall=wall,
                   exit=max(0.0, wall - exit_t), tail=max(0.0, exit_t - last_record - report),
@@ -237,7 +245,9 @@ def tables(title, argv, wall, cpu, code, jobs, totals, load):
               f"| of which the runner's process (all its threads) | | {totals['main_cpu']:.2f} | {totals['main_cpu'] / n:.3f} |", "",
               f"Wall / sum of render phases: {wall / max(totals['render'], 1e-9):.2f}x "
               f"(render phases {totals['render']:.1f} s; metrics.json wall_s sum {totals['mitsuba_wall']:.1f} s: "
-              f"{wall / max(totals['mitsuba_wall'], 1e-9):.2f}x).", ""]
+              f"{wall / max(totals['mitsuba_wall'], 1e-9):.2f}x).", "",
+              f"metrics.json {totals['metrics_bytes'][0] / 1e3:.1f} kB; the per-block arrays beside the images "
+              f"(probe_arrays-*.npz) {totals['metrics_bytes'][1] / 1e3:.1f} kB.", ""]
     lines += ["| job | export s | render s | Mitsuba s | verdict s | FLIP wait s | record s |", "|---|---|---|---|---|---|---|"]
     for label, r in jobs.items():
         lines.append(f"| {label} | {r.get('export', 0):.3f} | {r.get('render', 0):.3f} | {r.get('render_s', 0):.3f} | "
