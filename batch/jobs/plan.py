@@ -238,7 +238,7 @@ def read_metrics(out):
 
 def _option_name(key):
     return {"exec": "-e/--exec", "input": "-i/--input", "renderer": "-r/--renderer", "scene": "-s/--scene",
-            "case": "-c/--case", "flip": "--no-flip"}.get(key, "--" + key.replace("_", "-"))
+            "case": "-c/--case", "flip": "--flip"}.get(key, "--" + key.replace("_", "-"))
 
 
 def resumed_options(opts, given=None):
