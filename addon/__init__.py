@@ -1,5 +1,6 @@
 """Blender UI of the extension: annotation properties, operators, panels."""
-from . import benchmark, operators, panels, preferences, properties
+from ..exporters import blender_properties as properties
+from . import benchmark, operators, panels, preferences
 
 _MODULES = (properties, preferences, benchmark, operators, panels)
 

@@ -77,7 +77,7 @@ def load_blend(path, names=None):
     if not hasattr(bpy.types.Scene, "spectral_bench"):
         # only the annotation properties the extraction reads: no operator, panel or preference
         # of the extension is registered to read a .blend
-        from ..addon import properties
+        from ..exporters import blender_properties as properties
         properties.register()
     from ..exporters import extract_blender
     return extract_blender.extract(names)

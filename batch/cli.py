@@ -255,6 +255,24 @@ def _illuminant(v):
 _ILLUMINANT = text_kind(_illuminant, "illuminant")
 
 
+FLIP_WHEN = {"on": True, "off": False, "auto": "auto"}  # --flip: opts["flip"] (True, False as --no-flip, "auto")
+
+
+def _flip_text(text):
+    if text.strip() not in FLIP_WHEN:
+        raise ValueError(f"must be one of {', '.join(FLIP_WHEN)}")
+    return FLIP_WHEN[text.strip()]
+
+
+def _flip_native(v):
+    """A settings file's flip: true/false (as before --flip existed) or "on", "off", "auto"."""
+    if isinstance(v, bool):
+        return v
+    if isinstance(v, str) and v in FLIP_WHEN:
+        return FLIP_WHEN[v]
+    raise ValueError(f"must be true, false, \"on\", \"off\" or \"auto\", got {v!r}")
+
+
 def _device(v):
     if v not in DEVICES:
         raise ValueError(f"is not a device: one of {', '.join(DEVICES)}")
@@ -272,8 +290,9 @@ TYPES = {
     "cluster": text_kind(_cluster, "address"), "cluster_timeout": number(0, 3600, lo_open=True),
     "dashboard": text_kind(_dashboard, "[HOST]:PORT"), "resume": text_kind(_nonempty, "path"),
     "renderers": text_kind(_nonempty, "path"), "junit": text_kind(_nonempty, "path"),
-    "baseline": text_kind(_nonempty, "path"), "study": text_kind(_study, "study"),
-    "illuminants": _comma_list(_ILLUMINANT, "NAME,..."), "visible_de00": number(0, 100, lo_open=True),
+    "baseline": text_kind(_nonempty, "path"), "flip": Kind("on|off|auto", _flip_text, _flip_native),
+    "study": text_kind(_study, "study"), "illuminants": _comma_list(_ILLUMINANT, "NAME,..."),
+    "visible_de00": number(0, 100, lo_open=True),
 }
 
 
@@ -330,7 +349,10 @@ def parser():
     ap.add_argument("--max-passes", type=T["max_passes"], metavar="N",
                     help=f"cap on the passes of --detect, 1 to {MAX_PASSES} (default 16)")
     ap.add_argument("--seed", type=T["seed"], help=f"first sampler seed, 0 to {MAX_SEED} (default 0)")
-    ap.add_argument("--no-flip", dest="flip", action="store_false", help="skip HDR-FLIP")
+    ap.add_argument("--no-flip", dest="flip", action="store_false", help="skip HDR-FLIP (as --flip off)")
+    ap.add_argument("--flip", dest="flip", type=T["flip"], metavar="on|off|auto",
+                    help="HDR-FLIP against the reference: on (default) for every judged render, off, or auto: only "
+                         "for renders whose verdict is not ok (failed, known, fixed), where the error map is looked at")
     ap.add_argument("--references", action="append", type=T["references"], metavar="DIR",
                     help="reference folder (repeatable: for each scene the first folder holding a usable "
                          "reference wins; default: references/)")
@@ -478,8 +500,15 @@ def check_option(key, value):
 
 class Options(dict):
     """The options (a plain dict to every reader) and which of them this command gave
-    (``given``: from the command line or a settings file)."""
+    (``given``: from the command line or a settings file); ``defaults`` and ``check`` (each
+    option through its own type) travel with them, for ``--resume`` (batch/jobs/plan.py), which
+    imports no entry point."""
     given = frozenset()
+    defaults = DEFAULTS
+
+    @staticmethod
+    def check(key, value):
+        return check_option(key, value)
 
 
 def parse(args):

@@ -219,7 +219,7 @@ def verdict_word(row):
 
 
 def markdown(result):
-    from .report.summary import _cell
+    from .markdown import cell as _cell
     rs = rows(result)
     n_changed = sum(r["changed"] for r in rs)
     n_unjudged = sum(r["unjudged"] and not r["changed"] for r in rs)

@@ -13,6 +13,13 @@ and ``tool`` (this checkout's version from blender_manifest.toml and its git com
 - ``validate``: the schema's complaints about a dict, each naming the field.
 - ``noise_test_text``: the noise test of a run entry as one line (summary, report, panel).
 
+Per-block arrays: a probe's test numbers (``stat`` and each of its ``alternatives``) hold arrays
+of one value per block (thousands for a GGX plate). Any such array longer than ARRAY_INLINE_MAX is
+stored beside the run's image in ``probe_arrays-<sha256 of its content>.npz`` (numpy, no pickle)
+and metrics.json holds ``{"array_file": <path relative to the run folder>, "key": <name>}`` in
+its place; ``read`` puts the arrays back, so every reader sees the lists the verdict made. The
+file is named by its content: written once, never overwritten with other numbers.
+
 Paths: a path the runner writes is stored relative to the run folder (``os.path.relpath``, with
 ``/``; a reference outside the folder gets ``..`` parts), so a run folder can be moved together
 with what it points to. Only where no relative path exists (another drive on Windows) is a path
@@ -157,10 +164,120 @@ def document(folder, started, options, runs, jobs=None, sweeps=None, stability=N
     return _map_paths(data, lambda v: relative(v, folder))
 
 
+ARRAY_INLINE_MAX = 64  # longer per-block arrays of a probe's test go beside the image (module doc)
+ARRAY_REF = ("array_file", "key")
+
+
+def _stat_holders(run):
+    """Every dict of a run record's probe tests that may hold per-block arrays: each probe's
+    ``stat`` and each of its ``alternatives``."""
+    probes = run.get("probes") if isinstance(run, dict) else None
+    for p in probes if isinstance(probes, list) else ():
+        if not isinstance(p, dict):
+            continue
+        if isinstance(p.get("stat"), dict):
+            yield p["stat"]
+        alts = p.get("alternatives")
+        for a in alts.values() if isinstance(alts, dict) else ():
+            if isinstance(a, dict):
+                yield a
+
+
+def _long_numbers(value):
+    """The numpy dtype that holds ``value`` exactly if it is a list of more than ARRAY_INLINE_MAX
+    floats (or of as many ints); else None."""
+    if not isinstance(value, list) or len(value) <= ARRAY_INLINE_MAX:
+        return None
+    if all(type(x) is float for x in value):
+        return "float64"
+    if all(type(x) is int and -2**63 <= x < 2**63 for x in value):
+        return "int64"
+    return None
+
+
+def _store_arrays(data, folder):
+    """Move each run's long per-block arrays into a .npz beside its image (module doc), in place."""
+    import hashlib
+    import io
+    import numpy as np
+    for run in data.get("runs") or ():
+        image = run.get("image") if isinstance(run, dict) else None
+        if not isinstance(image, str) or PurePosixPath(image).is_absolute() or ".." in PurePosixPath(image).parts:
+            continue
+        where = PurePosixPath(image).parent
+        if not (folder / where).is_dir():
+            continue
+        arrays, places = {}, []
+        for holder in _stat_holders(run):
+            for k, v in holder.items():
+                dtype = _long_numbers(v)
+                if dtype:
+                    key = f"a{len(arrays)}"
+                    arrays[key] = np.asarray(v, dtype=dtype)
+                    places.append((holder, k, key))
+        if not arrays:
+            continue
+        digest = hashlib.sha256()
+        for key, a in arrays.items():
+            digest.update(f"{key}:{a.dtype.str}:{a.size};".encode() + a.tobytes())
+        rel = (where / f"probe_arrays-{digest.hexdigest()[:20]}.npz").as_posix()
+        path = folder / rel
+        if not path.is_file():
+            buf = io.BytesIO()
+            np.savez(buf, **arrays)
+            tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
+            tmp.write_bytes(buf.getvalue())
+            tmp.replace(path)
+        for holder, k, key in places:
+            holder[k] = {"array_file": rel, "key": key}
+
+
+def _load_arrays(data, folder, strict, problems):
+    """Put back the arrays ``_store_arrays`` moved out (in place). A file that is missing, not
+    inside the run folder or unreadable, or a key it lacks: RecordError naming both files when
+    ``strict``; else the array reads as None and the problem is recorded."""
+    import zipfile
+    import numpy as np
+    opened, seen = {}, set()
+
+    def load(ref):
+        rel = ref["array_file"]
+        if rel not in opened:
+            parts = inside_parts(folder, rel) if isinstance(rel, str) else None
+            try:
+                if parts is None:
+                    raise OSError("missing, or not a file inside the run folder")
+                with np.load(Path(folder, *parts), allow_pickle=False) as npz:
+                    opened[rel] = {k: npz[k] for k in npz.files}
+            except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+                opened[rel] = f"{type(exc).__name__}: {exc}"
+        got = opened[rel]
+        if isinstance(got, str):
+            return None, f"{rel!r}: {got}"
+        a = got.get(ref["key"]) if isinstance(ref["key"], str) else None
+        if a is None or a.ndim != 1 or a.dtype.kind not in "fi":
+            return None, f"{rel!r} holds no array {ref['key']!r}"
+        return a.tolist(), None
+
+    for run in data.get("runs") if isinstance(data.get("runs"), list) else ():
+        for holder in _stat_holders(run):
+            for k, v in list(holder.items()):
+                if isinstance(v, dict) and sorted(v) == sorted(ARRAY_REF):
+                    holder[k], problem = load(v)
+                    if problem and problem not in seen:  # once per file (or missing key)
+                        seen.add(problem)
+                        problem = f"{folder / FILE_NAME}: the per-block array {k!r} of {run.get('scene')!r}: {problem}"
+                        if strict:
+                            raise RecordError(problem)
+                        problems.append(problem)
+
+
 def write(folder, started, options, runs, jobs=None, sweeps=None, stability=None, studies=None):
-    """Write ``folder``/metrics.json atomically (a reader never sees half a file); returns its path."""
+    """Write ``folder``/metrics.json atomically (a reader never sees half a file); returns its path.
+    Long per-block arrays go beside each run's image first (module doc)."""
     folder = Path(folder)
     data = document(folder, started, options, runs, jobs, sweeps, stability, studies)
+    _store_arrays(data, folder)
     tmp = folder / (FILE_NAME + ".tmp")
     tmp.write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
     tmp.replace(folder / FILE_NAME)
@@ -253,8 +370,10 @@ def read(path, *, strict=True):
     SCHEMA_VERSION. RecordError, naming the file, when it cannot be read, is not JSON, is not an
     object; with ``strict`` (resume, compare) also when its schema_version is not a version this
     code reads. Not strict (report, panel: show what can be shown of any file): such a version is
-    read as the current one, with the problem in ``Run.problems``. Content is not validated here:
-    ``validate`` does that."""
+    read as the current one, with the problem in ``Run.problems``. The per-block arrays stored
+    beside the images are put back (module doc); one that cannot be read raises RecordError when
+    ``strict``, else reads as None with the problem. Content is not validated here: ``validate``
+    does that."""
     path = Path(path)
     if path.is_dir() or path.name != FILE_NAME and not path.suffix:
         path = path / FILE_NAME
@@ -272,7 +391,9 @@ def read(path, *, strict=True):
         data = UPGRADES[version](data, path.parent)
         version += 1
     data["schema_version"] = SCHEMA_VERSION
-    return Run(data, path, read_version, [problem] if problem else [])
+    problems = [problem] if problem else []
+    _load_arrays(data, path.parent, strict, problems)
+    return Run(data, path, read_version, problems)
 
 
 # -- validating ------------------------------------------------------------------------------------

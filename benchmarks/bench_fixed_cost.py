@@ -16,6 +16,15 @@ files) and *exit* (closing the warm workers). Renders and verdicts overlap (the 
 judges job k while job k+1 renders: batch/jobs/engines.py), so the phases add up to more than
 the wall time; the wall time against the sum of the render phases is the figure of merit.
 
+CPU (issue 31, decision 3): beside the wall times, the CPU seconds of judging against those of
+rendering, per job and in all. Rendering: the render workers' processes during a job's render
+call (every child process of the run but the FLIP child: psutil), plus the render thread's own
+(``time.thread_time``) for the pass loop and the export. Judging: the verdict thread's CPU in the
+job's verdict (noise test, probes, previews), the FLIP child's CPU between a job's request and its
+answer, the main thread's in the job's record (metrics.json, log, the page's data) and in the
+report (summary.md, report.html). The judging share is judging / rendering CPU; what neither
+claims (start-up, imports, idle threads) is the rest of the run's CPU.
+
 The tiny suite is issue 23's ``--scale 0.125 --spp 4``: the 620x420 charts, which 0.125 divides
 into no integer fraction, render at 0.1 (62x42), the nearest scale their references judge
 (README "Running"; the run's log says so).
@@ -42,6 +51,8 @@ from record import machine  # noqa: E402
 TINY = ["--scale", "0.125", "--spp", "4"]
 SMOKE = ["--scale", "0.25", "--spp", "4", "-s", "ggx_copper_50"]
 PHASES = ("export", "render", "verdict", "flip", "record")
+CPU = ("render", "export", "verdict", "flip", "record")  # per-job CPU seconds (module doc)
+JUDGING = ("verdict", "flip", "record")  # and the report's, once per run
 
 
 def _child(trace_path, argv):
@@ -55,17 +66,38 @@ def _child(trace_path, argv):
     from spectral_bench.batch.report import html, summary
     events, lock = [], threading.Lock()
 
+    import psutil
+    from spectral_bench.batch.verdict import flip_isolated
+    me, is_flip = psutil.Process(), {}
+
     def note(phase, label, t0, **extra):
         with lock:
             events.append(dict(phase=phase, job=label, t0=t0 - T0, t1=time.perf_counter() - T0, **extra))
 
+    def process_cpu(p):
+        t = p.cpu_times()
+        return t.user + t.system
+
+    def render_side_cpu():
+        """CPU seconds so far of every child process of the run but the FLIP child."""
+        total = 0.0
+        for p in me.children(recursive=True):
+            try:
+                if p.pid not in is_flip:
+                    is_flip[p.pid] = any("flip_isolated.py" in a for a in p.cmdline())
+                if not is_flip[p.pid]:
+                    total += process_cpu(p)
+            except psutil.Error:  # gone meanwhile
+                pass
+        return total
+
     def timed(phase, fn, label_of=lambda *a, **k: None):
         def wrapper(*a, **k):
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.thread_time()
             try:
                 return fn(*a, **k)
             finally:
-                note(phase, label_of(*a, **k), t0)
+                note(phase, label_of(*a, **k), t0, cpu=time.thread_time() - c0)
         return wrapper
 
     backend_of = jobs.backend_of
@@ -75,12 +107,36 @@ def _child(trace_path, argv):
         render = backend.render
 
         def rendered(*a, **k):
-            t0 = time.perf_counter()
+            t0, c0, w0 = time.perf_counter(), time.thread_time(), render_side_cpu()
             info = render(*a, **k)
-            note("render", job["label"], t0, render_s=info.get("time_s"))
+            thread = time.thread_time() - c0
+            note("render", job["label"], t0, render_s=info.get("time_s"), cpu=render_side_cpu() - w0 + thread,
+                 thread_cpu=thread)
             return info
         backend.render = rendered
         return backend
+
+    send, receive = flip_isolated.FlipWorker.send, flip_isolated.FlipWorker.receive
+
+    def flip_send(self, ref, test, map_path):
+        self.bench = (time.perf_counter(), process_cpu(psutil.Process(self.proc.pid)), Path(map_path))
+        return send(self, ref, test, map_path)
+
+    def flip_receive(self, timeout):
+        t0, c0, map_path = self.bench
+        try:
+            c1 = process_cpu(psutil.Process(self.proc.pid))
+        except psutil.Error:
+            c1 = c0
+        out = receive(self, timeout)
+        try:
+            c1 = process_cpu(psutil.Process(self.proc.pid))
+        except psutil.Error:  # died: what it had spent before
+            pass
+        # OUT/<scene>/results/<backend>/flip.exr: the job's default label "<scene> (<backend>)"
+        note("flip_cpu", f"{map_path.parts[-4]} ({map_path.parts[-2]})", t0, cpu=c1 - c0)
+        return out
+    flip_isolated.FlipWorker.send, flip_isolated.FlipWorker.receive = flip_send, flip_receive
     jobs.backend_of = timed_backend
     jobs.execute = timed("execute", jobs.execute, lambda job: job["label"])
     jobs.judge = timed("verdict", jobs.judge, lambda job, *a, **k: job["label"])
@@ -115,7 +171,14 @@ def measure(args_run, out):
         events = json.loads(trace.read_text())
     finally:
         trace.unlink(missing_ok=True)
-    runs = json.loads((Path(out) / "metrics.json").read_text())["runs"]
+    sys.path.insert(0, str(ROOT))
+    import pkg_bootstrap
+    pkg_bootstrap.package()
+    from spectral_bench.batch import records  # through the reader: the per-block arrays put back
+    runs = records.read(out)["runs"]
+    size = (Path(out) / "metrics.json").stat().st_size
+    beside = sum(p.stat().st_size for p in Path(out).rglob("probe_arrays-*.npz"))
+    events.append({"phase": "metrics.json", "job": None, "t0": 0.0, "t1": 0.0, "bytes": size, "beside": beside})
     return wall, cpu, proc.returncode, events, runs
 
 
@@ -133,17 +196,27 @@ def breakdown(wall, events, runs):
     for e in events:
         if e["job"] is None:
             continue
-        row = jobs.setdefault(e["job"], {})
+        row = jobs.setdefault(e["job"], {"cpu": {}})
+        if e["phase"] == "flip_cpu":
+            row["cpu"]["flip"] = row["cpu"].get("flip", 0.0) + e["cpu"]
+            continue
         row[e["phase"]] = row.get(e["phase"], 0.0) + e["t1"] - e["t0"]
+        if e.get("cpu") is not None and e["phase"] in CPU + ("execute",):
+            row["cpu"][e["phase"]] = row["cpu"].get(e["phase"], 0.0) + e["cpu"]
         if e["phase"] == "render":
             row["render_s"] = e.get("render_s") or 0.0
+            row["render_thread_cpu"] = row.get("render_thread_cpu", 0.0) + e.get("thread_cpu", 0.0)
     for row in jobs.values():  # export: what execute spends before the pass loop
         row["export"] = max(0.0, row.get("execute", 0.0) - row.get("render", 0.0))
+        row["cpu"]["export"] = max(0.0, row["cpu"].pop("execute", 0.0) - row.pop("render_thread_cpu", 0.0))
     first = min((e["t0"] for e in events if e["phase"] == "execute"), default=0.0)
     last_record = max((e["t1"] for e in events if e["phase"] == "record"), default=first)
     report = sum(e["t1"] - e["t0"] for e in events if e["phase"] == "report")
     exit_t = max((e["t1"] for e in events if e["phase"] == "exit"), default=last_record)
     totals = {p: sum(r.get(p, 0.0) for r in jobs.values()) for p in PHASES + ("render_s",)}
+    totals["cpu"] = {p: sum(r["cpu"].get(p, 0.0) for r in jobs.values()) for p in CPU}
+    totals["cpu"]["report"] = sum(e.get("cpu") or 0.0 for e in events if e["phase"] == "report")
+    totals["metrics_bytes"] = next(((e["bytes"], e["beside"]) for e in events if e["phase"] == "metrics.json"), (0, 0))
     totals["main_cpu"] = max((e.get("cpu_s") or 0.0 for e in events if e["phase"] == "exit"), default=0.0)
     totals.update(start=first, jobs_span=last_record - first, report=report, wall=wall,
                   exit=max(0.0, wall - exit_t), tail=max(0.0, exit_t - last_record - report),
@@ -172,12 +245,42 @@ def tables(title, argv, wall, cpu, code, jobs, totals, load):
               f"| of which the runner's process (all its threads) | | {totals['main_cpu']:.2f} | {totals['main_cpu'] / n:.3f} |", "",
               f"Wall / sum of render phases: {wall / max(totals['render'], 1e-9):.2f}x "
               f"(render phases {totals['render']:.1f} s; metrics.json wall_s sum {totals['mitsuba_wall']:.1f} s: "
-              f"{wall / max(totals['mitsuba_wall'], 1e-9):.2f}x).", ""]
+              f"{wall / max(totals['mitsuba_wall'], 1e-9):.2f}x).", "",
+              f"metrics.json {totals['metrics_bytes'][0] / 1e3:.1f} kB; the per-block arrays beside the images "
+              f"(probe_arrays-*.npz) {totals['metrics_bytes'][1] / 1e3:.1f} kB.", ""]
     lines += ["| job | export s | render s | Mitsuba s | verdict s | FLIP wait s | record s |", "|---|---|---|---|---|---|---|"]
     for label, r in jobs.items():
         lines.append(f"| {label} | {r.get('export', 0):.3f} | {r.get('render', 0):.3f} | {r.get('render_s', 0):.3f} | "
                      f"{r.get('verdict', 0):.3f} | {r.get('flip', 0):.3f} | {r.get('record', 0):.3f} |")
-    return "\n".join(lines)
+    return "\n".join(lines + [""] + cpu_table(jobs, totals, cpu))
+
+
+def judging_share(c):
+    """(rendering CPU s, judging CPU s, judging / rendering) of a {part: CPU s} dict."""
+    rendering = c.get("render", 0.0) + c.get("export", 0.0)
+    judging = sum(c.get(p, 0.0) for p in JUDGING + ("report",))
+    return rendering, judging, judging / rendering if rendering > 0 else float("nan")
+
+
+def cpu_table(jobs, totals, cpu):
+    """Issue 31: CPU seconds of judging beside rendering's, per job and in all (module doc)."""
+    c = totals["cpu"]
+    rendering, judging, share = judging_share(c)
+    lines = ["CPU seconds: judging (verdict: noise test, probes, previews; FLIP's child; record; report) "
+             "beside rendering (the render workers' processes and the render thread; export).", "",
+             "| job | render CPU s | export CPU s | verdict CPU s | FLIP CPU s | record CPU s | judging / rendering |",
+             "|---|---|---|---|---|---|---|"]
+    for label, r in jobs.items():
+        rj = r["cpu"]
+        lines.append(f"| {label} | {rj.get('render', 0):.3f} | {rj.get('export', 0):.3f} | {rj.get('verdict', 0):.3f} | "
+                     f"{rj.get('flip', 0):.3f} | {rj.get('record', 0):.3f} | {judging_share(rj)[2]:.0%} |")
+    lines += [f"| **all jobs** (+ report {c['report']:.2f}) | {c['render']:.2f} | {c['export']:.2f} | {c['verdict']:.2f} | "
+              f"{c['flip']:.2f} | {c['record']:.2f} | **{share:.0%}** |", "",
+              f"Judging {judging:.2f} s of CPU against rendering's {rendering:.2f} s: **{share:.0%}** "
+              f"(verdicts {c['verdict']:.2f}, FLIP {c['flip']:.2f}, record {c['record']:.2f}, report {c['report']:.2f}); "
+              f"the run's CPU {cpu:.2f} s, of which {max(cpu - rendering - judging, 0.0):.2f} s neither "
+              "(start-up, imports, idle threads).", ""]
+    return lines
 
 
 def main():

@@ -132,6 +132,16 @@ def noise_test(reference_name, image, stderr, spp, passes=2):
     return compare.z_test(image, at, spp, own_var_of_mean=own, own_passes=passes)
 
 
+def assert_sees(run, effect, what):
+    """A test at reduced settings keeps its power (issue 31): ``run``'s own ``detectable`` scale
+    (metrics.json: the smallest uniform error its checks find with 90 % power) is below
+    ``effect``, the size of what the test claims to see (``what``, for the message), so a render
+    too small to see it fails here instead of passing by luck."""
+    det = (run.get("detectable") or {}).get("scale")
+    assert isinstance(det, (int, float)) and det < effect, (
+        f"{run.get('scene')}: this run detects {det} (90 % power), not below the {effect:g} of {what}")
+
+
 def run_bpy(body, timeout=600, env=None):
     """Run ``body`` in a child Python with bpy, scenes.blend open and the extension registered
     (bpy has one global state per process); returns the JSON its last printed line holds."""

@@ -273,3 +273,47 @@ def test_prestarted_mitsuba_workers_serve_the_jobs_that_come_later(golden, tmp_p
     record = b.render(xml, variant, 1, tmp_path / "render.exr", passes=2, seed=3, timeout=300)
     assert record["passes"] == 2 and (tmp_path / "render.exr").is_file()
     assert mb._POOL[variant].alive() and mb._POOL[variant].proc.pid == pid  # the prestarted one rendered both passes
+
+
+# -- --flip on|off|auto (issue 31, decision 2: FLIP keeps its meaning, lazy for runs that ask) ------
+def test_flip_option_values_from_the_command_line_and_a_settings_file(tmp_path):
+    from spectral_bench.batch import cli
+    assert cli.parse([])["flip"] is True  # the default is unchanged
+    assert cli.parse(["--flip", "auto"])["flip"] == "auto"
+    assert cli.parse(["--flip", "off"])["flip"] is False and cli.parse(["--no-flip"])["flip"] is False
+    assert cli.parse(["--flip", "on"])["flip"] is True
+    for value, want in (('"auto"', "auto"), ("false", False), ("true", True)):
+        (tmp_path / "s.toml").write_text(f"flip = {value}\n")
+        assert cli.parse(["--settings", str(tmp_path / "s.toml")])["flip"] == want
+    (tmp_path / "s.toml").write_text('flip = "sometimes"\n')
+    with pytest.raises(cli.UsageError, match="flip"):
+        cli.parse(["--settings", str(tmp_path / "s.toml")])
+    assert cli.check_option("flip", "auto") == "auto" and cli.check_option("flip", False) is False  # --resume
+    with pytest.raises(SystemExit):  # argparse: exit 2 naming --flip
+        cli.parse(["--flip", "sometimes"])
+
+
+@pytest.mark.slow
+def test_flip_auto_judges_only_the_renders_that_are_not_ok(tmp_path):
+    """--flip auto: the copper scene that passes gets no FLIP (metrics.flip null, no flip.exr);
+    the D65 chart, "known" at 16 spp (Mitsuba's 0.1 % film scale), gets NVIDIA's HDR-FLIP mean:
+    the value flip-evaluator gives for the same pair (the reference at the render's size, the
+    render), computed here as --flip on computes it (from the files: the stored reference is
+    rounded below its noise, so to 1e-4; measured 2e-6)."""
+    from conftest import metrics, run_batch
+    from spectral_bench.batch import exr
+    out = tmp_path / "out"
+    proc = run_batch("-r", "mitsuba", "-s", "macbeth_chart_D65", "-s", "ggx_copper_60", "--spp", "16", "--flip", "auto",
+                     "-o", out)
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+    runs = {r["scene"]: r for r in metrics(out)["runs"]}
+    ok, known = runs["ggx_copper_60"], runs["macbeth_chart_D65"]
+    assert ok["status"] == "ok" and ok["metrics"]["flip"] is None, ok
+    assert not (out / "ggx_copper_60" / "results" / "mitsuba" / "flip.exr").exists()
+    assert known["status"] == "known" and isinstance(known["metrics"]["flip"], float), known
+    folder = out / "macbeth_chart_D65" / "results"
+    assert (folder / "mitsuba" / "flip.exr").is_file()
+    ref = exr.read_rgb(next(folder.glob("reference_*.exr")))
+    test = exr.read_rgb(folder / "mitsuba" / "render.exr")
+    mean, err = flip_isolated.flip_images(ref, test, tmp_path / "f.exr")
+    assert err is None and known["metrics"]["flip"] == pytest.approx(mean, rel=1e-4)

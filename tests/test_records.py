@@ -258,3 +258,85 @@ def test_junit_to_a_missing_folder_is_a_usage_error(tmp_path):
     proc = run_batch("-s", "ggx_copper_50", "-r", "mitsuba", "-o", tmp_path / "out", "--junit", tmp_path / "no" / "j.xml")
     assert proc.returncode == 2 and "--junit" in proc.stderr and str(tmp_path / "no") in proc.stderr, proc.stderr[-2000:]
     assert not (tmp_path / "out" / "metrics.json").exists()
+
+
+# -- per-block arrays beside the image (issue 31: metrics.json <= 500 kB) --------------------------
+def _run_with_block_arrays(n=3000):
+    records = _records()
+    rng = __import__("numpy").random.default_rng(7)
+    stat = {"z": 3.5, "pass": True, "measured": rng.random(n).tolist(), "se": (rng.random(n) * 1e-3).tolist(),
+            "dof": [831.0] * n, "ids": list(range(n)), "few": [0.1, 0.2, 0.3], "mixed": [1, 2.5] * 40}
+    alt = dict(stat, expected=rng.random(n).tolist())
+    run = records.run_record("ggx_copper_80_isolated", {"case": "reflectance"}, "mitsuba", mode="m", spp=4,
+                             resolution=[8, 8], job="0" * 20)
+    run["probes"] = [{"name": "ggx blocks", "pass": True, "stat": stat, "alternatives": {"mitsuba3": alt}},
+                     {"name": "other", "pass": True}]
+    return run
+
+
+def test_long_block_arrays_are_stored_beside_the_image_and_read_back_exactly(tmp_path):
+    """Lists of more than 64 floats (or ints) in a probe's stat and alternatives go into one .npz
+    beside the run's image; the file keeps short and mixed lists; read() returns the very lists
+    (float64 exactly); writing again reuses the file (named by its content)."""
+    records = _records()
+    out = tmp_path / "out"
+    image = out / "ggx_copper_80_isolated" / "results" / "mitsuba" / "render.exr"
+    image.parent.mkdir(parents=True)
+    run = _run_with_block_arrays()
+    run["image"] = str(image)
+    want = dict(json.loads(json.dumps(run)), image="ggx_copper_80_isolated/results/mitsuba/render.exr")
+    records.write(out, "2026-12-02T00:00:00", {}, [run])
+    text = (out / "metrics.json").read_text()
+    written = json.loads(text)
+    assert not records.validate(written), records.validate(written)
+    stat = written["runs"][0]["probes"][0]["stat"]
+    for key in ("measured", "se", "dof", "ids"):
+        assert set(stat[key]) == {"array_file", "key"}, stat[key]
+    assert stat["few"] == [0.1, 0.2, 0.3] and stat["mixed"] == [1, 2.5] * 40 and stat["z"] == 3.5
+    files = sorted(image.parent.glob("probe_arrays-*.npz"))
+    assert len(files) == 1 and stat["measured"]["array_file"] == files[0].relative_to(out).as_posix()
+    assert len(text) < 20_000 < files[0].stat().st_size  # the numbers moved, not dropped
+    back = records.read(out)
+    assert back["runs"] == [want] and not back.problems
+    assert type(back["runs"][0]["probes"][0]["stat"]["ids"][0]) is int
+    records.write(out, "2026-12-02T00:00:00", {}, [back["runs"][0]])  # a resumed run writes it again
+    assert sorted(image.parent.glob("probe_arrays-*.npz")) == files and records.read(out)["runs"] == [want]
+    moved = tmp_path / "moved"
+    shutil.move(out, moved)  # the folder moves with its arrays
+    assert records.read(moved)["runs"] == [want]
+
+
+@pytest.mark.parametrize("damage", ["missing", "outside", "not npz", "no such key"])
+def test_a_block_array_that_cannot_be_read_is_named(tmp_path, damage):
+    """Strict (resume, compare): RecordError naming metrics.json, the scene and the array file;
+    lenient (report, panel): the array reads as None and the problem is listed. A reference out of
+    the run folder is never opened."""
+    records = _records()
+    out = tmp_path / "out"
+    image = out / "s" / "render.exr"
+    image.parent.mkdir(parents=True)
+    run = _run_with_block_arrays(100)
+    run["image"] = str(image)
+    records.write(out, "2026-12-02T00:00:00", {}, [run])
+    data = json.loads((out / "metrics.json").read_text())
+    ref = data["runs"][0]["probes"][0]["stat"]["measured"]
+    npz = out / ref["array_file"]
+    if damage == "missing":
+        npz.unlink()
+    elif damage == "outside":
+        secret = tmp_path / "elsewhere.npz"
+        shutil.copy(npz, secret)
+        ref["array_file"] = "../elsewhere.npz"
+    elif damage == "not npz":
+        npz.write_bytes(b"PK not a zip")
+    else:
+        ref["key"] = "a99"
+    (out / "metrics.json").write_text(json.dumps(data))
+    with pytest.raises(records.RecordError) as err:
+        records.read(out)
+    assert "metrics.json" in str(err.value) and "ggx_copper_80_isolated" in str(err.value), err.value
+    assert (ref["array_file"] in str(err.value)), err.value
+    lenient = records.read(out, strict=False)
+    assert lenient["runs"][0]["probes"][0]["stat"]["measured"] is None and len(lenient.problems) == 1, lenient.problems
+    se = lenient["runs"][0]["probes"][0]["stat"]["se"]
+    assert se is None if damage in ("missing", "not npz") else len(se) == 100  # a broken file: every array in it

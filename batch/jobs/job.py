@@ -142,8 +142,8 @@ def _judge_render(job, record, deviations):
 @dataclass(frozen=True)
 class Kind:
     """What a kind of job does with its render record: ``judge`` (a function, or "module:function"
-    imported when first needed, so that this module imports no study: the studies import jobs,
-    never the other way) and the key under which its result sits in the record (``result``)."""
+    imported when first needed: a study's probes and scipy load only when a job of its kind is
+    judged) and the key under which its result sits in the record (``result``)."""
     judge: object = None
     result: str = None
 
@@ -177,7 +177,7 @@ def warm(job_list):
     from ..verdict import flip_isolated, judge as _verdicts  # noqa: F401 - imported to be ready
     from ...exporters import colorimetry
     colorimetry.srgb_to_xyz([1.0, 1.0, 1.0])
-    if any(j["kind"] == "render" and j["verdict"].get("flip", True) for j in job_list):
+    if any(j["kind"] == "render" and j["verdict"].get("flip", True) is True for j in job_list):  # auto: when asked
         flip_isolated.prestart()
 
 

@@ -246,7 +246,7 @@ def read_metrics(out):
 
 def _option_name(key):
     return {"exec": "-e/--exec", "input": "-i/--input", "renderer": "-r/--renderer", "scene": "-s/--scene",
-            "case": "-c/--case", "flip": "--no-flip"}.get(key, "--" + key.replace("_", "-"))
+            "case": "-c/--case", "flip": "--flip"}.get(key, "--" + key.replace("_", "-"))
 
 
 def _given_again(key, what, again):
@@ -322,19 +322,20 @@ def resumed_options(opts, given=None):
     planned), with this command's engine, log and resume settings (ENGINE_KEYS). Every other
     option comes from the run being resumed, checked through the option's own type; one that this
     command gives (``given``: its option names; default: those that differ from the defaults) with
-    another value is refused with ResumeError naming it."""
-    from .. import cli
+    another value is refused with ResumeError naming it. ``opts`` is the command's options
+    (batch/cli.py ``Options``): the defaults and each option's check come with them, so that
+    planning imports no entry point."""
     data = read_metrics(opts["resume"])
     previous = data.get("options") or {}
     if given is None:
-        given = {k for k, v in opts.items() if v != cli.DEFAULTS.get(k) and not (k == "exec" and not v)}
+        given = {k for k, v in opts.items() if v != opts.defaults.get(k) and not (k == "exec" and not v)}
     merged = dict(opts)
     for key, value in previous.items():
-        if key not in cli.DEFAULTS or key in ENGINE_KEYS:
+        if key not in opts.defaults or key in ENGINE_KEYS:
             continue
         try:
-            value = cli.check_option(key, value)
-        except cli.UsageError as exc:
+            value = opts.check(key, value)
+        except ValueError as exc:  # the option's UsageError
             raise ResumeError(f"cannot resume from {Path(opts['resume']) / 'metrics.json'}: it records {exc}") from None
         if key in RUNS_CODE:
             merged[key] = RUNS_CODE[key](opts, value, given)

@@ -20,7 +20,7 @@ from .. import backends, records, scene_sources
 from ..verdict import baseline as baselines, known, status
 from ..report import html as report, summary
 from ..studies import sweep
-from . import engines, plan as planning
+from . import engines, job as job_mod, plan as planning
 from .progress import Progress
 
 log = logging.getLogger("spectral_bench")
@@ -269,7 +269,7 @@ class Run:
         settings = planning.verdict_settings(self.opts)
         if self.opts.get("study"):  # a study instead of the judged jobs (its own words, no reference)
             from ..studies import spectral_vs_rgb
-            main, rows = spectral_vs_rgb.jobs(scenes, made, self.opts, self.out)
+            main, rows = spectral_vs_rgb.jobs(scenes, made, self.opts, self.out, jobs_mod.make, planning.for_run)
             immediate = []
             self.studies += rows
         else:
@@ -287,7 +287,8 @@ class Run:
             for backend in made.values():
                 if backend.availability()[0]:
                     try:
-                        stab_jobs, rows = stability.jobs(backend, golden, self.out, "stability", timeout=self.opts["timeout"])
+                        stab_jobs, rows = stability.jobs(backend, golden, self.out, "stability", job_mod.make,
+                                                        timeout=self.opts["timeout"])
                     except Exception as exc:  # noqa: BLE001 - a base scene the strips cannot use fails the study, not the batch
                         log.exception("the stability case cannot be planned on %s", backend.name)
                         stab_jobs, rows = [], [{"sweep": "stability", "backend": backend.name, "mode": None, "problems": [],

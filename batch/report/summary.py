@@ -1,6 +1,7 @@
 """The readable summary: summary.md in the output folder, also printed. Failures first."""
 from pathlib import Path
 
+from ..markdown import cell as _cell
 from ..records import noise_test_text
 from ..verdict.status import rank
 from .results import JUDGED, SELF_CHECK, checked_against_itself, judged_without_reference, probes_measured
@@ -50,16 +51,6 @@ def detectable_cell(run):
     ``detectable.scale``); empty when not stated."""
     d = run.get("detectable") or {}
     return f"; detects {100 * d['scale']:.2g} %" if isinstance(d.get("scale"), (int, float)) else ""
-
-
-def _cell(text):
-    """Any value as one Markdown table cell, shown as text: no line break or unescaped '|' that
-    would end the row or the cell, no '<' that a Markdown viewer would read as HTML, no backtick
-    (code span) or link; names and ordinary reasons read plainly on a terminal too."""
-    text = " ".join(str(text).split())
-    for c in "\\|<`":
-        text = text.replace(c, "\\" + c)
-    return text.replace("](", "]\\(")  # no [text](link)
 
 
 def reference_problems_table(runs):

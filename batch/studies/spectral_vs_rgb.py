@@ -115,11 +115,11 @@ def rgb_mode(backend, scene):
 
 
 # -- planning -------------------------------------------------------------------------------------
-def jobs(scenes, made, opts, out):
+def jobs(scenes, made, opts, out, make, for_run):
     """(jobs, rows decided without rendering) of the study: per scene and light, Mitsuba's
-    spectral render and each RGB route the run has (Mitsuba's RGB variant; Cycles, LuxCore)."""
-    from ..jobs import job as jobs_mod
-    from ..jobs.plan import for_run
+    spectral render and each RGB route the run has (Mitsuba's RGB variant; Cycles, LuxCore).
+    ``make``: the runner's job maker (batch/jobs/job.py make), ``for_run``: its scene settings
+    (batch/jobs/plan.py for_run): the runner hands them over, studies never import jobs."""
     job_list, rows = [], []
     lights_wanted = ["own"] + list(opts.get("illuminants") or [])
     for name, scene in scenes:
@@ -156,7 +156,7 @@ def jobs(scenes, made, opts, out):
                 continue
             for bname, mode, role in routes:
                 folder = FOLDER / name / light / f"{bname}-{mode}"
-                job_list.append(jobs_mod.make(
+                job_list.append(make(
                     "study", name, sc, bname, mode, sc["render"]["spp"], out, folder,
                     backend_options=made[bname].options, passes=PASSES, seed=opts.get("seed") or 0,
                     timeout=opts.get("timeout") or 1800, source_scene=scene,

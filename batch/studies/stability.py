@@ -263,10 +263,10 @@ def strip_image(path, images):
     Image.fromarray((np.concatenate(tiles, axis=1) * 255 + 0.5).astype(np.uint8)).save(path)
 
 
-def jobs(backend, golden, out, folder, passes=4, seed=0, timeout=600, strips=None):
-    """The stability case as jobs for one backend (batch/jobs/job.py): one per strip value, plus
+def jobs(backend, golden, out, folder, make, passes=4, seed=0, timeout=600, strips=None):
+    """The stability case as jobs for one backend, each made by ``make`` (batch/jobs/job.py
+    ``make``, given by the runner: a study imports no runner code): one per strip value, plus
     one for each strip's limit scene; and the rows decided without rendering (unsupported)."""
-    from ..jobs import job as jobs_mod
     job_list, rows = [], []
     for name, (strip, scenes) in definitions(golden, strips).items():
         tests = len(scenes) * 3 + (3 if strip.limit else 0)
@@ -277,7 +277,7 @@ def jobs(backend, golden, out, folder, passes=4, seed=0, timeout=600, strips=Non
                              "status": "unsupported", "reason": why})
                 continue
             where = Path(folder) / backend.name / name / f"{value:g}"
-            job_list.append(jobs_mod.make("stability", sc["name"], sc, backend.name, mode, sc["render"]["spp"], out,
+            job_list.append(make("stability", sc["name"], sc, backend.name, mode, sc["render"]["spp"], out,
                                           where, backend_options=backend.options, passes=passes,
                                           seed=seed, timeout=timeout, label=f"{name} {value:g} ({backend.name})",
                                           extra={"strip": name, "value": value, "tests": tests, "role": "value"}))
@@ -286,7 +286,7 @@ def jobs(backend, golden, out, folder, passes=4, seed=0, timeout=600, strips=Non
                 limit["needs"] = ir.derived_needs({key: v for key, v in limit.items() if key != "needs"})
                 mode_l, _ = backend.mode_for(limit)
                 if mode_l is not None:
-                    job_list.append(jobs_mod.make(
+                    job_list.append(make(
                         "stability", limit["name"], limit, backend.name, mode_l, limit["render"]["spp"], out,
                         Path(folder) / backend.name / name / "limit", backend_options=backend.options,
                         passes=passes, seed=seed + 1000, timeout=timeout, label=f"{name} limit ({backend.name})",

@@ -38,6 +38,7 @@ from pathlib import Path, PurePosixPath, PureWindowsPath
 import numpy as np
 
 from .. import exr
+from ..markdown import cell as _cell
 # compare, references, stats (scipy) and previews (PIL) are imported where they are used: the
 # Blender panel reads baseline records through this module without them.
 
@@ -469,7 +470,6 @@ def how_much(rec):
 def summary_section(runs):
     """The '## Against the baseline' section of summary.md: changed jobs first, with where (the
     z-map) and how much; empty when no job has a baseline record."""
-    from ..report.summary import _cell
     recs = [(r, r["baseline"]) for r in runs if isinstance(r, dict) and isinstance(r.get("baseline"), dict)]
     if not recs:
         return ""

@@ -42,8 +42,9 @@ PROBES_ALONE = "judged by probes alone"
 def render_verdict(entry, scene, rendered, image, res_dir, settings, deviations):
     """Judge the render ``image`` of ``rendered`` (the scene as rendered: spp and scale applied;
     ``scene`` as authored, for its reference) in place in ``entry``; writes the verdict's images
-    into ``res_dir``. ``settings``: alpha, min_samples, block, flip, references."""
-    if settings.get("flip", True):
+    into ``res_dir``. ``settings``: alpha, min_samples, block, flip (True, False or "auto": FLIP only
+    for a verdict that is not ok), references."""
+    if settings.get("flip", True) is True:
         flip_isolated.prestart()  # the FLIP child starts (once) while this verdict reads and tests
     names, test_all, stderr = exr.read_image_and_stderr(image)
     entry["channels"] = names
@@ -56,12 +57,13 @@ def render_verdict(entry, scene, rendered, image, res_dir, settings, deviations)
     entry["reference_problems"] = problems
     ztest = None
     later = []  # FLIP, computing in its child while the probes run here
+    auto = []  # --flip auto: FLIP's start, made once the status is known
     maps = {}
     try:
         if unusable:
             entry["reference_problem"] = unusable
         else:
-            ztest = noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings, later)
+            ztest = noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings, later, auto)
         observers = sorted({d.observer for d in known.applicable(deviations, entry) if d.observer})
         entry["probes"] = probes.evaluate(rendered, names, test_all, reference=None if unusable else ref,
                                           stderr=stderr, passes=entry["passes"], observers=observers, maps=maps)
@@ -76,6 +78,13 @@ def render_verdict(entry, scene, rendered, image, res_dir, settings, deviations)
     if unusable and not any(p["pass"] is not None for p in entry["probes"]):
         entry["unjudged_because"] = unusable + ("" if entry["probes"] else "; no analytic probe applies")
     status.decide(entry, deviations, ztest)
+    if auto and entry["status"] != "ok":  # --flip auto: the error map where the verdict is not ok
+        finishers = []
+        for start in auto:
+            start(finishers)
+        for finish in finishers:
+            if not flip_isolated.defer(finish):
+                finish()
     det = detectable(ztest, entry["probes"], settings.get("alpha"))
     if det is not None:
         entry["detectable"] = det
@@ -133,11 +142,12 @@ def detectable(ztest, probe_records, alpha=None):
     return out
 
 
-def noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings, later=None):
+def noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings, later=None, auto=None):
     """The noise test against the reference, on the render's own noise (entry["test"]); the
     diff, z-score and FLIP images. Returns the in-memory test (for re-judging) or None.
     ``later``: a list that receives what finishes FLIP (call it), which then computes meanwhile;
-    None: FLIP is waited for here."""
+    None: FLIP is waited for here. With ``settings["flip"] == "auto"``, ``auto`` receives FLIP's
+    start instead (call it with a list for its finisher, once the status says FLIP is wanted)."""
     entry["reference"] = {"path": str(ref.path), "spp": ref.spp, "backend": ref.provenance.get("backend"),
                           "mode": ref.provenance.get("mode"), "versions": ref.provenance.get("versions"),
                           "date": ref.provenance.get("date")}
@@ -187,16 +197,23 @@ def noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings, la
     shared = previews.shared_reference(res_dir, mean, np.sqrt(at.var_of_mean[..., :3]))
     entry["reference"]["image"] = str(PurePosixPath(entry["image"]).parent.parent / shared.name) \
         if isinstance(entry.get("image"), str) else None
-    if settings.get("flip", True):
-        # the warm FLIP child (flip_isolated.py) gets the arrays in hand (no temporary reference
-        # file, no re-reading of the render) and writes the map as half floats; it computes while
-        # this thread goes on (the probes) when the caller collects it later (``later``)
-        pending = flip_isolated.start(mean, test, res_dir / "flip.exr")  # nothing below can raise before it is collected
-        if later is not None:
-            later.append(lambda: _flip_result(entry, pending))
-        else:
-            _flip_result(entry, pending)
+    flip = settings.get("flip", True)
+    if flip is True:
+        _start_flip(entry, mean, test, res_dir, later)
+    elif flip == "auto" and auto is not None:
+        auto.append(lambda finishers: _start_flip(entry, mean, test, res_dir, finishers))
     return zt
+
+
+def _start_flip(entry, mean, test, res_dir, later):
+    """The warm FLIP child (flip_isolated.py) gets the arrays in hand (no temporary reference file,
+    no re-reading of the render) and writes the map as half floats; it computes while this thread
+    goes on (the probes) when the caller collects it later (``later``), else it is waited for."""
+    pending = flip_isolated.start(mean, test, res_dir / "flip.exr")  # nothing below can raise before it is collected
+    if later is not None:
+        later.append(lambda: _flip_result(entry, pending))
+    else:
+        _flip_result(entry, pending)
 
 
 def _flip_result(entry, pending):

@@ -7,7 +7,7 @@ import bpy
 from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProperty,
                        FloatVectorProperty, IntProperty, PointerProperty, StringProperty)
 
-from ..exporters import dispersion, ir, spectra
+from . import dispersion, ir, spectra
 
 SPECTRUM_TYPES = [
     ("CONSTANT", "Constant", "The same value at every wavelength"),
