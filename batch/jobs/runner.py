@@ -269,7 +269,7 @@ class Run:
         settings = planning.verdict_settings(self.opts)
         if self.opts.get("study"):  # a study instead of the judged jobs (its own words, no reference)
             from ..studies import spectral_vs_rgb
-            main, rows = spectral_vs_rgb.jobs(scenes, made, self.opts, self.out, jobs_mod.make, planning.for_run)
+            main, rows = spectral_vs_rgb.jobs(scenes, made, self.opts, self.out, job_mod.make, planning.for_run)
             immediate = []
             self.studies += rows
         else:
