@@ -1,0 +1,132 @@
+"""Write an ordinary .blend, made with bpy as any Blender user makes one, with no spectral
+annotation: scene "ordinary" (four Principled BSDF spheres of different base colours, one of them
+metallic gold, on a Principled floor; a 100 W point light, a 300 W area light, a world colour)
+and small plane scenes whose every light has a closed form (a Diffuse BSDF plane seen straight
+down through a 1-degree camera: under a world colour, a point, spot, sun, area and disk light,
+and a blackbody point light). tests/test_blender_conversion.py exports and renders them.
+
+    python scripts/make_ordinary_blend.py OUT.blend      (or: blender -b -P this -- OUT.blend)
+"""
+import math
+import sys
+
+import bpy
+
+RHO = 0.5  # the planes' diffuse reflectance
+HEIGHT = 2.0  # lights above the plane
+PLANE_LIGHTS = {
+    # scene: (light type, settings)
+    "plane_point": ("POINT", {"energy": 100.0, "color": (1.0, 0.8, 0.6), "shadow_soft_size": 0.0}),
+    "plane_spot": ("SPOT", {"energy": 100.0, "spot_size": math.radians(60), "spot_blend": 0.0, "shadow_soft_size": 0.0}),
+    "plane_sun": ("SUN", {"energy": 3.0, "angle": 0.0}),
+    "plane_area": ("AREA", {"energy": 300.0, "shape": "RECTANGLE", "size": 1.0, "size_y": 0.5}),
+    "plane_disk": ("AREA", {"energy": 300.0, "shape": "DISK", "size": 1.0}),
+    "plane_blackbody": ("POINT", {"energy": 100.0, "use_temperature": True, "temperature": 3000.0, "shadow_soft_size": 0.0}),
+}
+SUN_TILT = math.radians(30)  # the sun shines 30 degrees off the vertical
+WORLD_COLOUR, WORLD_STRENGTH = (0.2, 0.4, 0.8), 2.0
+
+
+def principled(name, colour, metallic=0.0, roughness=0.5):
+    m = bpy.data.materials.new(name)
+    p = m.node_tree.nodes["Principled BSDF"]
+    p.inputs["Base Color"].default_value = (*colour, 1.0)
+    p.inputs["Metallic"].default_value = metallic
+    p.inputs["Roughness"].default_value = roughness
+    return m
+
+
+def diffuse(name, rho):
+    m = bpy.data.materials.new(name)
+    nt = m.node_tree
+    node = nt.nodes.new("ShaderNodeBsdfDiffuse")
+    node.inputs["Color"].default_value = (rho, rho, rho, 1.0)
+    nt.links.new(node.outputs[0], nt.nodes["Material Output"].inputs["Surface"])
+    return m
+
+
+def link(scene, name, data, location=(0, 0, 0), rotation=(0, 0, 0)):
+    obj = bpy.data.objects.new(name, data)
+    obj.location, obj.rotation_euler = location, rotation
+    scene.collection.objects.link(obj)
+    return obj
+
+
+def quad(name, half, material):
+    me = bpy.data.meshes.new(name)
+    me.from_pydata([(-half, -half, 0), (half, -half, 0), (half, half, 0), (-half, half, 0)], [], [(0, 1, 2, 3)])
+    me.materials.append(material)
+    return me
+
+
+def uv_sphere(name, radius, material):
+    import bmesh
+    me = bpy.data.meshes.new(name)
+    bm = bmesh.new()
+    bmesh.ops.create_uvsphere(bm, u_segments=32, v_segments=16, radius=radius)
+    bm.to_mesh(me)
+    bm.free()
+    me.materials.append(material)
+    return me
+
+
+def world(name, colour, strength):
+    w = bpy.data.worlds.new(name)
+    bg = w.node_tree.nodes["Background"]
+    bg.inputs["Color"].default_value = (*colour, 1.0)
+    bg.inputs["Strength"].default_value = strength
+    return w
+
+
+def camera(scene, location, rotation, fov_deg=40.0, size=(320, 240)):
+    cd = bpy.data.cameras.new(f"{scene.name}_camera")
+    cd.sensor_fit = "HORIZONTAL"
+    cd.angle = math.radians(fov_deg)
+    scene.camera = link(scene, f"{scene.name}_camera", cd, location, rotation)
+    scene.render.resolution_x, scene.render.resolution_y = size
+    scene.render.resolution_percentage = 100
+
+
+def ordinary(scene):
+    camera(scene, (0.0, -7.0, 2.5), (math.radians(75), 0.0, 0.0))
+    link(scene, "floor", quad("floor", 6.0, principled("floor_grey", (0.5, 0.5, 0.5))))
+    for i, (name, colour, metallic) in enumerate((("red", (0.8, 0.1, 0.1), 0.0), ("green", (0.1, 0.6, 0.2), 0.0),
+                                                  ("blue", (0.1, 0.2, 0.8), 0.0), ("gold", (1.0, 0.78, 0.34), 1.0))):
+        link(scene, f"sphere_{name}", uv_sphere(name, 0.6, principled(name, colour, metallic, 0.3)),
+             (-2.4 + 1.6 * i, 0.0, 0.6))
+    point = bpy.data.lights.new("point", "POINT")
+    point.energy, point.color = 100.0, (1.0, 0.9, 0.8)
+    link(scene, "point_light", point, (2.0, -2.0, 3.0))
+    area = bpy.data.lights.new("area", "AREA")
+    area.energy, area.shape, area.size = 300.0, "SQUARE", 1.0
+    link(scene, "area_light", area, (-1.0, -1.0, 4.0))
+    scene.world = world("sky", (0.05, 0.07, 0.1), 1.0)
+
+
+def plane_scene(name):
+    scene = bpy.data.scenes.new(name)
+    camera(scene, (0.0, 0.0, 1.0), (0.0, 0.0, 0.0), fov_deg=1.0, size=(16, 16))
+    link(scene, "plane", quad(f"{name}_plane", 50.0, diffuse(f"{name}_rho", RHO)))
+    return scene
+
+
+def build():
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    scene.name = "ordinary"
+    ordinary(scene)
+    sc = plane_scene("plane_world")
+    sc.world = world("plane_world", WORLD_COLOUR, WORLD_STRENGTH)
+    for name, (kind, settings) in PLANE_LIGHTS.items():
+        sc = plane_scene(name)
+        sc.world = world(f"{name}_black", (0.0, 0.0, 0.0), 0.0)
+        light = bpy.data.lights.new(name, kind)
+        for key, value in settings.items():
+            setattr(light, key, value)
+        link(sc, f"{name}_light", light, (0.0, 0.0, HEIGHT), (SUN_TILT, 0.0, 0.0) if kind == "SUN" else (0, 0, 0))
+
+
+if __name__ == "__main__":
+    out = sys.argv[sys.argv.index("--") + 1] if "--" in sys.argv else sys.argv[1]
+    build()
+    bpy.ops.wm.save_as_mainfile(filepath=out)
