@@ -51,6 +51,9 @@ def problems(scene, distributions):
     if depth == 1:
         out.append(("render", "max_depth", "max_depth 1 (emitters seen directly, nothing lit) has no "
                     "counterpart: both renderers always sample direct light at the first hit", None))
+    for light in scene.get("lights", []):
+        out.append((light["name"], "type", f"a {light['type']} light: no mapping to this renderer's lights yet "
+                    "(Mitsuba renders it)", None))
     for obj in scene["objects"]:
         rough = (obj.get("bsdf") or {}).get("roughness")
         if rough and rough["alpha"] > 0:
