@@ -3,7 +3,7 @@
 extract_blender.py reads a Blender scene (the only bpy import of exporters/) into plain values
 and calls these where a material, light or world has no spectral annotation (an annotation always
 wins). Every conversion that is not exact, and everything that cannot be carried over, is a
-warning ``(object, field, message)``: nothing is lost silently. docs/scene-format.md, section 12,
+warning ``(object, field, message)``: nothing is lost silently. docs/scene-format.md, section 11,
 states every formula; the radiometric ones were measured with Cycles (bpy 5.0.1) and are checked
 by tests/test_blender_conversion.py.
 
