@@ -14,7 +14,7 @@ import textwrap
 import numpy as np
 import pytest
 
-from conftest import ROOT, render_with_noise
+from conftest import ROOT, metrics, render_with_noise, run_batch
 from spectral_bench.exporters import blender_conversion as conv
 from spectral_bench.exporters import colorimetry, ir_json, mitsuba_writer, validate
 
@@ -37,7 +37,7 @@ def exported(tmp_path_factory):
     """)
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
-    return json.loads(proc.stdout.strip().splitlines()[-1])
+    return dict(json.loads(proc.stdout.strip().splitlines()[-1]), _blend=str(path))
 
 
 def warnings_of(scene):
@@ -142,3 +142,25 @@ def test_converted_light_renders_its_closed_form_on_the_renders_own_noise(export
     mean, sem = px.mean(0), px.std(0, ddof=1) / math.sqrt(len(px))
     z = (mean - expected["mitsuba3"]) / sem
     assert np.abs(z).max() < 4, (mean, expected["mitsuba3"], sem, z)
+
+
+@pytest.mark.slow
+def test_the_batch_runner_renders_the_ordinary_blend_and_lists_every_conversion(exported, tmp_path):
+    """The user's command on the .blend: Mitsuba renders it (no reference exists: unjudged, exit 3,
+    as README's table says), and every conversion warning reaches the run's log, metrics.json and
+    summary.md, naming object and field."""
+    out = tmp_path / "run"
+    proc = run_batch("-i", exported["_blend"], "-s", "ordinary", "-r", "mitsuba", "--scale", "0.25", "--spp", "8",
+                     "-o", out)
+    assert proc.returncode == 3, proc.stderr[-3000:]
+    expected = exported["ordinary"]["warnings"]
+    assert len(expected) >= 13
+    log = proc.stdout + proc.stderr
+    for w in expected:
+        assert f"conversion (ordinary): {w['object']}.{w['field']}: {w['message']}" in log
+    (run,) = metrics(out)["runs"]
+    assert run["status"] == "unjudged" and run["scene_warnings"] == expected
+    summary = (out / "summary.md").read_text()
+    assert "## Conversions from the source scene" in summary
+    assert "| ordinary | point_light | data.color | colour (1, 0.9, 0.8) x intensity I = P / (4 pi)" in summary
+    assert "conversion: sphere_gold.material[gold]" in (out / "report.html").read_text()

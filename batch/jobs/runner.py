@@ -469,6 +469,9 @@ def _run(opts, out, deviations, t0):
                      ", ".join(f"{w}x{h}" for _, (w, h) in sizes))
     batch = Run(opts, out, deviations)
     log.info("writing to %s", batch.out)
+    for name, sc in scenes:  # what each scene's export converted or lost (a Blender scene without annotations)
+        for w in sc.get("warnings", []):
+            log.warning("conversion (%s): %s.%s: %s", name, w["object"], w["field"], w["message"])
     if not scenes:
         log.error("no scene matches the selection")
         batch.save()
