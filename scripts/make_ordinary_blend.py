@@ -23,6 +23,7 @@ PLANE_LIGHTS = {
     "plane_disk": ("AREA", {"energy": 300.0, "shape": "DISK", "size": 1.0}),
     "plane_blackbody": ("POINT", {"energy": 100.0, "use_temperature": True, "temperature": 3000.0, "shadow_soft_size": 0.0}),
 }
+PLANE_CAMERA = (1.0, 1.0)  # the plane scenes' camera: height above the plane, horizontal fov in degrees
 SUN_TILT = math.radians(30)  # the sun shines 30 degrees off the vertical
 WORLD_COLOUR, WORLD_STRENGTH = (0.2, 0.4, 0.8), 2.0
 
@@ -105,7 +106,7 @@ def ordinary(scene):
 
 def plane_scene(name):
     scene = bpy.data.scenes.new(name)
-    camera(scene, (0.0, 0.0, 1.0), (0.0, 0.0, 0.0), fov_deg=1.0, size=(16, 16))
+    camera(scene, (0.0, 0.0, PLANE_CAMERA[0]), (0.0, 0.0, 0.0), fov_deg=PLANE_CAMERA[1], size=(16, 16))
     link(scene, "plane", quad(f"{name}_plane", 50.0, diffuse(f"{name}_rho", RHO)))
     return scene
 
