@@ -171,19 +171,26 @@ def test_the_batch_runner_renders_the_ordinary_blend_and_lists_every_conversion(
     assert "conversion: sphere_gold.material[gold]" in (out / "report.html").read_text()
 
 
-def test_cycles_renders_the_delta_lights_as_their_closed_form(exported, tmp_path):
-    """The RGB route: Cycles renders the IR's point, spot and directional lights (reduced to RGB)
-    as the closed form of the IR scene (the same expected value as Mitsuba's, film: the format's
-    CIE 1931 rule), z < 4 on the pixels' spread with a float32 floor (a delta light on a plane is
-    noise-free in Cycles: its pixels differ only by rounding); one Cycles worker for all."""
+# a floor under the pixels' spread, relative to the expected value: the RGB renderers' delta lights
+# on a plane are noise-free, their pixels differ only by rounding (float32: 2^-23); LuxCore's
+# point and spot lights read 1.0e-5 and 1.6e-5 high (its ray offsets: measured, every channel alike)
+RGB_FLOOR = {"cycles": 2 ** -23, "luxcore": 5e-5}
+
+
+@pytest.mark.parametrize("backend", sorted(RGB_FLOOR))
+def test_rgb_renderers_render_the_delta_lights_as_their_closed_form(exported, backend, tmp_path):
+    """The RGB route: Cycles and LuxCore render the IR's point, spot and directional lights
+    (reduced to RGB) as the closed form of the IR scene (the same expected value as Mitsuba's,
+    film: the format's CIE 1931 rule), z < 4 on the pixels' spread with the renderer's floor; one
+    warm worker per renderer for all four scenes."""
     for name in ("plane_point", "plane_spot", "plane_sun", "plane_blackbody"):
         sc = exported[name]
         geometry, _q, _c = _plane_pixel(name)
         light = sc["lights"][0]
         spec = light.get("intensity") or light.get("irradiance")
         expected = geometry * colorimetry.xyz_to_srgb(colorimetry.spectrum_xyz(spec))
-        _sc, _names, img, _se = render_with_noise(sc, tmp_path / name, 16, passes=1, backend="cycles")
+        _sc, _names, img, _se = render_with_noise(sc, tmp_path / name, 16, passes=1, backend=backend)
         px = img[..., :3].reshape(-1, 3).astype(np.float64)
-        sem = np.maximum(px.std(0, ddof=1) / math.sqrt(len(px)), 2 ** -23 * np.abs(expected))
+        sem = np.maximum(px.std(0, ddof=1) / math.sqrt(len(px)), RGB_FLOOR[backend] * np.abs(expected))
         z = (px.mean(0) - expected) / sem
         assert np.abs(z).max() < 4, (name, px.mean(0), expected, z)
