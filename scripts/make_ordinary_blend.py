@@ -1,7 +1,7 @@
 """Write an ordinary .blend, made with bpy as any Blender user makes one, with no spectral
 annotation: scene "ordinary" (four Principled BSDF spheres of different base colours, one of them
 metallic gold, on a Principled floor; a 100 W point light, a 300 W area light, a world colour)
-and small plane scenes whose every light has a closed form (a Diffuse BSDF plane seen straight
+scene "zoo" (one of each conversion and loss the export warns about), and small plane scenes whose every light has a closed form (a Diffuse BSDF plane seen straight
 down through a 1-degree camera: under a world colour, a point, spot, sun, area and disk light,
 and a blackbody point light). tests/test_blender_conversion.py exports and renders them.
 
@@ -111,11 +111,70 @@ def plane_scene(name):
     return scene
 
 
+def zoo(scene):
+    """Scene "zoo": one of each conversion and loss the export warns about (a textured base colour,
+    a mix shader, glass, an unnamed metal, a coat, an emissive Principled, a disk and an ellipse
+    light, a soft sun, a blended spot, a light with exposure and a Blackbody node, an HDRI world,
+    a curve object, smooth shading, a mesh without material)."""
+    camera(scene, (0.0, -8.0, 3.0), (math.radians(72), 0.0, 0.0), size=(64, 48))
+    textured = principled("textured", (0.3, 0.3, 0.3))
+    tex = textured.node_tree.nodes.new("ShaderNodeTexChecker")
+    textured.node_tree.links.new(tex.outputs["Color"], textured.node_tree.nodes["Principled BSDF"].inputs["Base Color"])
+    mixed = bpy.data.materials.new("mixed")
+    nt = mixed.node_tree
+    mix = nt.nodes.new("ShaderNodeMixShader")
+    nt.links.new(nt.nodes["Principled BSDF"].outputs[0], mix.inputs[1])
+    nt.links.new(mix.outputs[0], nt.nodes["Material Output"].inputs["Surface"])
+    glass = principled("glass", (1.0, 1.0, 1.0), roughness=0.0)
+    glass.node_tree.nodes["Principled BSDF"].inputs["Transmission Weight"].default_value = 1.0
+    glass.node_tree.nodes["Principled BSDF"].inputs["IOR"].default_value = 1.45
+    violet = principled("violet_metal", (0.6, 0.2, 0.9), metallic=1.0, roughness=0.2)
+    coated = principled("coated", (0.2, 0.5, 0.5))
+    coated.node_tree.nodes["Principled BSDF"].inputs["Coat Weight"].default_value = 1.0
+    glowing = principled("glowing", (0.1, 0.1, 0.1))
+    glowing.node_tree.nodes["Principled BSDF"].inputs["Emission Strength"].default_value = 3.0
+    glowing.node_tree.nodes["Principled BSDF"].inputs["Emission Color"].default_value = (1.0, 0.5, 0.2, 1.0)
+    for i, m in enumerate((textured, mixed, glass, violet, coated, glowing)):
+        me = uv_sphere(m.name, 0.4, m)
+        if m is coated:
+            me.shade_smooth()
+        link(scene, f"ball_{m.name}", me, (-2.5 + i, 0.0, 0.4))
+    link(scene, "bare", quad("bare", 0.3, principled("unused", (0.5, 0.5, 0.5))), (0.0, 2.0, 0.01)).data.materials.clear()
+    for name, kind, settings, location in (
+            ("disk", "AREA", {"shape": "DISK", "size": 0.6, "energy": 50.0}, (-1.0, 0.0, 3.0)),
+            ("ellipse", "AREA", {"shape": "ELLIPSE", "size": 0.8, "size_y": 0.4, "energy": 50.0}, (1.0, 0.0, 3.0)),
+            ("soft_sun", "SUN", {"energy": 1.0, "angle": math.radians(5)}, (0.0, 0.0, 5.0)),
+            ("blended_spot", "SPOT", {"energy": 200.0, "spot_size": math.radians(50), "spot_blend": 0.4,
+                                      "shadow_soft_size": 0.1}, (0.0, -2.0, 4.0)),
+            ("exposed", "POINT", {"energy": 20.0, "exposure": 1.0, "shadow_soft_size": 0.0}, (2.0, -1.0, 2.0))):
+        light = bpy.data.lights.new(name, kind)
+        for key, value in settings.items():
+            setattr(light, key, value)
+        link(scene, name, light, location)
+    bb = bpy.data.lights["exposed"]
+    bb.use_nodes = True
+    emission = next(n for n in bb.node_tree.nodes if n.bl_idname == "ShaderNodeEmission")
+    black = bb.node_tree.nodes.new("ShaderNodeBlackbody")
+    black.inputs["Temperature"].default_value = 4000.0
+    bb.node_tree.links.new(black.outputs[0], emission.inputs["Color"])
+    curve = bpy.data.curves.new("path", "CURVE")
+    link(scene, "path", curve)
+    img = bpy.data.images.new("sky_hdri", 8, 4, float_buffer=True)
+    img.pixels.foreach_set([v for row in range(4) for _ in range(8) for v in ((0.5, 0.6, 0.9, 1.0) if row >= 2 else (0.2, 0.15, 0.1, 1.0))])
+    img.pack()
+    w = world("hdri_world", (0.0, 0.0, 0.0), 1.5)
+    env = w.node_tree.nodes.new("ShaderNodeTexEnvironment")
+    env.image = img
+    w.node_tree.links.new(env.outputs["Color"], w.node_tree.nodes["Background"].inputs["Color"])
+    scene.world = w
+
+
 def build():
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
     scene.name = "ordinary"
     ordinary(scene)
+    zoo(bpy.data.scenes.new("zoo"))
     sc = plane_scene("plane_world")
     sc.world = world("plane_world", WORLD_COLOUR, WORLD_STRENGTH)
     for name, (kind, settings) in PLANE_LIGHTS.items():

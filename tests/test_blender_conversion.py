@@ -194,3 +194,45 @@ def test_rgb_renderers_render_the_delta_lights_as_their_closed_form(exported, ba
         sem = np.maximum(px.std(0, ddof=1) / math.sqrt(len(px)), RGB_FLOOR[backend] * np.abs(expected))
         z = (px.mean(0) - expected) / sem
         assert np.abs(z).max() < 4, (name, px.mean(0), expected, z)
+
+
+ZOO_WARNINGS = {  # (object, field) -> a phrase of its message: one of each conversion and loss
+    ("world[hdri_world]", "node_tree.nodes[Background].Color"): "environment map 'sky_hdri'",
+    ("ball_textured", "material[textured].node_tree.nodes[Principled BSDF].inputs[Base Color]"): "ShaderNodeTexChecker",
+    ("ball_mixed", "material[mixed].node_tree"): "ShaderNodeMixShader",
+    ("ball_glass", "material[glass].node_tree.nodes[Principled BSDF].inputs[Transmission Weight]"): "IOR 1.45",
+    ("ball_violet_metal", "material[violet_metal].node_tree.nodes[Principled BSDF].inputs[Base Color]"): "Gulbrandsen",
+    ("ball_coated", "material[coated].node_tree.nodes[Principled BSDF].inputs[Coat Weight]"): "not rendered",
+    ("ball_coated", "data.polygons.use_smooth"): "rendered faceted",
+    ("ball_glowing", "material[glowing].node_tree.nodes[Principled BSDF].inputs[Emission Strength]"): "area emitter",
+    ("bare", "material"): "no material",
+    ("disk", "data.shape"): "128 triangles",
+    ("ellipse", "data.color"): "L = P / (pi A) = 50 / (pi 0.251327)",
+    ("soft_sun", "data.angle"): "delta",
+    ("blended_spot", "data.spot_blend"): "from 15 to 25 deg",
+    ("blended_spot", "data.shadow_soft_size"): "radius 0.1",
+    ("exposed", "data.exposure"): "40 W",
+    ("exposed", "data.node_tree.nodes[Blackbody].Temperature"): "blackbody 4000 K kept exact",
+    ("path", "type"): "CURVE",
+}
+
+
+def test_each_conversion_and_loss_is_a_warning_and_the_scene_still_renders(exported, tmp_path):
+    sc = exported["zoo"]
+    assert "error" not in sc, sc
+    validate.check(copy.deepcopy(sc))
+    w = {}
+    for entry in sc["warnings"]:
+        w.setdefault((entry["object"], entry["field"]), []).append(entry["message"])
+    for key, phrase in ZOO_WARNINGS.items():
+        assert any(phrase in m for m in w.get(key, [])), (key, w.get(key))
+    objects = {o["name"]: o for o in sc["objects"]}
+    assert objects["ball_glass"]["bsdf"] == {"type": "dielectric", "int_ior": 1.45, "ext_ior": 1.0}
+    assert objects["ball_violet_metal"]["bsdf"]["eta"]["type"] == "sampled"
+    assert objects["ball_glowing"]["emitter"]["type"] == "area" and objects["ball_glowing"]["bsdf"]["type"] == "diffuse"
+    assert objects["disk"]["shape"]["type"] == "mesh" and "path" not in objects
+    exposed = next(lt for lt in sc["lights"] if lt["name"] == "exposed")
+    assert exposed["intensity"]["type"] == "blackbody" and exposed["intensity"]["temperature"] == 4000.0
+    assert sc["environment"]["radiance"]["type"] == "sampled"
+    _sc, _names, img, _se = render_with_noise(sc, tmp_path, 4, size=(32, 24), passes=1)
+    assert np.isfinite(img).all() and img[..., :3].mean() > 0
