@@ -210,7 +210,9 @@ def _converted_material(obj, mat, warnings):
     return convert(_node_inputs(node, node_warn), getattr(node, "distribution", None))
 
 
-def _light_annotated(light):
+def light_annotated(light):
+    """Whether a light has a spectral annotation: any field of its radiance (or collimated) was
+    ever set; a light never annotated is converted from its power and colour."""
     r = light.spectral_bench.radiance
     return any(r.is_property_set(k) for k in ("kind", "value", "named", "scale", "temperature", "samples")) \
         or light.spectral_bench.is_property_set("collimated")
@@ -261,7 +263,7 @@ def _light_object(obj, problems, warnings):
     """(object or None, light or None) of a Blender light: an area light is an emitting shape
     (``objects``), point, spot and sun are the IR's delta ``lights``."""
     light = obj.data
-    annotated = _light_annotated(light)
+    annotated = light_annotated(light)
     world = _world(obj)
     warn = lambda field, message: warnings.append((obj.name, field, message))  # noqa: E731
     power = float(light.energy) * 2.0 ** float(getattr(light, "exposure", 0.0))
@@ -269,6 +271,10 @@ def _light_object(obj, problems, warnings):
         warn("data.exposure", f"exposure {light.exposure:g}: power x 2^exposure = {power:.6g} W")
     if light.type == "AREA":
         return _area_light(obj, light, world, power, annotated, problems, warn, warnings), None
+    if annotated and light.spectral_bench.collimated:
+        problems.append((obj.name, "spectral_bench.collimated", f"a collimated beam needs a square or rectangle "
+                         f"area light, got a {light.type} light"))
+        return None, None
     loc, rot, _scale = world.decompose()
     if light.type != "SUN" and light.shadow_soft_size > 0:
         warn("data.shadow_soft_size", f"radius {light.shadow_soft_size:g}: the IR's {light.type.lower()} light is a "
