@@ -470,7 +470,7 @@ def _run(opts, out, deviations, t0):
     batch = Run(opts, out, deviations)
     log.info("writing to %s", batch.out)
     for name, sc in scenes:  # what each scene's export converted or lost (a Blender scene without annotations)
-        for w in sc.get("warnings", []):
+        for w in (sc.get("warnings", []) if isinstance(sc, dict) else []):  # a scene that failed to load: no dict
             log.warning("conversion (%s): %s.%s: %s", name, w["object"], w["field"], w["message"])
     if not scenes:
         log.error("no scene matches the selection")
