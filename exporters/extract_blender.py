@@ -332,6 +332,9 @@ def _area_light(obj, light, world, power, annotated, problems, warn, warnings):
     else:
         normalize = getattr(light, "normalize", True)
         radiance = conv.area_radiance(power, area, normalize)
+        if not obj.visible_camera:
+            warn("visible_camera", "Blender's light is invisible to the camera (Cycles, the default); the IR's area "
+                 "emitter is seen directly wherever the camera sees it")
         if getattr(light, "spread", math.pi) < math.pi - 1e-6:
             warn("data.spread", f"spread {math.degrees(light.spread):.4g} deg: the IR's area emitter is Lambertian "
                  "(180 deg): light outside the spread is added")

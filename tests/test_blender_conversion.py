@@ -207,6 +207,7 @@ ZOO_WARNINGS = {  # (object, field) -> a phrase of its message: one of each conv
     ("ball_glowing", "material[glowing].node_tree.nodes[Principled BSDF].inputs[Emission Strength]"): "area emitter",
     ("bare", "material"): "no material",
     ("disk", "data.shape"): "128 triangles",
+    ("disk", "visible_camera"): "invisible to the camera",
     ("ellipse", "data.color"): "L = P / (pi A) = 50 / (pi 0.251327)",
     ("soft_sun", "data.angle"): "delta",
     ("blended_spot", "data.spot_blend"): "from 15 to 25 deg",
