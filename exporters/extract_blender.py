@@ -268,7 +268,7 @@ def _light_object(obj, problems, warnings):
     warn = lambda field, message: warnings.append((obj.name, field, message))  # noqa: E731
     power = float(light.energy) * 2.0 ** float(getattr(light, "exposure", 0.0))
     if getattr(light, "exposure", 0.0):
-        warn("data.exposure", f"exposure {light.exposure:g}: power x 2^exposure = {power:.6g} W")
+        warn("data.exposure", f"exposure {light.exposure:g}: power (a sun's strength) x 2^exposure = {power:.6g}")
     if light.type == "AREA":
         return _area_light(obj, light, world, power, annotated, problems, warn, warnings), None
     if annotated and light.spectral_bench.collimated:
@@ -284,7 +284,7 @@ def _light_object(obj, problems, warnings):
             warn("data.angle", f"angular diameter {math.degrees(light.angle):.4g} deg: the IR's directional light is "
                  "a delta (sharp shadows)")
         direction = [_clean(-c) for c in rot.to_matrix().col[2]]  # Blender's sun shines along local -Z
-        e = conv.sun_irradiance(float(light.energy))
+        e = conv.sun_irradiance(power)
         spec = spectrum(light.spectral_bench.radiance) if annotated else _light_spectrum(
             obj, e, f"irradiance E = strength = {e:.6g} W/m^2", warnings)
         return None, {"type": "directional", "direction": direction, "irradiance": spec}

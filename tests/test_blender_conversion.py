@@ -212,7 +212,7 @@ ZOO_WARNINGS = {  # (object, field) -> a phrase of its message: one of each conv
     ("soft_sun", "data.angle"): "delta",
     ("blended_spot", "data.spot_blend"): "from 15 to 25 deg",
     ("blended_spot", "data.shadow_soft_size"): "radius 0.1",
-    ("exposed", "data.exposure"): "40 W",
+    ("exposed", "data.exposure"): "= 40",
     ("exposed", "data.node_tree.nodes[Blackbody].Temperature"): "blackbody 4000 K kept exact",
     ("path", "type"): "CURVE",
 }

@@ -471,7 +471,8 @@ def _run(opts, out, deviations, t0):
     log.info("writing to %s", batch.out)
     for name, sc in scenes:  # what each scene's export converted or lost (a Blender scene without annotations)
         for w in (sc.get("warnings", []) if isinstance(sc, dict) else []):  # a scene that failed to load: no dict
-            log.warning("conversion (%s): %s.%s: %s", name, w["object"], w["field"], w["message"])
+            log.warning("conversion (%s): %s.%s: %s", name, *(t if t.isprintable() else repr(t)
+                                                             for t in (w["object"], w["field"], w["message"])))
     if not scenes:
         log.error("no scene matches the selection")
         batch.save()
