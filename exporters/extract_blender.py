@@ -127,7 +127,7 @@ def _mesh_object(obj, depsgraph, problems, warnings):
     elif mat.spectral_bench.kind == "NONE":
         bsdf, emitter = _converted_material(obj, mat, warnings)
     else:
-        bsdf = material_bsdf(mat)
+        bsdf = _completed(obj, mat, material_bsdf(mat), warnings)
     if len({s.material for s in obj.material_slots if s.material is not None}) > 1:
         warnings.append((name, "material_slots", f"{len(obj.material_slots)} material slots: the IR has one "
                          f"material per object; the active one ({mat.name if mat else None}) is used for every face"))
@@ -210,12 +210,59 @@ def _converted_material(obj, mat, warnings):
     return convert(_node_inputs(node, node_warn), getattr(node, "distribution", None))
 
 
+SPECTRUM_FIELDS = ("kind", "value", "named", "scale", "temperature", "samples")
+
+
+def spectrum_set(props):
+    """Whether any field of a spectrum annotation was ever set (else it holds the defaults)."""
+    return any(props.is_property_set(k) for k in SPECTRUM_FIELDS)
+
+
+def _completed(obj, mat, bsdf, warnings):
+    """An annotated material whose Model was set but not its data (a diffuse without a reflectance
+    spectrum, a named conductor never chosen) takes that data from Blender's own material (a
+    warning), instead of the annotation's defaults (0.5 grey, Cu)."""
+    a = mat.spectral_bench
+    if a.kind == "DIFFUSE" and not spectrum_set(a.reflectance):
+        where = f"material[{mat.name}].spectral_bench.reflectance"
+        converted, _ = _converted_material(obj, mat, [])
+        colour, source = _base_colour(mat)
+        spec = converted["reflectance"] if converted["type"] == "diffuse" else conv.reflectance(colour)[0]
+        warnings.append((obj.name, where, f"Model Diffuse without a reflectance spectrum: Blender's {source} "
+                         f"{conv.fmt(colour)} is used ({spec['type']} reflectance; {conv.UPLIFT_METHOD} where not "
+                         "grey), not the default 0.5"
+                         + ("" if converted["type"] == "diffuse" else f"; Blender's material would convert to a "
+                            f"{converted['type']}: the Model wins")))
+        bsdf = dict(bsdf, reflectance=spec)
+    if a.kind == "CONDUCTOR" and a.conductor_named and not a.is_property_set("conductor"):
+        converted, _ = _converted_material(obj, mat, [])
+        if converted["type"] == "conductor":
+            bsdf = {**{k: v for k, v in bsdf.items() if k != "material"},
+                    **{k: v for k, v in converted.items() if k in ("material", "eta", "k")}}
+            what = converted.get("material") or "eta and k fitted to the base colour"
+            warnings.append((obj.name, f"material[{mat.name}].spectral_bench.conductor", "Model Conductor without a "
+                             f"chosen conductor: Blender's metallic base colour gives {what} (not the default Cu)"))
+        else:
+            warnings.append((obj.name, f"material[{mat.name}].spectral_bench.conductor", "Model Conductor without a "
+                             f"chosen conductor and Blender's material is not metallic (it converts to a "
+                             f"{converted['type']}): the default {a.conductor} is used"))
+    return bsdf
+
+
+def _base_colour(mat):
+    """(linear sRGB, where it came from) of a material's colour: its Surface node's Base Color or
+    Color (unlinked value), else the viewport colour."""
+    node = _surface(mat.node_tree)
+    for key in ("Base Color", "Color"):
+        if node is not None and key in node.inputs and hasattr(node.inputs[key], "default_value"):
+            return tuple(node.inputs[key].default_value[:3]), f"{node.name} {key}"
+    return tuple(mat.diffuse_color[:3]), "viewport colour"
+
+
 def light_annotated(light):
     """Whether a light has a spectral annotation: any field of its radiance (or collimated) was
     ever set; a light never annotated is converted from its power and colour."""
-    r = light.spectral_bench.radiance
-    return any(r.is_property_set(k) for k in ("kind", "value", "named", "scale", "temperature", "samples")) \
-        or light.spectral_bench.is_property_set("collimated")
+    return spectrum_set(light.spectral_bench.radiance) or light.spectral_bench.is_property_set("collimated")
 
 
 def _light_spectrum(obj, factor, quantity, warnings):
@@ -446,6 +493,10 @@ def extract_scene(scene):
         out["environment"] = {"type": "uniform", "radiance": spectrum(world.spectral_bench.radiance)}
     elif world is not None:
         out["environment"] = _converted_world(world, warnings)
+    if world is not None and world.spectral_bench.enabled and not spectrum_set(world.spectral_bench.radiance):
+        out["environment"] = _converted_world(world, warnings)
+        warnings.append((f"world[{world.name}]", "spectral_bench.radiance", "Uniform Environment on without a "
+                         "radiance spectrum: Blender's world colour x strength is used, not the default 0.5"))
     lights = []
     depsgraph = scene.view_layers[0].depsgraph if scene.view_layers else None
     taken = []

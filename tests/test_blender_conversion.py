@@ -33,6 +33,15 @@ def exported(tmp_path_factory):
         runpy.run_path({str(ROOT / 'scripts' / 'make_ordinary_blend.py')!r}, run_name="__main__")
         from spectral_bench.batch import blend_input
         out = {{n: (r if isinstance(r, dict) else {{"error": str(r)}}) for n, r in blend_input.load_blend({str(path)!r})}}
+        # the issue's "only the Model set": a Diffuse Model without a spectrum, a Conductor Model
+        # without a chosen metal, the Uniform Environment on without a radiance
+        import bpy
+        from spectral_bench.exporters import extract_blender
+        for mat, kind in (("red", "DIFFUSE"), ("gold", "CONDUCTOR"), ("green", "DIFFUSE"), ("blue", "CONDUCTOR")):
+            bpy.data.materials[mat].spectral_bench.kind = kind
+        sc = bpy.data.scenes["ordinary"]
+        sc.world.spectral_bench.enabled = True
+        out["model_only"] = extract_blender.extract_scene(sc)
         print(json.dumps(out))
     """)
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
@@ -237,3 +246,24 @@ def test_each_conversion_and_loss_is_a_warning_and_the_scene_still_renders(expor
     assert sc["environment"]["radiance"]["type"] == "sampled"
     _sc, _names, img, _se = render_with_noise(sc, tmp_path, 4, size=(32, 24), passes=1)
     assert np.isfinite(img).all() and img[..., :3].mean() > 0
+
+
+def test_a_model_without_its_data_takes_blenders_own_not_the_defaults(exported):
+    """The issue's silent losses with only the Model set: a Diffuse without a spectrum was 0.5 grey,
+    the world colour dropped, the 300 W area light radiance 0.5, metallic gold grey diffuse."""
+    sc = exported["model_only"]
+    w = warnings_of(sc)
+    objects = {o["name"]: o for o in sc["objects"]}
+    red = objects["sphere_red"]["bsdf"]
+    assert red["type"] == "diffuse" and "(0.8, 0.1, 0.1)" in red["reflectance"]["source"]
+    assert "not the default 0.5" in w[("sphere_red", "material[red].spectral_bench.reflectance")]
+    # gold with Model Conductor and no metal chosen: Au from its base colour, not the default Cu
+    assert objects["sphere_gold"]["bsdf"]["material"] == "Au"
+    assert "gives Au (not the default Cu)" in w[("sphere_gold", "material[gold].spectral_bench.conductor")]
+    # blue with Model Conductor but a non-metallic Principled: the Model wins with its default Cu, warned
+    assert objects["sphere_blue"]["bsdf"]["material"] == "Cu"
+    assert "the default Cu is used" in w[("sphere_blue", "material[blue].spectral_bench.conductor")]
+    assert sc["environment"] == exported["ordinary"]["environment"]
+    assert "not the default 0.5" in w[("world[sky]", "spectral_bench.radiance")]
+    assert objects["area_light"]["emitter"] == next(o for o in exported["ordinary"]["objects"]
+                                                    if o["name"] == "area_light")["emitter"]
