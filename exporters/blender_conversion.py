@@ -271,7 +271,7 @@ def _roughness(rough, distribution, field, warn):
     return {"distribution": dist, "alpha": alpha}
 
 
-def _surface_emission(inp, colour_key, strength_key, warn):
+def surface_emission(inp, colour_key, strength_key, warn):
     strength = float(inp.get(strength_key, 0.0) or 0.0)
     colour = np.asarray(inp.get(colour_key, (1, 1, 1)), dtype=np.float64)[:3]
     if strength <= 0 or colour.max() <= 0:
@@ -333,7 +333,7 @@ def principled(inp, distribution):
         r = _roughness(rough, distribution, "inputs[Roughness]", warn)
         if r:
             out["roughness"] = r
-    return out, _surface_emission(inp, "Emission Color", "Emission Strength", warn)
+    return out, surface_emission(inp, "Emission Color", "Emission Strength", warn)
 
 
 def diffuse_node(inp, distribution):
@@ -371,7 +371,7 @@ def glossy_node(inp, distribution):
 
 
 def emission_node(inp, distribution):
-    return None, _surface_emission(inp, "Color", "Strength", inp.warn)
+    return None, surface_emission(inp, "Color", "Strength", inp.warn)
 
 
 # Blender shader node -> conversion; any other node at a material's Surface is substituted (a warning)

@@ -128,6 +128,7 @@ def _mesh_object(obj, depsgraph, problems, warnings):
         bsdf, emitter = _converted_material(obj, mat, warnings)
     else:
         bsdf = _completed(obj, mat, material_bsdf(mat), warnings)
+        emitter = _annotated_emission(obj, mat, warnings)
     if len({s.material for s in obj.material_slots if s.material is not None}) > 1:
         warnings.append((name, "material_slots", f"{len(obj.material_slots)} material slots: the IR has one "
                          f"material per object; the active one ({mat.name if mat else None}) is used for every face"))
@@ -247,6 +248,22 @@ def _completed(obj, mat, bsdf, warnings):
                              f"chosen conductor and Blender's material is not metallic (it converts to a "
                              f"{converted['type']}): the default {a.conductor} is used"))
     return bsdf
+
+
+def _annotated_emission(obj, mat, warnings):
+    """The emission of an annotated material's Principled BSDF or Emission node (the annotation
+    describes the surface only): an area emitter, warned; None when it emits nothing."""
+    node = _surface(mat.node_tree)
+    key = {"ShaderNodeBsdfPrincipled": "Emission Strength", "ShaderNodeEmission": "Strength"}.get(
+        node.bl_idname if node is not None else None)
+    if key is None or float(node.inputs[key].default_value) <= 0:
+        return None
+    def node_warn(field, message):
+        warnings.append((obj.name, f"material[{mat.name}].node_tree.nodes[{node.name}].{field}",
+                         message + " (beside the annotated surface)"))
+    inp = _node_inputs(node, node_warn)
+    colour_key = "Emission Color" if key == "Emission Strength" else "Color"
+    return conv.surface_emission(inp, colour_key, key, node_warn)
 
 
 def _base_colour(mat):
@@ -467,6 +484,22 @@ def _camera(scene, problems):
     return out
 
 
+def _scene_losses(scene):
+    """(object, field, message) of the scene's and camera's settings that change Blender's image
+    and that the IR has no field for."""
+    cam = scene.camera
+    if cam is not None and cam.type == "CAMERA" and cam.data.dof.use_dof:
+        yield cam.name, "data.dof.use_dof", "depth of field: the IR's camera is a pinhole (all in focus)"
+    if scene.render.use_motion_blur:
+        yield "scene", "render.use_motion_blur", "motion blur: the IR's scene is static (no blur)"
+    if scene.render.film_transparent:
+        yield "scene", "render.film_transparent", ("a transparent film: the IR renders the environment where Blender "
+                                                   "leaves the background transparent")
+    exposure = getattr(getattr(scene, "cycles", None), "film_exposure", 1.0)
+    if abs(exposure - 1.0) > 1e-6:
+        yield "scene", "cycles.film_exposure", f"film exposure {exposure:g}: the IR's pixels are radiance (exposure 1)"
+
+
 def extract_scene(scene):
     """IR dict of one Blender scene; raises validate.SceneError naming every problem."""
     problems = []
@@ -488,7 +521,7 @@ def extract_scene(scene):
     if a.output != "RGB":
         out["render"]["output"] = a.output.lower()
     world = scene.world
-    warnings = []
+    warnings = list(_scene_losses(scene))
     if world is not None and world.spectral_bench.enabled:
         out["environment"] = {"type": "uniform", "radiance": spectrum(world.spectral_bench.radiance)}
     elif world is not None:
@@ -511,6 +544,9 @@ def extract_scene(scene):
         else:
             if obj.type not in ("CAMERA", "EMPTY"):
                 warnings.append((obj.name, "type", f"a {obj.type} object is not exported (only meshes and lights)"))
+            elif obj.type == "EMPTY" and obj.instance_type == "COLLECTION" and obj.instance_collection is not None:
+                warnings.append((obj.name, "instance_collection", f"the instanced collection "
+                                 f"{obj.instance_collection.name!r} is not exported (instances are not)"))
             continue
         for entry, target in ((item, out["objects"]), (light, lights)):
             if entry is not None:

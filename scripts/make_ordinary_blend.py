@@ -115,7 +115,8 @@ def zoo(scene):
     """Scene "zoo": one of each conversion and loss the export warns about (a textured base colour,
     a mix shader, glass, an unnamed metal, a coat, an emissive Principled, a disk and an ellipse
     light, a soft sun, a blended spot, a light with exposure and a Blackbody node, an HDRI world,
-    a curve object, smooth shading, a mesh without material)."""
+    a curve object, an instanced collection, smooth shading, a mesh without material, depth of field,
+    a transparent film)."""
     camera(scene, (0.0, -8.0, 3.0), (math.radians(72), 0.0, 0.0), size=(64, 48))
     textured = principled("textured", (0.3, 0.3, 0.3))
     tex = textured.node_tree.nodes.new("ShaderNodeTexChecker")
@@ -159,6 +160,12 @@ def zoo(scene):
     bb.node_tree.links.new(black.outputs[0], emission.inputs["Color"])
     curve = bpy.data.curves.new("path", "CURVE")
     link(scene, "path", curve)
+    group = bpy.data.collections.new("props")
+    group.objects.link(bpy.data.objects["ball_glass"])
+    inst = link(scene, "prop_instance", None, (0.0, 1.5, 0.0))
+    inst.instance_type, inst.instance_collection = "COLLECTION", group
+    scene.camera.data.dof.use_dof = True
+    scene.render.film_transparent = True
     img = bpy.data.images.new("sky_hdri", 8, 4, float_buffer=True)
     img.pixels.foreach_set([v for row in range(4) for _ in range(8) for v in ((0.5, 0.6, 0.9, 1.0) if row >= 2 else (0.2, 0.15, 0.1, 1.0))])
     img.pack()

@@ -42,6 +42,8 @@ def exported(tmp_path_factory):
         sc = bpy.data.scenes["ordinary"]
         sc.world.spectral_bench.enabled = True
         out["model_only"] = extract_blender.extract_scene(sc)
+        bpy.data.materials["glowing"].spectral_bench.kind = "DIFFUSE"  # annotated, and emissive in Blender
+        out["zoo_annotated"] = extract_blender.extract_scene(bpy.data.scenes["zoo"])
         print(json.dumps(out))
     """)
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
@@ -224,6 +226,9 @@ ZOO_WARNINGS = {  # (object, field) -> a phrase of its message: one of each conv
     ("exposed", "data.exposure"): "= 40",
     ("exposed", "data.node_tree.nodes[Blackbody].Temperature"): "blackbody 4000 K kept exact",
     ("path", "type"): "CURVE",
+    ("prop_instance", "instance_collection"): "'props' is not exported",
+    ("zoo_camera", "data.dof.use_dof"): "pinhole",
+    ("scene", "render.film_transparent"): "transparent film",
 }
 
 
@@ -267,3 +272,10 @@ def test_a_model_without_its_data_takes_blenders_own_not_the_defaults(exported):
     assert "not the default 0.5" in w[("world[sky]", "spectral_bench.radiance")]
     assert objects["area_light"]["emitter"] == next(o for o in exported["ordinary"]["objects"]
                                                     if o["name"] == "area_light")["emitter"]
+
+
+def test_an_annotated_materials_emission_is_exported_beside_it(exported):
+    glowing = next(o for o in exported["zoo_annotated"]["objects"] if o["name"] == "ball_glowing")
+    assert glowing["bsdf"]["type"] == "diffuse" and glowing["emitter"]["type"] == "area"
+    assert any(w["object"] == "ball_glowing" and "beside the annotated surface" in w["message"]
+               for w in exported["zoo_annotated"]["warnings"])
