@@ -258,6 +258,7 @@ def _annotated_emission(obj, mat, warnings):
         node.bl_idname if node is not None else None)
     if key is None or float(node.inputs[key].default_value) <= 0:
         return None
+
     def node_warn(field, message):
         warnings.append((obj.name, f"material[{mat.name}].node_tree.nodes[{node.name}].{field}",
                          message + " (beside the annotated surface)"))
