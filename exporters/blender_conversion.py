@@ -100,6 +100,14 @@ def emission(rgb, scale):
             "source": f"{UPLIFT_METHOD} of the colour ({c[0]:.4g}, {c[1]:.4g}, {c[2]:.4g}) times D65, x {scale:.6g}"}
 
 
+def emission_note(spec):
+    """How an emission spectrum from ``emission`` was made and what it renders as (linear sRGB by
+    the format's film rule): for a warning."""
+    made = "cie_d65 scaled (white is D65, the sRGB white)" if spec["type"] == "named" else (
+        "0" if spec["type"] == "constant" else f"an emission spectrum ({UPLIFT_METHOD}, times D65)")
+    return f"{made}; renders as {fmt(spectrum_rgb(lambda wl: spectra.evaluate(spec, wl), illuminated=False))}"
+
+
 def blackbody(temperature, luminance):
     """A blackbody of ``temperature`` K scaled to luminance Y = ``luminance`` (Cycles' Blackbody
     node is a colour of luminance 1: measured)."""
@@ -278,8 +286,8 @@ def surface_emission(inp, colour_key, strength_key, warn):
         return None
     spec = emission(colour, strength)
     warn(f"inputs[{strength_key}]", f"emission colour {fmt(colour)} x strength {strength:.4g} -> an area emitter of "
-                                    f"radiance strength x colour (Cycles' convention: strength 1 is radiance 1), "
-                                    f"uplifted ({spec['type']})")
+                                    f"radiance strength x colour (Cycles' convention: strength 1 is radiance 1): "
+                                    f"{emission_note(spec)}")
     return {"type": "area", "radiance": spec}
 
 

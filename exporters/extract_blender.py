@@ -318,9 +318,7 @@ def _light_spectrum(obj, factor, quantity, warnings):
                 "applied as its luminance only: its hue is lost"))
         return spec
     spec = conv.emission(colour, factor)
-    warn("data.color", f"colour {conv.fmt(colour)} x {quantity} -> "
-         + ("cie_d65 scaled (white is D65, the sRGB white)" if spec["type"] == "named"
-            else f"an emission spectrum ({conv.UPLIFT_METHOD}, times D65)"))
+    warn("data.color", f"colour {conv.fmt(colour)} x {quantity} -> {conv.emission_note(spec)}")
     return spec
 
 
@@ -444,7 +442,7 @@ def _converted_world(world, warnings):
         return None
     spec = conv.emission(colour, strength)
     warn(field, f"background colour {conv.fmt(colour)} x strength {strength:g} -> a uniform environment of that "
-         "radiance (Cycles' convention), " + ("cie_d65 scaled" if spec["type"] == "named" else f"uplifted ({conv.UPLIFT_METHOD}, times D65)"))
+         f"radiance (Cycles' convention): {conv.emission_note(spec)}")
     return {"type": "uniform", "radiance": spec}
 
 
