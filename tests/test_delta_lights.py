@@ -96,3 +96,20 @@ def test_a_scene_without_lights_or_warnings_is_written_as_before(golden):
         assert "lights" not in sc and "warnings" not in sc
         assert '"lights"' not in ir_json.dumps(sc)
     assert json.loads(ir_json.dumps(golden["ggx_copper_50"]))["objects"]
+
+
+def test_a_scene_files_warnings_reach_the_log_escaped_and_metrics(scene, tmp_path):
+    """A scene file's warnings (here hand-written, with a newline in a name that would forge a log
+    line) are logged one line each, escaped, and land in metrics.json; --export-only renders nothing."""
+    from conftest import metrics, run_batch
+    scene["warnings"] = [{"object": "lamp\nERROR forged", "field": "data.color", "message": "converted"}]
+    path = ir_json.write(scene, tmp_path / "lit.json")
+    out = tmp_path / "out"
+    proc = run_batch("-i", path, "-r", "mitsuba", "--export-only", "-o", out)
+    log = proc.stdout + proc.stderr
+    assert "conversion (ggx_copper_50): 'lamp\\nERROR forged'.data.color: converted" in log, log[-2000:]
+    assert not any(line.startswith("ERROR forged") for line in log.splitlines())
+    assert proc.returncode == 0, log[-2000:]
+    runs = metrics(out)["runs"]
+    assert runs and all(r["scene_warnings"] == scene["warnings"] for r in runs)
+    assert json.loads((out / "ggx_copper_50" / "json" / "ggx_copper_50.json").read_text())["warnings"] == scene["warnings"]
