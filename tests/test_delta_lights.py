@@ -113,3 +113,10 @@ def test_a_scene_files_warnings_reach_the_log_escaped_and_metrics(scene, tmp_pat
     runs = metrics(out)["runs"]
     assert runs and all(r["scene_warnings"] == scene["warnings"] for r in runs)
     assert json.loads((out / "ggx_copper_50" / "json" / "ggx_copper_50.json").read_text())["warnings"] == scene["warnings"]
+
+
+def test_list_notes_a_scene_with_conversion_warnings(scene, tmp_path, run_batch_here):
+    path = ir_json.write(scene, tmp_path / "lit.json")
+    proc = run_batch_here("--list", "-r", "mitsuba", "-i", path)
+    assert proc.returncode == 0 and proc.stdout.splitlines() == ["ggx_copper_50\treflectance\tmitsuba"]
+    assert "note: ggx_copper_50: 1 conversion warning(s)" in proc.stderr
