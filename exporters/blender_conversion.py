@@ -117,6 +117,30 @@ def blackbody(temperature, luminance):
     return {"type": "blackbody", "temperature": float(temperature), "scale": round(float(luminance) / y_unit, 9)}
 
 
+def tinted_blackbody(temperature, colour, scale):
+    """(IR spectrum, note) of a blackbody light whose colour is not white: Cycles multiplies the
+    Blackbody colour (luminance 1) by the colour channel by channel; here the blackbody is
+    multiplied by the colour's smooth reflectance uplift (a filter, Jakob and Hanika 2019) and
+    scaled to Cycles' luminance, scale x Y(blackbody rgb x colour). The note compares the RGB it
+    renders as with Cycles' product."""
+    colour = np.clip(np.asarray(colour, dtype=np.float64), 0.0, None)
+    unit = blackbody(temperature, 1.0)
+    bb_rgb = spectrum_rgb(lambda wl: spectra.evaluate(unit, wl), illuminated=False)
+    cycles = scale * bb_rgb * colour
+    peak = float(colour.max())
+    if peak <= 0 or scale <= 0:
+        return {"type": "constant", "value": 0.0}, "black"
+    wl = grid()
+    values = spectra.evaluate(unit, wl) * np.asarray(_jakob(tuple(round(float(v), 6) for v in colour / peak)))
+    spec = {"type": "sampled", "wavelengths": _rounded(wl, 3), "values": list(values)}
+    spec["values"] = _rounded(np.asarray(values) * luminance(cycles) / luminance(
+        spectrum_rgb(lambda w: spectra.evaluate(spec, w), illuminated=False)), 9)
+    spec["source"] = (f"blackbody {temperature:g} K times {UPLIFT_METHOD} of the colour ({colour[0]:.4g}, "
+                      f"{colour[1]:.4g}, {colour[2]:.4g}), luminance {luminance(cycles):.6g}")
+    back = spectrum_rgb(lambda w: spectra.evaluate(spec, w), illuminated=False)
+    return spec, f"renders as {fmt(back)} where Cycles multiplies to {fmt(cycles)}"
+
+
 def luminance(rgb):
     """Y of a linear sRGB colour (the IEC matrix's second row of its inverse)."""
     return float(SRGB_TO_XYZ[1] @ np.asarray(rgb, dtype=np.float64))

@@ -310,12 +310,14 @@ def _light_spectrum(obj, factor, quantity, warnings):
                 colour = colour * np.asarray(col.default_value[:3])
             else:
                 colour = colour * np.asarray(col.default_value[:3])
-    if temperature is not None:
-        spec = conv.blackbody(temperature, factor * conv.luminance(colour))
+    if temperature is not None and np.abs(colour - 1).max() < 1e-6:
         warn(field, f"blackbody {temperature:g} K kept exact (a blackbody spectrum), scaled to {quantity} "
-                    f"x the luminance of the colour (Cycles' blackbody colour has luminance 1)"
-             + ("" if np.abs(colour - 1).max() < 1e-6 else f"; the light's colour {conv.fmt(colour)} is "
-                "applied as its luminance only: its hue is lost"))
+                    "(Cycles' blackbody colour has luminance 1)")
+        return conv.blackbody(temperature, factor)
+    if temperature is not None:
+        spec, note = conv.tinted_blackbody(temperature, colour, factor)
+        warn(field, f"blackbody {temperature:g} K with the colour {conv.fmt(colour)}, {quantity}: the blackbody "
+                    f"times the colour's smooth uplift (no longer a pure blackbody), {note}")
         return spec
     spec = conv.emission(colour, factor)
     warn("data.color", f"colour {conv.fmt(colour)} x {quantity} -> {conv.emission_note(spec)}")

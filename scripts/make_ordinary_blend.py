@@ -22,6 +22,8 @@ PLANE_LIGHTS = {
     "plane_area": ("AREA", {"energy": 300.0, "shape": "RECTANGLE", "size": 1.0, "size_y": 0.5}),
     "plane_disk": ("AREA", {"energy": 300.0, "shape": "DISK", "size": 1.0}),
     "plane_blackbody": ("POINT", {"energy": 100.0, "use_temperature": True, "temperature": 3000.0, "shadow_soft_size": 0.0}),
+    "plane_warm_tint": ("POINT", {"energy": 100.0, "use_temperature": True, "temperature": 3000.0,
+                                  "color": (0.6, 0.8, 1.0), "shadow_soft_size": 0.0}),
 }
 PLANE_CAMERA = (1.0, 1.0)  # the plane scenes' camera: height above the plane, horizontal fov in degrees
 SUN_TILT = math.radians(30)  # the sun shines 30 degrees off the vertical

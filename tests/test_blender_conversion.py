@@ -22,7 +22,14 @@ sys.path.insert(0, str(ROOT / "scripts"))
 import make_ordinary_blend as blend  # noqa: E402  (no bpy at import: it is imported inside functions)
 
 
-PLANES = ["plane_world", "plane_point", "plane_spot", "plane_sun", "plane_area", "plane_disk", "plane_blackbody"]
+PLANES = ["plane_world", "plane_point", "plane_spot", "plane_sun", "plane_area", "plane_disk", "plane_blackbody",
+          "plane_warm_tint"]
+
+
+def blackbody_rgb(temperature):
+    """Linear sRGB of a blackbody of luminance 1 (the format's film): Cycles' Blackbody colour."""
+    spec = conv.blackbody(temperature, 1.0)
+    return colorimetry.xyz_to_srgb(colorimetry.spectrum_xyz(spec))
 
 
 @pytest.fixture(scope="module")
@@ -166,9 +173,17 @@ def test_converted_light_renders_its_closed_form_on_the_renders_own_noise(export
     if name == "plane_blackbody":
         # Cycles' Blackbody colour has luminance 1 (measured: 3000 K is (1.7708, 0.8443, 0.2722)), its
         # hue is the blackbody's own: the exact spectrum keeps the luminance
-        assert conv.luminance(expected["cie1931"]) == pytest.approx(conv.luminance(blender), rel=1e-6)
+        assert conv.luminance(expected["cie1931"]) == pytest.approx(geometry * quantity, rel=1e-6)
         assert expected["cie1931"] / conv.luminance(expected["cie1931"]) == pytest.approx(
             [1.7708, 0.8443, 0.2722], abs=2e-3)
+    elif name == "plane_warm_tint":
+        # Cycles multiplies the Blackbody colour by the light's colour channel by channel; the
+        # conversion (a blackbody times the colour's uplift) keeps that luminance, and its warning
+        # states the RGB it renders as beside Cycles' product
+        cycles = geometry * quantity * blackbody_rgb(3000.0) * colour
+        assert conv.luminance(expected["cie1931"]) == pytest.approx(conv.luminance(cycles), rel=1e-6)
+        (note,) = [w["message"] for w in sc["warnings"] if w["field"] == "data.temperature"]
+        assert f"where Cycles multiplies to {conv.fmt(cycles / geometry)}" in note
     else:
         assert np.abs(expected["cie1931"] - blender).max() <= 2e-3 * blender.max(), (expected["cie1931"], blender)
     _sc, _names, img, _se = render_with_noise(sc, tmp_path, 64, passes=1)
@@ -312,9 +327,9 @@ def test_blenders_own_render_matches_the_formulas_of_the_conversion(exported, na
     px = np.asarray(exported["cycles_native"][name], dtype=np.float64)
     mean = px.mean(0)
     sem = np.maximum(px.std(0, ddof=1) / math.sqrt(len(px)), 2 ** -20 * mean)
-    if name == "plane_blackbody":
-        y = conv.luminance(mean)
-        assert abs(y - geometry * quantity) < 4 * 2e-4 * y, (y, geometry * quantity)
+    if name in ("plane_blackbody", "plane_warm_tint"):
+        y, y_cycles = conv.luminance(mean), geometry * quantity * conv.luminance(blackbody_rgb(3000.0) * colour)
+        assert abs(y - y_cycles) < 4 * 2e-4 * y, (y, y_cycles)
         return
     z = (mean - geometry * quantity * colour) / sem
     assert np.abs(z).max() < 4, (mean, geometry * quantity * colour, sem, z)
