@@ -20,6 +20,7 @@ from . import benchmark, canonical, preferences
 def export_scene(scene, fmt, path):
     """Export one Blender scene; returns the written path. Raises validate.SceneError."""
     data = extract_blender.extract_scene(scene)
+    export_scene.last_warnings = data.get("warnings", [])  # what was converted or lost (docs/scene-format.md 11)
     if fmt == "json":
         return ir_json.write(data, path)
     if fmt == "art":
@@ -40,6 +41,8 @@ class _ExportBase:
             return {"CANCELLED"}
         for obj, field, msg in getattr(export_scene, "last_unsupported", []) if self.fmt == "art" else []:
             self.report({"WARNING"}, f"ART cannot express {obj}.{field}: {msg} (left out)")
+        for w in getattr(export_scene, "last_warnings", []):
+            self.report({"WARNING"}, f"converted {w['object']}.{w['field']}: {w['message']}")
         self.report({"INFO"}, f"wrote {out}")
         return {"FINISHED"}
 

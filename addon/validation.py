@@ -7,7 +7,8 @@ from ..exporters import extract_blender, spectra, validate
 def material_problems(mat):
     a = mat.spectral_bench
     if a.kind == "NONE":
-        return ["Not annotated: set a Model, or the exporter reports this material"]
+        return ["Not annotated: exported from its shader nodes (Principled BSDF, ...), each conversion a warning; "
+                "set a Model to give its spectra"]
     if a.kind == "CONDUCTOR" and a.conductor_named and a.conductor not in spectra.NAMED_CONDUCTORS:
         return [f"Unknown conductor {a.conductor!r}"]
     if a.kind == "DIFFUSE":
@@ -24,8 +25,10 @@ def spectrum_problems(props, label):
 
 
 def light_problems(light):
-    if light.type != "AREA" or light.shape not in ("SQUARE", "RECTANGLE"):
-        return ["Only square or rectangular area lights are exported"]
+    if not extract_blender.light_annotated(light):
+        return ["Not annotated: exported from its power and colour (docs/scene-format.md section 11)"]
+    if light.spectral_bench.collimated and (light.type != "AREA" or light.shape not in ("SQUARE", "RECTANGLE")):
+        return ["A collimated beam needs a square or rectangular area light"]
     return spectrum_problems(light.spectral_bench.radiance, "radiance")
 
 

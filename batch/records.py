@@ -95,6 +95,8 @@ def run_record(scene_name, scene, backend, *, mode=None, spp=None, resolution=No
          "metrics": {"rmse": None, "relmse": None, "mape": None, "flip": None}, "probes": []}
     if job is not None:
         e["job"] = job
+    if isinstance(scene, dict) and scene.get("warnings"):  # what the export converted or lost (the IR's warnings)
+        e["scene_warnings"] = [dict(w) for w in scene["warnings"]]
     e.update(fields)
     return e
 

@@ -33,7 +33,8 @@ def setup_logging(log_file=None):
 
 def list_jobs(runner, opts):
     """--list: each job as scene, case and backend; a scene that cannot be loaded is listed as
-    ``ERROR`` with why (file, object and field) and makes the exit status 2."""
+    ``ERROR`` with why (file, object and field) and makes the exit status 2; a scene with
+    conversion warnings gets a note on stderr (their count)."""
     jobs, scenes = runner.plan(opts)
     errors = {name: str(sc) for name, sc in scenes if isinstance(sc, Exception)}
     for scene, case, backend in jobs:
@@ -41,6 +42,10 @@ def list_jobs(runner, opts):
             print(f"{scene}\t{case}\t{backend}")
     for scene, why in errors.items():
         print(f"{scene}\tERROR\t{' '.join(why.split())[:500]}")
+    for scene, sc in scenes:  # a scene converted from Blender without annotations: how much it lost
+        if isinstance(sc, dict) and sc.get("warnings"):
+            print(f"note: {scene}: {len(sc['warnings'])} conversion warning(s) from its source (each in the run's "
+                  "log, metrics.json and summary.md)", file=sys.stderr)
     if errors:
         print(f"error: {len(errors)} scene(s) could not be loaded (listed as ERROR)", file=sys.stderr)
     return 2 if errors else 0

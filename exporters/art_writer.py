@@ -198,6 +198,9 @@ class _Writer:
         for obj in sc["objects"]:
             if (obj.get("emitter") or {}).get("type") == "collimated":
                 self.unsupported.append((obj["name"], "emitter.type", "ART has no collimated (directional area) emitter"))
+        for light in sc.get("lights", []):
+            self.unsupported.append((light["name"], "type", f"a {light['type']} light: not mapped to ART's light "
+                                     "sources (only area emitters and the uniform environment are)"))
 
     def camera(self):
         cam, r = self.scene["camera"], self.scene["render"]

@@ -1,14 +1,20 @@
 """Blender -> scene IR. The only module of exporters/ that imports bpy.
 
-One Blender scene is one test scene. Exported: the scene camera, render-visible mesh objects
-(with an annotated material), area lights (square or rectangle), and the world's uniform
-environment. Anything that cannot be expressed is reported by object and field.
+One Blender scene is one test scene. Exported: the scene camera, render-visible mesh objects,
+Blender's lights (point, spot, sun, area of every shape) and the world. A material, light or
+world with a spectral annotation is exported as annotated; one without is converted from what
+Blender has (Principled BSDF and the other BSDF nodes, light power and colour, the world's
+Background node) by exporters/blender_conversion.py, and every approximation or loss is a warning
+(object, field, message) in the IR's ``warnings``. What makes a scene impossible to export (no
+camera, an empty mesh) is an error naming object and field.
 """
 import math
 
 import bpy
+import numpy as np
 from mathutils import Matrix
 
+from . import blender_conversion as conv
 from . import ir, names, validate
 
 
@@ -110,17 +116,23 @@ def material_bsdf(mat):
     return out
 
 
-def _mesh_object(obj, depsgraph, problems):
+def _mesh_object(obj, depsgraph, problems, warnings):
     name = obj.name
     mat = obj.active_material
+    emitter = None
     if mat is None:
-        problems.append((name, "material", "mesh object has no material"))
-        return None
-    if mat.spectral_bench.kind == "NONE":
-        problems.append((name, f"material[{mat.name}].spectral_bench.kind",
-                         "material has no spectral annotation (set its Model)"))
-        return None
-    if mat.spectral_bench.kind == "DIFFUSE":
+        bsdf = {"type": "diffuse", "reflectance": {"type": "constant", "value": 0.8}}
+        warnings.append((name, "material", "mesh object has no material: rendered as Blender renders it, a "
+                         "diffuse reflectance 0.8 (Blender's default surface)"))
+    elif mat.spectral_bench.kind == "NONE":
+        bsdf, emitter = _converted_material(obj, mat, warnings)
+    else:
+        bsdf = _completed(obj, mat, material_bsdf(mat), warnings)
+        emitter = _annotated_emission(obj, mat, warnings)
+    if len({s.material for s in obj.material_slots if s.material is not None}) > 1:
+        warnings.append((name, "material_slots", f"{len(obj.material_slots)} material slots: the IR has one "
+                         f"material per object; the active one ({mat.name if mat else None}) is used for every face"))
+    if mat is not None and mat.spectral_bench.kind == "DIFFUSE":
         try:
             fluorescence(mat.spectral_bench)
         except ValueError as exc:
@@ -148,26 +160,303 @@ def _mesh_object(obj, depsgraph, problems):
             source.to_mesh_clear()
         if not faces:
             problems.append((name, "data", "mesh has no faces (missing mesh)"))
+        elif any(p.use_smooth for p in obj.data.polygons):
+            warnings.append((name, "data.polygons.use_smooth", "smooth shading: the IR's mesh faces are flat (no "
+                             "interpolated normals): rendered faceted"))
         shape = {"type": "mesh", "to_world": _matrix(mw), "vertices": verts, "faces": faces}
-    return {"name": name, "shape": shape, "bsdf": material_bsdf(mat), "emitter": None}
+    return {"name": name, "shape": shape, "bsdf": bsdf, "emitter": emitter}
 
 
-def _light_object(obj, problems):
-    light = obj.data
-    if light.type != "AREA" or light.shape not in ("SQUARE", "RECTANGLE"):
-        problems.append((obj.name, "data.type", f"only square/rectangle area lights are exported, got {light.type}"
-                         + (f"/{light.shape}" if light.type == "AREA" else "")))
+def _value(v):
+    if hasattr(v, "__len__") and not isinstance(v, str):
+        return tuple(float(x) for x in v)
+    return float(v) if isinstance(v, (int, float, bool)) else v
+
+
+def _node_inputs(node, warn):
+    """conv.Inputs of a node: each input's unlinked value and the type of a node linked into it."""
+    values = {i.name: (_value(i.default_value), i.links[0].from_node.bl_idname if i.is_linked else None)
+              for i in node.inputs if hasattr(i, "default_value")}
+    return conv.Inputs(values, warn)
+
+
+def _surface(tree, socket="Surface"):
+    """The node linked into the active output's ``socket`` (None when there is none)."""
+    if tree is None:
         return None
+    out = tree.get_output_node("CYCLES") if hasattr(tree, "get_output_node") else None
+    if out is None or socket not in out.inputs or not out.inputs[socket].is_linked:
+        return None
+    return out.inputs[socket].links[0].from_node
+
+
+def _converted_material(obj, mat, warnings):
+    """(bsdf, emitter) of a material without a spectral annotation, from its shader nodes."""
+    where = f"material[{mat.name}]"
+
+    def warn(field, message):
+        warnings.append((obj.name, f"{where}.{field}", message))
+    node = _surface(mat.node_tree)
+    convert = conv.SURFACE_NODES.get(node.bl_idname) if node is not None else None
+    if convert is None:
+        what = f"the {node.bl_idname} node {node.name!r}" if node is not None else "no shader node at the Surface"
+        warn("node_tree" if node is not None else "surface",
+             f"{what} has no IR conversion (textures, mixes and other shaders are not converted): substituted a "
+             f"diffuse of the material's viewport colour")
+        return {"type": "diffuse", "reflectance": conv.colour_reflectance(
+            mat.diffuse_color[:3], "diffuse_color", warn)}, None
+
+    def node_warn(field, message):
+        warn(f"node_tree.nodes[{node.name}].{field}", message)
+    return convert(_node_inputs(node, node_warn), getattr(node, "distribution", None))
+
+
+SPECTRUM_FIELDS = ("kind", "value", "named", "scale", "temperature", "samples")
+
+
+def spectrum_set(props):
+    """Whether any field of a spectrum annotation was ever set (else it holds the defaults)."""
+    return any(props.is_property_set(k) for k in SPECTRUM_FIELDS)
+
+
+def _completed(obj, mat, bsdf, warnings):
+    """An annotated material whose Model was set but not its data (a diffuse without a reflectance
+    spectrum, a named conductor never chosen) takes that data from Blender's own material (a
+    warning), instead of the annotation's defaults (0.5 grey, Cu)."""
+    a = mat.spectral_bench
+    if a.kind == "DIFFUSE" and not spectrum_set(a.reflectance):
+        where = f"material[{mat.name}].spectral_bench.reflectance"
+        converted, _ = _converted_material(obj, mat, [])
+        colour, source = _base_colour(mat)
+        spec = converted["reflectance"] if converted["type"] == "diffuse" else conv.reflectance(colour)[0]
+        warnings.append((obj.name, where, f"Model Diffuse without a reflectance spectrum: Blender's {source} "
+                         f"{conv.fmt(colour)} is used ({spec['type']} reflectance; {conv.UPLIFT_METHOD} where not "
+                         "grey), not the default 0.5"
+                         + ("" if converted["type"] == "diffuse" else f"; Blender's material would convert to a "
+                            f"{converted['type']}: the Model wins")))
+        bsdf = dict(bsdf, reflectance=spec)
+    if a.kind == "CONDUCTOR" and a.conductor_named and not a.is_property_set("conductor"):
+        converted, _ = _converted_material(obj, mat, [])
+        if converted["type"] == "conductor":
+            bsdf = {**{k: v for k, v in bsdf.items() if k != "material"},
+                    **{k: v for k, v in converted.items() if k in ("material", "eta", "k")}}
+            what = converted.get("material") or "eta and k fitted to the base colour"
+            warnings.append((obj.name, f"material[{mat.name}].spectral_bench.conductor", "Model Conductor without a "
+                             f"chosen conductor: Blender's metallic base colour gives {what} (not the default Cu)"))
+        else:
+            warnings.append((obj.name, f"material[{mat.name}].spectral_bench.conductor", "Model Conductor without a "
+                             f"chosen conductor and Blender's material is not metallic (it converts to a "
+                             f"{converted['type']}): the default {a.conductor} is used"))
+    return bsdf
+
+
+def _annotated_emission(obj, mat, warnings):
+    """The emission of an annotated material's Principled BSDF or Emission node (the annotation
+    describes the surface only): an area emitter, warned; None when it emits nothing."""
+    node = _surface(mat.node_tree)
+    key = {"ShaderNodeBsdfPrincipled": "Emission Strength", "ShaderNodeEmission": "Strength"}.get(
+        node.bl_idname if node is not None else None)
+    if key is None or float(node.inputs[key].default_value) <= 0:
+        return None
+
+    def node_warn(field, message):
+        warnings.append((obj.name, f"material[{mat.name}].node_tree.nodes[{node.name}].{field}",
+                         message + " (beside the annotated surface)"))
+    inp = _node_inputs(node, node_warn)
+    colour_key = "Emission Color" if key == "Emission Strength" else "Color"
+    return conv.surface_emission(inp, colour_key, key, node_warn)
+
+
+def _base_colour(mat):
+    """(linear sRGB, where it came from) of a material's colour: its Surface node's Base Color or
+    Color (unlinked value), else the viewport colour."""
+    node = _surface(mat.node_tree)
+    for key in ("Base Color", "Color"):
+        if node is not None and key in node.inputs and hasattr(node.inputs[key], "default_value"):
+            return tuple(node.inputs[key].default_value[:3]), f"{node.name} {key}"
+    return tuple(mat.diffuse_color[:3]), "viewport colour"
+
+
+def light_annotated(light):
+    """Whether a light has a spectral annotation: any field of its radiance (or collimated) was
+    ever set; a light never annotated is converted from its power and colour."""
+    return spectrum_set(light.spectral_bench.radiance) or light.spectral_bench.is_property_set("collimated")
+
+
+def _light_spectrum(obj, factor, quantity, warnings):
+    """IR spectrum of an unannotated light: its colour (or blackbody temperature) times ``factor``,
+    the light's radiometric ``quantity`` for white."""
+    light = obj.data
+    warn = lambda field, message: warnings.append((obj.name, field, message))  # noqa: E731
+    colour = np.asarray(light.color[:3], dtype=np.float64)
+    temperature, field = None, None
+    if getattr(light, "use_temperature", False):
+        temperature, field = float(light.temperature), "data.temperature"
+    node = _surface(light.node_tree) if getattr(light, "use_nodes", False) else None
+    if node is not None:
+        if node.bl_idname != "ShaderNodeEmission":
+            warn("data.node_tree", f"a {node.bl_idname} node at the light's output is not converted: ignored")
+        else:
+            strength = node.inputs["Strength"]
+            if strength.is_linked:
+                warn("data.node_tree.Strength", "linked: its unlinked value is used")
+            factor *= float(strength.default_value)
+            col = node.inputs["Color"]
+            src = col.links[0].from_node if col.is_linked else None
+            if src is not None and src.bl_idname == "ShaderNodeBlackbody" and not src.inputs[0].is_linked:
+                temperature, field = float(src.inputs[0].default_value), f"data.node_tree.nodes[{src.name}].Temperature"
+            elif src is not None:
+                warn("data.node_tree.Color", f"linked to a {src.bl_idname} node: not converted, its unlinked value used")
+                colour = colour * np.asarray(col.default_value[:3])
+            else:
+                colour = colour * np.asarray(col.default_value[:3])
+    if temperature is not None and np.abs(colour - 1).max() < 1e-6:
+        warn(field, f"blackbody {temperature:g} K kept exact (a blackbody spectrum), scaled to {quantity} "
+                    "(Cycles' blackbody colour has luminance 1)")
+        return conv.blackbody(temperature, factor)
+    if temperature is not None:
+        spec, note = conv.tinted_blackbody(temperature, colour, factor)
+        warn(field, f"blackbody {temperature:g} K with the colour {conv.fmt(colour)}, {quantity}: the blackbody "
+                    f"times the colour's smooth uplift (no longer a pure blackbody), {note}")
+        return spec
+    spec = conv.emission(colour, factor)
+    warn("data.color", f"colour {conv.fmt(colour)} x {quantity} -> {conv.emission_note(spec)}")
+    return spec
+
+
+def _light_object(obj, problems, warnings):
+    """(object or None, light or None) of a Blender light: an area light is an emitting shape
+    (``objects``), point, spot and sun are the IR's delta ``lights``."""
+    light = obj.data
+    annotated = light_annotated(light)
+    world = _world(obj)
+    warn = lambda field, message: warnings.append((obj.name, field, message))  # noqa: E731
+    power = float(light.energy) * 2.0 ** float(getattr(light, "exposure", 0.0))
+    if getattr(light, "exposure", 0.0):
+        warn("data.exposure", f"exposure {light.exposure:g}: power (a sun's strength) x 2^exposure = {power:.6g}")
+    if light.type == "AREA":
+        return _area_light(obj, light, world, power, annotated, problems, warn, warnings), None
+    if annotated and light.spectral_bench.collimated:
+        problems.append((obj.name, "spectral_bench.collimated", f"a collimated beam needs a square or rectangle "
+                         f"area light, got a {light.type} light"))
+        return None, None
+    loc, rot, _scale = world.decompose()
+    if light.type != "SUN" and light.shadow_soft_size > 0:
+        warn("data.shadow_soft_size", f"radius {light.shadow_soft_size:g}: the IR's {light.type.lower()} light is a "
+             "point (irradiance beyond the radius unchanged; soft shadows and highlight size lost)")
+    if light.type == "SUN":
+        if light.angle > 0:
+            warn("data.angle", f"angular diameter {math.degrees(light.angle):.4g} deg: the IR's directional light is "
+                 "a delta (sharp shadows)")
+        direction = [_clean(-c) for c in rot.to_matrix().col[2]]  # Blender's sun shines along local -Z
+        e = conv.sun_irradiance(power)
+        spec = spectrum(light.spectral_bench.radiance) if annotated else _light_spectrum(
+            obj, e, f"irradiance E = strength = {e:.6g} W/m^2", warnings)
+        return None, {"type": "directional", "direction": direction, "irradiance": spec}
+    intensity = conv.point_intensity(power)
+    spec = spectrum(light.spectral_bench.radiance) if annotated else _light_spectrum(
+        obj, intensity, f"intensity I = P / (4 pi) = {intensity:.6g} W/sr", warnings)
+    if light.type == "POINT":
+        return None, {"type": "point", "position": [_clean(c) for c in loc], "intensity": spec}
+    cutoff, beam = conv.spot_cone(light.spot_size, light.spot_blend)
+    if light.spot_blend > 0:
+        warn("data.spot_blend", f"blend {light.spot_blend:g}: Blender's smooth falloff over the cone's outer part "
+             f"becomes the IR's linear falloff in angle from {beam:.4g} to {cutoff:.4g} deg")
+    if getattr(light, "use_square", False):
+        warn("data.use_square", "a square spot cone: the IR's spot is round")
+    # Blender's spot points along local -Z, the IR's along +Z: turn it over; no scale
+    to_world = Matrix.LocRotScale(loc, rot, None) @ Matrix.Rotation(math.pi, 4, "X")
+    return None, {"type": "spot", "to_world": _matrix(to_world), "intensity": spec,
+                  "cutoff_angle": _clean(cutoff), "beam_width": _clean(beam)}
+
+
+def _area_light(obj, light, world, power, annotated, problems, warn, warnings):
     sx = light.size / 2
-    sy = (light.size_y if light.shape == "RECTANGLE" else light.size) / 2
-    # Blender area lights emit along local -Z; the IR rectangle emits along +Z: turn it over
+    sy = (light.size_y if light.shape in ("RECTANGLE", "ELLIPSE") else light.size) / 2
+    # Blender area lights emit along local -Z; the IR's shapes emit along +Z: turn it over
     # (180 degrees about X), then size it.
-    local = Matrix.Diagonal((sx, sy, 1.0, 1.0)) @ Matrix.Rotation(math.pi, 4, "X")
-    emitter = {"type": "area", "radiance": spectrum(light.spectral_bench.radiance)}
-    if light.spectral_bench.collimated:
-        emitter = {"type": "collimated", "irradiance": spectrum(light.spectral_bench.radiance)}
-    return {"name": obj.name, "shape": {"type": "rectangle", "to_world": _matrix(_world(obj) @ local)},
-            "bsdf": None, "emitter": emitter}
+    flip = Matrix.Rotation(math.pi, 4, "X")
+    m3 = world.to_3x3()
+    area = (m3.col[0].cross(m3.col[1])).length * 4 * sx * sy  # the world-space area of the 2 sx x 2 sy light
+    if light.shape in ("SQUARE", "RECTANGLE"):
+        shape = {"type": "rectangle", "to_world": _matrix(world @ Matrix.Diagonal((sx, sy, 1.0, 1.0)) @ flip)}
+    else:
+        area *= math.pi / 4
+        verts, faces = conv.ellipse_polygon(sx, sy)
+        shape = {"type": "mesh", "to_world": _matrix(world @ flip), "vertices": [[_clean(c) for c in v] for v in verts],
+                 "faces": faces}
+        warn("data.shape", f"{light.shape.lower()} area light -> a mesh of {conv.DISK_SEGMENTS} triangles of the "
+             "ellipse's exact area")
+    if annotated:
+        emitter = {"type": "area", "radiance": spectrum(light.spectral_bench.radiance)}
+        if light.spectral_bench.collimated:
+            if shape["type"] != "rectangle":
+                problems.append((obj.name, "spectral_bench.collimated", "a collimated beam needs a square or "
+                                 f"rectangle area light, got {light.shape}"))
+            emitter = {"type": "collimated", "irradiance": spectrum(light.spectral_bench.radiance)}
+    else:
+        normalize = getattr(light, "normalize", True)
+        radiance = conv.area_radiance(power, area, normalize)
+        if not obj.visible_camera:
+            warn("visible_camera", "Blender's light is invisible to the camera (Cycles, the default); the IR's area "
+                 "emitter is seen directly wherever the camera sees it")
+        if getattr(light, "spread", math.pi) < math.pi - 1e-6:
+            warn("data.spread", f"spread {math.degrees(light.spread):.4g} deg: the IR's area emitter is Lambertian "
+                 "(180 deg): light outside the spread is added")
+        formula = f"radiance L = P / (pi A) = {power:.6g} / (pi {area:.6g})" if normalize else \
+            f"radiance L = P / pi = {power:.6g} / pi (Normalize off: not divided by the area)"
+        emitter = {"type": "area", "radiance": _light_spectrum(obj, radiance, f"{formula} = {radiance:.6g}", warnings)}
+    return {"name": obj.name, "shape": shape, "bsdf": None, "emitter": emitter}
+
+
+def _converted_world(world, warnings):
+    """The IR environment of a world without an annotation: its Background node's colour x strength
+    as a uniform environment; anything else a warning naming the world and field."""
+    name = f"world[{world.name}]"
+    warn = lambda field, message: warnings.append((name, field, message))  # noqa: E731
+    if _surface(world.node_tree, "Volume") is not None:
+        warn("node_tree.Volume", "a world volume is not converted: ignored")
+    node = _surface(world.node_tree) if getattr(world, "use_nodes", True) else None
+    if node is None:
+        colour, strength = np.asarray(world.color[:3], dtype=np.float64), 1.0
+        field = "color"
+    elif node.bl_idname != "ShaderNodeBackground":
+        warn("node_tree", f"a {node.bl_idname} node at the world's Surface is not converted: no environment")
+        return None
+    else:
+        field = f"node_tree.nodes[{node.name}].Color"
+        strength = float(node.inputs["Strength"].default_value)
+        if node.inputs["Strength"].is_linked:
+            warn(f"node_tree.nodes[{node.name}].Strength", "linked: its unlinked value is used")
+        colour = np.asarray(node.inputs["Color"].default_value[:3], dtype=np.float64)
+        src = node.inputs["Color"].links[0].from_node if node.inputs["Color"].is_linked else None
+        if src is not None and src.bl_idname == "ShaderNodeBlackbody" and not src.inputs[0].is_linked:
+            t = float(src.inputs[0].default_value)
+            warn(field, f"blackbody {t:g} K kept exact, luminance = strength {strength:g} (Cycles' normalisation)")
+            return {"type": "uniform", "radiance": conv.blackbody(t, strength)}
+        if src is not None and src.bl_idname == "ShaderNodeTexEnvironment" and src.image is not None:
+            colour = _image_mean(src.image)
+            warn(field, f"environment map {src.image.name!r}: the IR's environment is uniform: substituted the map's "
+                 f"mean radiance over the sphere {conv.fmt(colour)} (solid-angle weighted, equirectangular)")
+        elif src is not None:
+            warn(field, f"linked to a {src.bl_idname} node: not converted, its unlinked colour {conv.fmt(colour)} used")
+    if strength * colour.max() <= 0:
+        return None
+    spec = conv.emission(colour, strength)
+    warn(field, f"background colour {conv.fmt(colour)} x strength {strength:g} -> a uniform environment of that "
+         f"radiance (Cycles' convention): {conv.emission_note(spec)}")
+    return {"type": "uniform", "radiance": spec}
+
+
+def _image_mean(image):
+    """Mean linear RGB of an equirectangular image over the sphere (rows weighted by cos latitude)."""
+    w, h = image.size
+    px = np.empty(w * h * image.channels, dtype=np.float32)
+    image.pixels.foreach_get(px)
+    rgb = px.reshape(h, w, image.channels)[..., :3].astype(np.float64)
+    lat = (np.arange(h) + 0.5) / h * math.pi - math.pi / 2
+    wts = np.cos(lat)[:, None]
+    return (rgb * wts[..., None]).sum(axis=(0, 1)) / (wts.sum() * w)
 
 
 def _camera(scene, problems):
@@ -196,6 +485,22 @@ def _camera(scene, problems):
     return out
 
 
+def _scene_losses(scene):
+    """(object, field, message) of the scene's and camera's settings that change Blender's image
+    and that the IR has no field for."""
+    cam = scene.camera
+    if cam is not None and cam.type == "CAMERA" and cam.data.dof.use_dof:
+        yield cam.name, "data.dof.use_dof", "depth of field: the IR's camera is a pinhole (all in focus)"
+    if scene.render.use_motion_blur:
+        yield "scene", "render.use_motion_blur", "motion blur: the IR's scene is static (no blur)"
+    if scene.render.film_transparent:
+        yield "scene", "render.film_transparent", ("a transparent film: the IR renders the environment where Blender "
+                                                   "leaves the background transparent")
+    exposure = getattr(getattr(scene, "cycles", None), "film_exposure", 1.0)
+    if abs(exposure - 1.0) > 1e-6:
+        yield "scene", "cycles.film_exposure", f"film exposure {exposure:g}: the IR's pixels are radiance (exposure 1)"
+
+
 def extract_scene(scene):
     """IR dict of one Blender scene; raises validate.SceneError naming every problem."""
     problems = []
@@ -217,24 +522,42 @@ def extract_scene(scene):
     if a.output != "RGB":
         out["render"]["output"] = a.output.lower()
     world = scene.world
+    warnings = list(_scene_losses(scene))
     if world is not None and world.spectral_bench.enabled:
         out["environment"] = {"type": "uniform", "radiance": spectrum(world.spectral_bench.radiance)}
+    elif world is not None:
+        out["environment"] = _converted_world(world, warnings)
+    if world is not None and world.spectral_bench.enabled and not spectrum_set(world.spectral_bench.radiance):
+        out["environment"] = _converted_world(world, warnings)
+        warnings.append((f"world[{world.name}]", "spectral_bench.radiance", "Uniform Environment on without a "
+                         "radiance spectrum: Blender's world colour x strength is used, not the default 0.5"))
+    lights = []
     depsgraph = scene.view_layers[0].depsgraph if scene.view_layers else None
     taken = []
     for obj in sorted(scene.objects, key=lambda o: o.name):
         if obj.hide_render:
             continue
+        light = None
         if obj.type == "MESH":
-            item = _mesh_object(obj, depsgraph, problems)
+            item = _mesh_object(obj, depsgraph, problems, warnings)
         elif obj.type == "LIGHT":
-            item = _light_object(obj, problems)
+            item, light = _light_object(obj, problems, warnings)
         else:
+            if obj.type not in ("CAMERA", "EMPTY"):
+                warnings.append((obj.name, "type", f"a {obj.type} object is not exported (only meshes and lights)"))
+            elif obj.type == "EMPTY" and obj.instance_type == "COLLECTION" and obj.instance_collection is not None:
+                warnings.append((obj.name, "instance_collection", f"the instanced collection "
+                                 f"{obj.instance_collection.name!r} is not exported (instances are not)"))
             continue
-        if item is not None:
-            named = _named(obj.name, taken, names.object_problem)
-            item = {**named, **{k: v for k, v in item.items() if k != "name"}}
-            taken.append(named["name"])
-            out["objects"].append(item)
+        for entry, target in ((item, out["objects"]), (light, lights)):
+            if entry is not None:
+                named = _named(obj.name, taken, names.object_problem)
+                target.append({**named, **{k: v for k, v in entry.items() if k != "name"}})
+                taken.append(named["name"])
+    if lights:
+        out["lights"] = lights
+    if warnings:
+        out["warnings"] = [{"object": o, "field": f, "message": m} for o, f, m in warnings]
     if problems:
         raise validate.SceneError(out["name"], problems)
     validate.check(out)

@@ -17,6 +17,11 @@ Conventions (every writer follows them):
 - Spectra and their radiometric normalisation: see spectra.py.
 - A dielectric's ``int_ior`` is a number or an IOR model n(lambda) (Sellmeier, Cauchy, a named
   glass): see dispersion.py. A model needs "dispersion" (and "spectral").
+- Delta ``lights`` (optional): ``point`` (``intensity``, W/sr-like: E = I / d^2), ``spot`` (a
+  point light masked to a cone about local +Z of its ``to_world``: full within ``beam_width``,
+  linear in angle to 0 at ``cutoff_angle``, Mitsuba's spot) and ``directional`` (``irradiance``
+  on a surface facing it, travelling along ``direction``). They are never seen directly.
+- ``warnings`` (optional): what an exporter converted or lost, for people; never part of the image.
 - An emitter is ``area`` (Lambertian, ``radiance``) or ``collimated`` (a rectangle emitting only
   along its +Z normal, ``irradiance`` across the beam: Mitsuba's directionalarea); a collimated
   beam is reached only by light tracing (``render.integrator`` "ptracer").
@@ -84,6 +89,9 @@ def derived_needs(scene):
             needs.add("spectral")
         if bsdf.get("type") == "dielectric" and isinstance(bsdf.get("int_ior"), dict):
             needs.update(("dispersion", "spectral"))  # an IOR model: n varies with wavelength
+    for light in scene.get("lights", []):
+        if spectral(light.get("intensity")) or spectral(light.get("irradiance")):
+            needs.add("spectral")
     return sorted(needs)
 
 

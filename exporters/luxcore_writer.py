@@ -22,6 +22,11 @@ Materials (LuxCore 2.x names, src/slg/scene/parsematerials.cpp):
   the radiance is exactly rgb) and theta 90 (TriangleLight: emits on the front side only, like
   the IR's +Z-only rectangles); an emitter without BSDF is a black matte.
 - The uniform environment: ``constantinfinite`` with ``color = rgb``, gain 1 (radiance rgb).
+- Delta lights: ``point`` (gain 4 pi: LuxCore's point intensity is gain x color / (4 pi)), ``spot``
+  (coneangle = cutoff, conedeltaangle = cutoff - beam_width; intensity gain x color; its falloff
+  is LuxCore's, an approximation unless beam = cutoff) and ``sharpdistant`` (irradiance gain x
+  color): all measured on a diffuse plane against the closed form (tests/test_blender_conversion.py;
+  LuxCore's point and spot read 1.0e-5 and 1.6e-5 high, its ray offsets).
 
 Render settings (render.cfg): PATHCPU with the RANDOM sampler (independent, uniformly jittered
 samples; adaptive strength 0), ``batch.haltspp`` = the scene's spp (the backend polls the session:
@@ -35,12 +40,19 @@ Camera: LuxCore's perspective camera maps film row y to raster row height - y - 
 scene one row lower than in Mitsuba and Cycles); the screen window written here is moved down
 by one pixel to render the IR's framing.
 """
+import math
 from pathlib import Path
 
 import numpy as np
 
 from . import mesh_io, names, rgb_scene
 
+
+
+# gain per delta light type so that the IR's intensity / irradiance is gain x color in LuxCore's terms
+# (measured on a diffuse plane, LuxCore 2.11: a point light's intensity is color / (4 pi), a spot's
+# and a sharpdistant's color itself)
+LIGHT_GAIN = {"point": 4 * math.pi, "spot": 1.0, "directional": 1.0}
 
 
 def _v(x):
@@ -119,6 +131,24 @@ def config_lines(rgb, seed=0):
             'film.outputs.0.type = "RGB"', 'film.outputs.0.filename = "render.exr"']
 
 
+def light_lines(k, light):
+    """SDL lines of a delta light (``lightK``): point, spot and sharpdistant with power 0 and
+    efficacy 0 (the radiometric value is gain x color; see the module docstring)."""
+    p = f"scene.lights.light{k}"
+    kind = light["type"]
+    rgb = light["irradiance" if kind == "directional" else "intensity"]
+    out = [f"{p}.color = {_v(rgb)}", f"{p}.gain = {_v(LIGHT_GAIN[kind])} {_v(LIGHT_GAIN[kind])} {_v(LIGHT_GAIN[kind])}"]
+    if kind == "directional":
+        return [f'{p}.type = "sharpdistant"', f"{p}.direction = {_v(light['direction'])}"] + out
+    out += [f"{p}.power = 0", f"{p}.efficency = 0"]
+    if kind == "point":
+        return [f'{p}.type = "point"', f"{p}.position = {_v(light['position'])}"] + out
+    m = np.asarray(light["to_world"], dtype=np.float64)
+    return [f'{p}.type = "spot"', f"{p}.position = {_v(m[:3, 3])}", f"{p}.target = {_v(m[:3, 3] + m[:3, 2])}",
+            f"{p}.coneangle = {_v(light['cutoff_angle'])}",
+            f"{p}.conedeltaangle = {_v(light['cutoff_angle'] - light['beam_width'])}"] + out
+
+
 def write(rgb, out_dir):
     """Write the RGB scene ``rgb`` into ``out_dir``; returns the path of render.cfg."""
     out = Path(out_dir)
@@ -139,6 +169,9 @@ def write(rgb, out_dir):
         mesh_io.write_ply(out / rel, verts, faces, normals=normals)
         lines += [f'scene.shapes.{name}.type = "mesh"', f'scene.shapes.{name}.ply = "{rel}"',
                   f'scene.objects.{name}.shape = "{name}"', f'scene.objects.{name}.material = "{name}"']
+    for k, light in enumerate(rgb.get("lights", [])):
+        lines.append(f"# {names.comment_text(light['name'])}")
+        lines += light_lines(k, light)
     (out / "scene.scn").write_text("\n".join(lines) + "\n")
     cfg = out / "render.cfg"
     cfg.write_text("\n".join(config_lines(rgb)) + "\n")

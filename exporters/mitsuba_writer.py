@@ -150,6 +150,24 @@ class _Writer:
             em = ET.SubElement(node, "emitter", type="area")
             self.spectrum(em, "radiance", obj["emitter"]["radiance"], f"{names.file_stem(obj['name'])}_radiance")
 
+    def light(self, root, light):
+        """A delta light: Mitsuba's point, spot (its falloff is the IR's) and directional emitters."""
+        stem = names.file_stem(light["name"])
+        kind = light["type"]
+        em = ET.SubElement(root, "emitter", type=kind, id=light["name"])
+        if kind == "point":
+            p = [repr(float(c)) for c in light["position"]]
+            ET.SubElement(em, "point", name="position", x=p[0], y=p[1], z=p[2])
+        elif kind == "spot":
+            _transform(em, light["to_world"])
+            ET.SubElement(em, "float", name="cutoff_angle", value=repr(float(light["cutoff_angle"])))
+            ET.SubElement(em, "float", name="beam_width", value=repr(float(light["beam_width"])))
+        else:
+            d = [repr(float(c)) for c in light["direction"]]
+            ET.SubElement(em, "vector", name="direction", x=d[0], y=d[1], z=d[2])
+        key = "irradiance" if kind == "directional" else "intensity"
+        self.spectrum(em, key, light[key], f"{stem}_{key}")
+
     def write(self):
         sc, r = self.scene, self.scene["render"]
         root = ET.Element("scene", version="3.0.0")
@@ -193,6 +211,8 @@ class _Writer:
             self.spectrum(em, "radiance", env["radiance"], "environment_radiance")
         for obj in sc["objects"]:
             self.shape(root, obj)
+        for light in sc.get("lights", []):
+            self.light(root, light)
         if polarizer:
             root.insert(1, ET.Comment(
                 f" renders S0..S3; the camera's ideal linear polariser at {float(polarizer['angle'])!r} deg "

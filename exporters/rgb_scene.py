@@ -5,6 +5,8 @@ Shared by the Cycles and LuxCore backends, so both render the same reduced scene
 (``build``) is a JSON-compatible dict:
     name, render {width, height, spp, max_depth}, camera {to_world, fov, fov_axis},
     environment {rgb} | None, objects [{name, shape, material, emission}],
+    lights [{name, type (point, spot, directional), intensity | irradiance (rgb), and the IR's
+    position | to_world, cutoff_angle, beam_width | direction}],
     film_scale (1, or 1/2 for an approximated polariser), stokes (bool: add S0 = RGB, S1..S3 = 0),
     reduced [{object, field, rgb, note}], approximated [text]
 where material is {type: diffuse, albedo} | {type: conductor, eta, k, distribution, alpha, fit}
@@ -31,9 +33,9 @@ SPHERE_LEVEL = 6  # icosphere subdivisions for the renderers without analytic sp
 POLARIZER_TRANSMITTANCE = 0.5  # an ideal linear polariser passes half of unpolarised light (Malus)
 
 
-def problems(scene, distributions):
+def problems(scene, distributions, light_types=frozenset()):
     """[(object, field, message, approximation or None)]: what an RGB renderer with the given
-    microfacet ``distributions`` cannot express in ``scene``."""
+    microfacet ``distributions`` and delta ``light_types`` cannot express in ``scene``."""
     out = []
     cam = scene["camera"]
     if cam.get("polarizer"):
@@ -51,6 +53,14 @@ def problems(scene, distributions):
     if depth == 1:
         out.append(("render", "max_depth", "max_depth 1 (emitters seen directly, nothing lit) has no "
                     "counterpart: both renderers always sample direct light at the first hit", None))
+    for light in scene.get("lights", []):
+        if light["type"] not in light_types:
+            out.append((light["name"], "type", f"a {light['type']} light: no mapping to this renderer's lights yet "
+                        "(Mitsuba renders it)", None))
+        elif light["type"] == "spot" and light["beam_width"] < light["cutoff_angle"]:
+            out.append((light["name"], "beam_width", "a spot's linear falloff in angle between beam_width and "
+                        "cutoff_angle has no counterpart",
+                        "rendered with the renderer's own smooth falloff over the same angles"))
     for obj in scene["objects"]:
         rough = (obj.get("bsdf") or {}).get("roughness")
         if rough and rough["alpha"] > 0:
@@ -142,10 +152,19 @@ def _material(obj, distributions, reduced):
     return out
 
 
-def build(scene, distributions, approximate=False):
+def _light(light, reduced):
+    """A delta light as an RGB renderer takes it: its spectrum reduced to RGB, its geometry as is."""
+    key = "irradiance" if light["type"] == "directional" else "intensity"
+    rgb, note = rgb_reduction.emission_rgb(light[key])
+    reduced.append({"object": light["name"], "field": key, "rgb": rgb.round(8).tolist(), "note": note})
+    geometry = {k: light[k] for k in ("position", "to_world", "direction", "cutoff_angle", "beam_width") if k in light}
+    return {"name": light["name"], "type": light["type"], key: rgb.tolist(), **geometry}
+
+
+def build(scene, distributions, approximate=False, light_types=frozenset()):
     """The RGB scene (see the module docstring). Raises ValueError naming object and field when
     something cannot be expressed (and, with ``approximate``, has no stated approximation)."""
-    found = problems(scene, distributions)
+    found = problems(scene, distributions, light_types)
     blocking = [p for p in found if not approximate or p[3] is None]
     if blocking:
         raise ValueError("; ".join(f"{o}.{f}: {m}" for o, f, m, _ in blocking))
@@ -174,6 +193,7 @@ def build(scene, distributions, approximate=False):
             "camera": {"to_world": cam["to_world"], "fov": float(cam["fov"]), "fov_axis": cam.get("fov_axis", "x")},
             "environment": None if env_rgb is None else {"rgb": env_rgb},
             "objects": objects,
+            "lights": [_light(light, reduced) for light in scene.get("lights", [])],
             "film_scale": POLARIZER_TRANSMITTANCE if (cam.get("name", "camera"), "polarizer") in fields else 1.0,
             "stokes": ("render", "output") in fields,
             "reduced": reduced,

@@ -118,6 +118,11 @@ def _schema_problems(data):
             # a name that is itself wrong (not a string, a path) never labels the object
             obj = name if names.problem(name) is None else f"objects[{path[1]}]"
             path = path[2:]
+        elif len(path) >= 2 and path[0] == "lights" and isinstance(path[1], int):
+            lights = data.get("lights", [])
+            name = lights[path[1]].get("name") if isinstance(lights[path[1]], dict) else None
+            obj = name if names.problem(name) is None else f"lights[{path[1]}]"
+            path = path[2:]
         elif path and path[0] in ("camera", "render", "environment"):
             obj = path[0]
             path = path[1:]
@@ -149,15 +154,16 @@ def _name_problems(scene):
         if why:
             yield "camera", "name", why
     seen = {}
-    for i, obj in enumerate(scene["objects"]):
+    for where, obj in [(f"objects[{i}]", o) for i, o in enumerate(scene["objects"])] + \
+            [(f"lights[{i}]", o) for i, o in enumerate(scene.get("lights", []))]:
         why = names.object_problem(obj["name"])
         if why:
-            yield f"objects[{i}]", "name", f"{why}; got {obj['name']!r}"
+            yield where, "name", f"{why}; got {obj['name']!r}"
         elif obj["name"].lower() in seen:
-            yield obj["name"], "name", (f"is used by two objects (objects[{seen[obj['name'].lower()]}] and "
-                                        f"objects[{i}]; names are compared ignoring case: they name files)")
+            yield obj["name"], "name", (f"is used by two objects ({seen[obj['name'].lower()]} and "
+                                        f"{where}; names are compared ignoring case: they name files)")
         else:
-            seen[obj["name"].lower()] = i
+            seen[obj["name"].lower()] = where
 
 
 def render_limit(field):
@@ -214,6 +220,30 @@ def _value_problems(scene):
                 yield name, "emitter.type", "a collimated emitter must be a rectangle (it emits along its normal)"
         if not bsdf and not em:
             yield name, "bsdf", "object has neither a BSDF nor an emitter annotation"
+    for light in scene.get("lights", []):
+        yield from ((light["name"], f, m) for f, m in light_problems(light))
+
+
+# a delta light's spectrum and geometry fields, by its type
+LIGHT_SPECTRUM = {"point": "intensity", "spot": "intensity", "directional": "irradiance"}
+
+
+def light_problems(light):
+    key = LIGHT_SPECTRUM[light["type"]]
+    yield from spectra.check(light[key], key)
+    if light["type"] == "point" and not all(_finite(c) and abs(c) <= MAX_COORDINATE for c in light["position"]):
+        yield "position", f"must be finite and within +-{MAX_COORDINATE:g}, got {light['position']!r}"
+    if light["type"] == "directional":
+        d = light["direction"]
+        if not all(_finite(c) for c in d) or not 0 < math.hypot(*d) < math.inf:
+            yield "direction", f"must be a finite non-zero vector, got {d!r}"
+    if light["type"] == "spot":
+        yield from _transform_problems(light["to_world"], "to_world")
+        cut, beam = light["cutoff_angle"], light["beam_width"]
+        if not _finite(cut) or not 0 < cut <= 90:
+            yield "cutoff_angle", f"must be in (0, 90] degrees, got {cut!r}"
+        elif not _finite(beam) or not 0 <= beam <= cut:
+            yield "beam_width", f"must be in [0, cutoff_angle = {cut}] degrees, got {beam!r}"
 
 
 # Scene units: the canonical scenes span a few tens of units; beyond these bounds single-precision

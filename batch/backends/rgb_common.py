@@ -27,6 +27,7 @@ class RgbBackend:
     availability, write(rgb scene, out_dir) -> path and render."""
     name = label = ""
     distributions = frozenset()
+    light_types = frozenset()  # the IR's delta light types (point, spot, directional) it renders
 
     def __init__(self, executable=None, approximate=False):
         self.executable = executable
@@ -38,7 +39,7 @@ class RgbBackend:
         return (self.name,)
 
     def mode_for(self, scene):
-        found = rgb_scene.problems(scene, self.distributions)
+        found = rgb_scene.problems(scene, self.distributions, self.light_types)
         blocking = [p for p in found if not self.approximate or p[3] is None]
         if blocking:
             hint = any(p[3] for p in blocking)
@@ -48,7 +49,7 @@ class RgbBackend:
 
     def export(self, scene, out_dir):
         """Reduce ``scene`` to RGB and write it in this renderer's format into ``out_dir``."""
-        rgb = rgb_scene.build(scene, self.distributions, approximate=self.approximate)
+        rgb = rgb_scene.build(scene, self.distributions, approximate=self.approximate, light_types=self.light_types)
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
         return self.write(rgb, out)

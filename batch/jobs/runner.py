@@ -496,6 +496,10 @@ def _run(opts, out, deviations, t0):
                      ", ".join(f"{w}x{h}" for _, (w, h) in sizes))
     batch = Run(opts, out, deviations)
     log.info("writing to %s", batch.out)
+    for name, sc in scenes:  # what each scene's export converted or lost (a Blender scene without annotations)
+        for w in (sc.get("warnings", []) if isinstance(sc, dict) else []):  # a scene that failed to load: no dict
+            log.warning("conversion (%s): %s.%s: %s", name, *(t if t.isprintable() else repr(t)
+                                                             for t in (w["object"], w["field"], w["message"])))
     if not scenes:
         log.error("no scene matches the selection")
         batch.save()

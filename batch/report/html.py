@@ -96,6 +96,12 @@ def _reference_problems(run):
     return out
 
 
+def _conversions(run):
+    """The scene's conversion warnings (metrics.json ``scene_warnings``) as lines."""
+    return [f"conversion: {_text(w.get('object'))}.{_text(w.get('field'))}: {_text(w.get('message'))}"
+            for w in _list(run.get("scene_warnings")) if isinstance(w, dict)]
+
+
 def _summary_rows(runs, anchors, listed=None):
     rows = []
     order = sorted((i for i in range(len(runs)) if listed is None or id(runs[i]) in listed), key=lambda i: (ORDER.get(_css(runs[i].get("status")), 9),
@@ -495,7 +501,7 @@ def _viewer(out, run, deviations=None):
             "tev": _tev(run, folder, ref if ref_url else None, out), "regions": json.dumps(regions),
             "marks": json.dumps(_prism_marks(run)), "prism": _prism_line(run), "baseline": _baseline(out, run),
             "numbers": [f"{_text(k)}: {_fmt(v)}" for k, v in _dict(run.get("metrics")).items()],
-            "reference_problems": _reference_problems(run)}
+            "reference_problems": _reference_problems(run), "conversions": _conversions(run)}
 
 
 def _section(text, heading):

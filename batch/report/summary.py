@@ -78,6 +78,23 @@ def reference_problems_table(runs):
     return "\n".join(out) + "\n"
 
 
+def conversions_table(runs):
+    """Every scene's conversion warnings (what its export from Blender converted or lost), once per
+    scene: the scene, the object and field, and what happened."""
+    seen, out = set(), []
+    for r in runs:
+        if r.get("scene") in seen or not r.get("scene_warnings"):
+            continue
+        seen.add(r.get("scene"))
+        out += [f"| {_cell(r['scene'])} | {_cell(w.get('object'))} | {_cell(w.get('field'))} | {_cell(w.get('message'))} |"
+                for w in r["scene_warnings"]]
+    if not out:
+        return ""
+    return "\n".join(["", "## Conversions from the source scene", "",
+                      "What each scene's export converted or could not carry over (docs/scene-format.md, section 11).",
+                      "", "| scene | object | field | conversion or loss |", "|---|---|---|---|", *out]) + "\n"
+
+
 def counts(runs):
     out = {}
     for r in runs:
@@ -191,7 +208,7 @@ def write(out_dir, runs, elapsed_s, sweeps=None, stability=None, studies=None):
     if studies and not runs:  # a study instead of the judged jobs
         pairs = [r for r in studies if r.get("de00")]
         text = (f"# Spectral benchmark study\n\n{len(pairs)} render pair{'s' if len(pairs) != 1 else ''} compared in "
-                f"{elapsed_s:.1f} s.\n" + studies_table(studies))
+                f"{elapsed_s:.1f} s.\n" + studies_table(studies) + conversions_table(studies))
         Path(out_dir, "summary.md").write_text(text)
         return text
     c = counts(runs)
@@ -204,7 +221,7 @@ def write(out_dir, runs, elapsed_s, sweeps=None, stability=None, studies=None):
             "the reference's; block test, Sidak-corrected) and the analytic probes (ground truth from no renderer). "
             "known: fails exactly as a recorded deviation (known_deviations.toml); unjudged: nothing could judge it. "
             "Images and diffs: `<scene>/results/<backend>/`; all numbers: `metrics.json`.\n\n"
-            + _against_baseline(runs) + table(runs) + "\n" + reference_problems_table(runs) + rgb_comparison(runs) + sweeps_table(sweeps) + stability_table(stability)
-            + studies_table(studies))
+            + _against_baseline(runs) + table(runs) + "\n" + reference_problems_table(runs) + conversions_table(runs)
+            + rgb_comparison(runs) + sweeps_table(sweeps) + stability_table(stability) + studies_table(studies))
     Path(out_dir, "summary.md").write_text(text)
     return text

@@ -228,6 +228,8 @@ def finish(results, out, visible=VISIBLE_DE00):
         for job, record in (jr for jr in items if jr[0]["extra"]["role"] == "rgb"):
             row = {"scene": name, "light": light, "rgb": job["backend"], "rgb_mode": job["mode"],
                    "spectral_mode": spectral[0]["mode"] if spectral else None}
+            if job["source_scene"].get("warnings"):  # what the export from Blender converted or lost
+                row["scene_warnings"] = [dict(w) for w in job["source_scene"]["warnings"]]
             failed = [r for r in (record, spectral[1] if spectral else None) if r is None or r.get("status") != "rendered"]
             if failed:
                 row.update(status="failed", reason="; ".join((r or {}).get("reason") or "the spectral render is missing"

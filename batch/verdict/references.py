@@ -70,12 +70,15 @@ def fingerprint(scene):
     behind named spectra, conductors and mesh files resolved."""
     data = _resolved(copy.deepcopy({k: v for k, v in scene.items() if not k.startswith("_")}), scene.get("_base_dir"))
     data["render"].pop("spp", None)
-    for key in ("description", "name", "case"):
+    for key in ("description", "name", "case", "warnings"):
         data.pop(key, None)
     data["camera"].pop("name", None)
     for obj in data["objects"]:
         obj.pop("name", None)
     data["objects"].sort(key=lambda o: json.dumps(o, sort_keys=True))
+    for light in data.get("lights", []):
+        light.pop("name", None)
+    data.get("lights", []).sort(key=lambda o: json.dumps(o, sort_keys=True))
     return hashlib.sha256(ir_json.dumps(data).encode()).hexdigest()
 
 

@@ -39,6 +39,7 @@ class CyclesBackend(RgbBackend):
     name = "cycles"
     label = "Cycles"
     distributions = frozenset({"ggx", "beckmann"})
+    light_types = frozenset({"point", "spot", "directional"})
 
     def availability(self):
         if self.executable:

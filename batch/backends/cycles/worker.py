@@ -33,6 +33,10 @@ intern/cycles/kernel/svm/closure.h for the roughness conventions):
   spheres but a ray inside one never finds its exit (measured on ggx_glass: the refracted view of
   the light through the bottom of the sphere was black, max |z| 988 against the reference).
 - World: Background colour rgb / strength, strength = the largest component (radiance = rgb).
+- Delta lights (make_light): point and spot lights of power 4 pi I (Cycles' point intensity is
+  P / (4 pi), measured), radius 0; a spot's size is twice the cutoff angle and its blend
+  1 - beam_width / cutoff (Cycles' smoothstep falloff: an approximation unless beam = cutoff); a
+  sun of strength E, angle 0.
 """
 import argparse
 import json
@@ -161,6 +165,35 @@ def make_material(bpy, name, material, emission):
     return m
 
 
+def make_light(bpy, sc, light):
+    """A delta light as a Cycles light (conventions measured with bpy 5.0.1, docs/scene-format.md
+    section 11): point and spot of power P = 4 pi I, radius 0; sun of strength E, angle 0; colour
+    rgb / the largest component."""
+    import mathutils
+    kind = light["type"]
+    rgb = light["irradiance" if kind == "directional" else "intensity"]
+    strength, colour = _strength(rgb)
+    data = bpy.data.lights.new(light["name"], {"point": "POINT", "spot": "SPOT", "directional": "SUN"}[kind])
+    data.color = colour
+    if kind == "directional":
+        data.energy, data.angle = strength, 0.0
+        d = mathutils.Vector(light["direction"]).normalized()
+        matrix = (-d).to_track_quat("Z", "Y").to_matrix().to_4x4()  # the sun shines along its local -Z
+    else:
+        data.energy, data.shadow_soft_size = 4 * math.pi * strength, 0.0
+        if kind == "spot":
+            data.spot_size = math.radians(2 * light["cutoff_angle"])
+            data.spot_blend = 1.0 - light["beam_width"] / light["cutoff_angle"]
+            data.use_soft_falloff = False
+            # the IR's spot points along its local +Z, Blender's along -Z
+            matrix = mathutils.Matrix(light["to_world"]) @ mathutils.Matrix.Rotation(math.pi, 4, "X")
+        else:
+            matrix = mathutils.Matrix.Translation(light["position"])
+    obj = bpy.data.objects.new(light["name"], data)
+    sc.collection.objects.link(obj)
+    obj.matrix_world = matrix
+
+
 def build(rgb, blend_path):
     import bpy
     import mathutils
@@ -205,6 +238,8 @@ def build(rgb, blend_path):
         me.materials.append(mat)
         o = bpy.data.objects.new(obj["name"], me)
         sc.collection.objects.link(o)
+    for light in rgb.get("lights", []):
+        make_light(bpy, sc, light)
     sc["spectral_bench"] = json.dumps({k: rgb[k] for k in ("film_scale", "stokes", "approximated")})
     bpy.ops.wm.save_as_mainfile(filepath=str(blend_path), compress=True)
 

@@ -33,6 +33,7 @@ class LuxCoreBackend(RgbBackend):
     name = "luxcore"
     label = "LuxCore"
     distributions = frozenset({"ggx"})
+    light_types = frozenset({"point", "spot", "directional"})
 
     def availability(self):
         if self.executable:
