@@ -26,9 +26,9 @@ die() { local code=$1; shift; say "error: $*"; exit "$code"; }
 SRC=$1
 PREFIX=${2:-$REPO/.art}
 [ -e "$SRC" ] || die 2 "ART source '$SRC' does not exist (give the path of ART's source tarball or folder; this script never downloads it)"
-SRC=$(cd "$(dirname "$SRC")" && pwd)/$(basename "$SRC")
+SRC=$(cd "$(dirname "$SRC")" && pwd -P)/$(basename "$SRC")
 mkdir -p "$PREFIX" || die 2 "cannot create PREFIX '$PREFIX'"
-PREFIX=$(cd "$PREFIX" && pwd)
+PREFIX=$(cd "$PREFIX" && pwd -P)
 
 # ---- Debian packages (the list of ART's own .gitlab-ci.yml; gcc, gobjc and GNUstep stay needed
 # at render time: artist compiles every .arm scene)
