@@ -30,36 +30,6 @@ SRC=$(cd "$(dirname "$SRC")" && pwd -P)/$(basename "$SRC")
 mkdir -p "$PREFIX" || die 2 "cannot create PREFIX '$PREFIX'"
 PREFIX=$(cd "$PREFIX" && pwd -P)
 
-# ---- Debian packages (the list of ART's own .gitlab-ci.yml; gcc, gobjc and GNUstep stay needed
-# at render time: artist compiles every .arm scene)
-PACKAGES="cmake ninja-build pkg-config make gcc g++ gobjc gobjc++ libtiff-dev liblcms2-dev libgnustep-base-dev libgsl-dev libopenexr-dev"
-missing_packages() {
-  local p out=""
-  for p in $PACKAGES; do
-    dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || out="$out $p"
-  done
-  echo "${out# }"
-}
-if command -v dpkg-query >/dev/null; then
-  MISSING=$(missing_packages)
-  if [ -n "$MISSING" ]; then
-    if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
-      say "installing Debian packages: $MISSING"
-      # shellcheck disable=SC2086
-      apt-get install -y -qq --no-install-recommends $MISSING >/dev/null 2>&1 \
-        || { apt-get update -qq >/dev/null 2>&1 && apt-get install -y -qq --no-install-recommends $MISSING >/dev/null; } \
-        || die 3 "apt-get could not install: $MISSING"
-    else
-      die 3 "ART needs these Debian packages; install them as root, then rerun:
-  apt-get install $MISSING"
-    fi
-  fi
-else
-  for tool in cmake ninja gcc pkg-config; do
-    command -v "$tool" >/dev/null || die 3 "not a Debian system and '$tool' is missing; ART needs: $PACKAGES (or your system's equivalents)"
-  done
-fi
-
 # ---- the source: a folder is used in place; a tarball is unpacked once into PREFIX/.build/src
 is_art_tree() {  # $1: a folder; true when it is ART's source top level
   [ -f "$1/CMakeLists.txt" ] && grep -qE '^[[:space:]]*project[[:space:]]*\([[:space:]]*ART[[:space:]]*\)' "$1/CMakeLists.txt" \
@@ -96,6 +66,37 @@ else
   fi
 fi
 if [ "$(cat "$BUILD/source.stamp" 2>/dev/null)" != "$STAMP" ]; then rm -rf "$BUILD/cmake"; fi
+
+# ---- Debian packages, once the source is known good (a wrong source fails before any install):
+# the list of ART's own .gitlab-ci.yml; gcc, gobjc and GNUstep stay needed at render time (artist
+# compiles every .arm scene)
+PACKAGES="cmake ninja-build pkg-config make gcc g++ gobjc gobjc++ libtiff-dev liblcms2-dev libgnustep-base-dev libgsl-dev libopenexr-dev"
+missing_packages() {
+  local p out=""
+  for p in $PACKAGES; do
+    dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || out="$out $p"
+  done
+  echo "${out# }"
+}
+if command -v dpkg-query >/dev/null; then
+  MISSING=$(missing_packages)
+  if [ -n "$MISSING" ]; then
+    if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+      say "installing Debian packages: $MISSING"
+      # shellcheck disable=SC2086
+      apt-get install -y -qq --no-install-recommends $MISSING >/dev/null 2>&1 \
+        || { apt-get update -qq >/dev/null 2>&1 && apt-get install -y -qq --no-install-recommends $MISSING >/dev/null; } \
+        || die 3 "apt-get could not install: $MISSING"
+    else
+      die 3 "ART needs these Debian packages; install them as root, then rerun:
+  apt-get install $MISSING"
+    fi
+  fi
+else
+  for tool in cmake ninja gcc pkg-config; do
+    command -v "$tool" >/dev/null || die 3 "not a Debian system and '$tool' is missing; ART needs: $PACKAGES (or your system's equivalents)"
+  done
+fi
 
 # ---- configure, build, install
 JOBS=$(nproc 2>/dev/null || echo 1)
