@@ -389,3 +389,28 @@ def test_art_brewster_and_polariser_convention(golden, tmp_path, angle, turned, 
     p = next(x for x in probes.evaluate(sc, names, img, stderr=se, passes=2) if x["name"].startswith("brewster"))
     assert p["pass"], p
     assert (sum(p["measured"]) > 0.5) == expect_bright
+
+
+@pytest.mark.slow
+@needs_artist
+def test_panel_shows_art_runs_like_any_other(art_runs):
+    """The Blender panel over the ART run's folder: ART is available (found through .art/env.json
+    or PATH, as the runner finds it), every job is a row with its status, and the render, the
+    reference and, for a polarised scene, each Stokes component of ART's spectral film load as images."""
+    from conftest import run_bpy
+    out = art_runs[1]
+    got = run_bpy(f"""
+        from spectral_bench.addon import benchmark
+        out = {str(out)!r}
+        rows = [(scene, backend, run["status"]) for scene, backend, run in benchmark.result_rows(out)]
+        images = {{}}
+        for kind in ("render", "reference", "S0", "S1", "S2", "S3"):
+            img = benchmark.load_result_image(out, "polarizing_spheres", "art", kind)
+            px = img.pixels[:]
+            images[kind] = [img.size[0], img.size[1], max(abs(v) for i, v in enumerate(px) if i % 4 != 3)]  # not alpha
+        print(json.dumps({{"available": benchmark.availability("art"), "rows": rows, "images": images}}))
+    """)
+    assert got["available"] == [True, ""], got["available"]
+    assert sorted(map(tuple, got["rows"])) == sorted((s, "art", r["status"]) for s, r in art_runs[2].items())
+    for kind, (w, h, top) in got["images"].items():
+        assert (w, h) == (128, 128) and top > 0, (kind, w, h, top)
