@@ -196,7 +196,6 @@ def test_env_file_gives_artist_and_its_child_environment_only(tmp_path, monkeypa
     env_file = tmp_path / "env.json"
     env_file.write_text(json.dumps({"artist": str(artist), "source": "x", "env": env}))
     monkeypatch.setattr(art_backend, "ENV_FILE", env_file)
-    monkeypatch.setattr(art_backend.built_art, "__defaults__", (env_file,))
     monkeypatch.setenv("PATH", "/usr/bin:/bin")
     monkeypatch.setenv("LD_LIBRARY_PATH", "/opt/x")
     monkeypatch.delenv("ART_RESOURCE_PATH", raising=False)

@@ -39,11 +39,12 @@ PREPENDED = ("PATH", "LD_LIBRARY_PATH")  # the env file's entries go before the 
 FIXED = {"LC_NUMERIC": "C", "ART_VIEWER": "true"}  # every artist child: decimal points, no viewer
 
 
-def built_art(env_file=ENV_FILE):
-    """(artist, {variable: value}) from scripts/build_art.sh's env file, or None when there is
-    none or its artist is gone (a build deleted since): then PATH is searched."""
+def built_art(env_file=None):
+    """(artist, {variable: value}) from scripts/build_art.sh's env file (default ENV_FILE), or None
+    when there is none, it is unreadable or its artist is gone (a build deleted since): then PATH
+    is searched."""
     try:
-        record = json.loads(Path(env_file).read_text())
+        record = json.loads(Path(env_file or ENV_FILE).read_text())
         artist, env = Path(record["artist"]), record["env"]
     except (OSError, ValueError, KeyError, TypeError):
         return None
