@@ -28,7 +28,13 @@ tracer and no collimated emitter; of the IOR models only Sellmeier (and named gl
 Sellmeier) and constants; and its outside medium is vacuum. Named conductors are written with the
 IR's own eta/k tables (Mitsuba's data, exporters/data), not ART's material presets, so both
 renderers render the same metal.
+
+Test hook (tests/test_art.py, README "Developing"): ``SPECTRAL_BENCH_TEST_ART_ILLUMINANT_SCALE=F``
+in the environment multiplies every emitter's and the environment's brightness by F (a planted
+error of the ART route, which the ART render tests must detect), and the .arm says so in a
+comment. Unset, nothing changes.
 """
+import os
 from pathlib import Path
 
 import numpy as np
@@ -44,6 +50,22 @@ ART_ILLUMINANTS = {"cie_a": "CIE_ILLUMINANT_A", "cie_d50": "CIE_ILLUMINANT_D50",
                    "cie_fl7": "CIE_ILLUMINANT_FL7", "cie_fl8": "CIE_ILLUMINANT_FL8", "cie_fl11": "CIE_ILLUMINANT_FL11"}
 ART_TABLE_AT_560NM = 100.0  # A and the D series
 ART_CROSSTALK_RANGE = (300.0, 799.0)  # nm: ART's ArCrosstalk500, 500 cells of 1 nm from 300 nm
+TEST_HOOK = "SPECTRAL_BENCH_TEST_ART_ILLUMINANT_SCALE"
+
+
+def planted_scale():
+    """The test hook's factor on every emitter (1.0 when unset); a value that is not a positive
+    number is an error naming the variable."""
+    text = os.environ.get(TEST_HOOK)
+    if not text:
+        return 1.0
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not (value > 0 and np.isfinite(value)):
+        raise ValueError(f"{TEST_HOOK}={text!r}: expected a positive number (a test hook's planted factor)")
+    return value
 
 
 def _num(x):
@@ -69,6 +91,7 @@ class _Writer:
         self.lines = []
         fluorescent = "fluorescence" in ir.derived_needs(scene)
         self.spectra_from = fluorescence.FLUORESCENT_SPECTRA_FROM if fluorescent else spectra.LAMBDA_MIN
+        self.planted = planted_scale()
 
     def fluorescent(self, name, b):
         """CONST_FLUORESCENT_COLOUR under a Lambertian reflector (None when ART cannot take it)."""
@@ -91,10 +114,10 @@ class _Writer:
                 f"            VEC2D({_num(fl['absorption_width'])} NM, {_num(fl['emission_width'])} NM)))")
 
     def emission(self, spec):
-        """(colour, brightness) of an emitted spectrum."""
+        """(colour, brightness) of an emitted spectrum (times the test hook's planted factor)."""
         if spec.get("type") == "named" and spec["name"] in ART_ILLUMINANTS:
-            return ART_ILLUMINANTS[spec["name"]], spec.get("scale", 1.0) / raw_table_at_560nm(spec["name"])
-        return self.colour(spec), 1.0
+            return ART_ILLUMINANTS[spec["name"]], self.planted * spec.get("scale", 1.0) / raw_table_at_560nm(spec["name"])
+        return self.colour(spec), self.planted
 
     def colour(self, spec):
         if spectra.is_constant(spec):
@@ -248,6 +271,8 @@ class _Writer:
     def write(self):
         sc = self.scene
         self.lines = [f"// {names.comment_text(sc['name'])} ({names.comment_text(sc.get('case'))}), written from the scene IR v{ir.VERSION} by spectral_bench",
+                      *([f"// {TEST_HOOK}={self.planted!r}: every emitter's brightness is scaled (a planted error)"]
+                        if self.planted != 1.0 else []),
                       f"#ifndef SAMPLES\n#define SAMPLES {sc['render']['spp']}\n#endif", "",
                       "ARM_MAIN_FUNCTION(scene)", "{"]
         parts = []

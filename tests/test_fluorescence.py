@@ -14,7 +14,6 @@ import copy
 import json
 import os
 import re
-import shutil
 import subprocess
 import sys
 import textwrap
@@ -29,8 +28,7 @@ from spectral_bench.batch.verdict import compare, probes, raycast, references, s
 from spectral_bench.exporters import (art_writer, fluorescence, ir, ir_json, mitsuba_writer, spectra,
                                       validate)
 
-ARTIST = os.environ.get("ART_ARTIST") or shutil.which("artist")
-needs_artist = pytest.mark.skipif(not ARTIST, reason="no ART 'artist' on PATH (set ART_ARTIST): ART renders not run")
+from test_art import EXEC as ART_EXEC, needs_artist  # ART as the runner finds it (.art/env.json, PATH, ART_ARTIST)
 LONE = "fluorescent_sphere_lone"
 PROBE_SIZE, PROBE_SPP = 64, 64
 
@@ -402,7 +400,7 @@ def test_writers_model_no_more_than_a_scene_needs(golden, tmp_path):
 def test_art_renders_the_450nm_spheres_dark_and_red(golden, tmp_path):
     """ART (fluorescent natively) shows the thesis' two 450 nm cases the same way."""
     out = tmp_path / "art"
-    proc = run_batch("-r", "art", "-s", MONO[0], "-s", MONO[1], "--scale", 0.125, "--spp", 64, "--no-flip", "-o", out)
+    proc = run_batch("-r", "art", *ART_EXEC, "-s", MONO[0], "-s", MONO[1], "--scale", 0.125, "--spp", 64, "--no-flip", "-o", out)
     runs = {r["scene"]: r for r in metrics(out)["runs"]}
     assert all(r["mode"] == "spectral46" and r["image"] for r in runs.values()), (runs, proc.stderr[-2000:])
     dark, _ = _sphere_rgb(out, runs[MONO[0]], golden[MONO[0]])

@@ -25,6 +25,7 @@ pass k keeps seed ``seed + k * SEED_STRIDE`` and the samples per pixel of the fi
 """
 import math
 import os
+import re
 import shutil
 import time
 from dataclasses import dataclass, field
@@ -49,9 +50,14 @@ class PassStopped(BackendFailure):
     """A pass ended because the run was interrupted (``stop_all``; not retried)."""
 
 
+# terminal control: escape sequences (ART colours its errors even without a terminal) and other
+# control characters, which a reason (metrics.json, summary.md, the report) must not carry
+TERMINAL_CONTROL = re.compile(r"\x1b\[[0-?]*[ -/]*[@-~]|\x1b[@-_]|[\x00-\x08\x0b-\x1f\x7f]")
+
+
 def tail(text, lines=3, chars=600):
     """The last lines of a renderer's output that say something (errors first), for a reason."""
-    all_lines = [l for l in (text or "").strip().splitlines() if l.strip()]
+    all_lines = [l for l in TERMINAL_CONTROL.sub("", (text or "").replace("\r", "\n")).strip().splitlines() if l.strip()]
     errors = [l for l in all_lines if "error" in l.lower() or "exception" in l.lower()][-lines:]
     return " | ".join(errors or all_lines[-lines:])[-chars:]
 

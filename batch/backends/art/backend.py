@@ -1,9 +1,12 @@
 """ART backend: runs the user's ``artist`` (ART 2.1.2) on a copy of the exported folder.
 
 artist compiles the .arm with gcc at render time, edits it in place and writes its outputs
-beside it, so every render works on a copy. It needs ART_RESOURCE_PATH and ART_LIBRARY_PATH
-(and the library on LD_LIBRARY_PATH); when they are unset they are derived from the
-executable's install prefix (<prefix>/bin/artist, <prefix>/lib). Options used:
+beside it, so every render works on a copy. Where artist comes from, first found: ``-e art=PATH``
+(or the settings file's exec), the env file ``.art/env.json`` that scripts/build_art.sh writes
+(its artist and the environment its child gets), ``artist`` on PATH. It needs ART_RESOURCE_PATH
+and ART_LIBRARY_PATH (and the library on LD_LIBRARY_PATH): the env file's, else, when unset,
+derived from the executable's install prefix (<prefix>/bin/artist, <prefix>/lib); always
+LC_NUMERIC=C (ART parses and prints decimal points) and ART_VIEWER=true (headless). Options used:
 ``-b`` (no viewer), ``-wp d65``, ``-s46e`` (46 spectral bands of 10 nm, 320-780 nm, instead of
 the default 8), ``-seed`` (reproducible passes), ``-p`` when the scene needs polarisation. Every
 scene is written out as ART's spectral EXR (S0, or S0..S3 with signs kept, per band; the band
@@ -12,6 +15,7 @@ linear sRGB by batch/spectral_exr.py as the IR defines colour (exporters/colorim
 and, for Stokes output, S0.R ... S3.B.
 ART's own sRGB EXR is not used: it maps out-of-gamut colours into the gamut.
 """
+import json
 import os
 import re
 import shutil
@@ -30,19 +34,50 @@ NATIVE = {"spectral", "polarization", "dispersion", "fluorescence"}  # dispersio
 # fluorescence: CONST_FLUORESCENT_COLOUR (art_writer)
 
 
+# written by scripts/build_art.sh; SPECTRAL_BENCH_ART_ENV names another (.ci/run: one for the tests only)
+ENV_FILE = Path(os.environ.get("SPECTRAL_BENCH_ART_ENV") or Path(__file__).resolve().parents[3] / ".art" / "env.json")
+PREPENDED = ("PATH", "LD_LIBRARY_PATH")  # the env file's entries go before the inherited ones
+FIXED = {"LC_NUMERIC": "C", "ART_VIEWER": "true"}  # every artist child: decimal points, no viewer
+
+
+def built_art(env_file=None):
+    """(artist, {variable: value}) from scripts/build_art.sh's env file (default ENV_FILE), or None
+    when there is none, it is unreadable or its artist is gone (a build deleted since): then PATH
+    is searched."""
+    try:
+        record = json.loads(Path(env_file or ENV_FILE).read_text())
+        artist, env = Path(record["artist"]), record["env"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    if not (artist.is_file() and os.access(artist, os.X_OK)) or not isinstance(env, dict):
+        return None
+    return artist, {str(k): str(v) for k, v in env.items()}
+
+
 def find_artist(executable=None):
+    """The artist to run: ``executable`` when given, else the built one (env file), else PATH."""
     if executable:
         return Path(executable) if Path(executable).is_file() else None
+    built = built_art()
+    if built:
+        return built[0]
     found = shutil.which("artist")
     return Path(found) if found else None
 
 
 def artist_env(artist):
+    """The environment of an artist child (this process's own is left as it is)."""
     env = dict(os.environ)
+    built = built_art()
+    if built and built[0].resolve() == Path(artist).resolve():
+        for k, v in built[1].items():
+            env[k] = os.pathsep.join(p for p in (v, env.get(k)) if p) if k in PREPENDED else v
     prefix = Path(artist).resolve().parent.parent
     env.setdefault("ART_LIBRARY_PATH", str(prefix / "lib"))
     env.setdefault("ART_RESOURCE_PATH", str(prefix / "lib" / "ART_Resources"))
-    env["LD_LIBRARY_PATH"] = os.pathsep.join(p for p in (env["ART_LIBRARY_PATH"], env.get("LD_LIBRARY_PATH")) if p)
+    if env["ART_LIBRARY_PATH"] not in env.get("LD_LIBRARY_PATH", "").split(os.pathsep):
+        env["LD_LIBRARY_PATH"] = os.pathsep.join(p for p in (env["ART_LIBRARY_PATH"], env.get("LD_LIBRARY_PATH")) if p)
+    env.update(FIXED)
     return env
 
 
@@ -79,9 +114,9 @@ class ArtBackend:
 
     def availability(self):
         if self.artist is None:
-            where = self.executable or "PATH"
-            return False, (f"artist (ART 2.1.2) not found in {where}: give it with -e art=PATH, "
-                           "the settings file's exec, or PATH")
+            where = self.executable or f"{ENV_FILE.parent.name}/{ENV_FILE.name} or PATH"
+            return False, (f"artist (ART 2.1.2) not found in {where}: build it with scripts/build_art.sh SRC "
+                           "(ART's source), or give it with -e art=PATH, the settings file's exec, or PATH")
         return True, ""
 
     def mode_for(self, scene):
