@@ -289,10 +289,15 @@ def verdict_lines(v):
     if not v["comparable"]:
         return [f"  cannot judge the new reference against the old: {v['reason']}"]
     t = v["test"]
+    block_ok = t.get("block_pass", t["pass"])
     lines = [f"  new against old on both noises ({t['name']}, alpha {t['alpha']}, {t['tests']} tests of "
              f"{t['block']}x{t['block']} px blocks at {v['judged_at'][0]}x{v['judged_at'][1]}): p_min = {t['p_min']:.3g} "
-             f"{'>=' if t['pass'] else '<'} threshold {t['threshold']:.3g}, max |z| = {t['z_max']:.2f}: "
-             + ("the same within noise" if v["same"] else "they DIFFER beyond noise")]
+             f"{'>=' if block_ok else '<'} threshold {t['threshold']:.3g}, max |z| = {t['z_max']:.2f}"]
+    sc = t.get("scale_test")
+    if isinstance(sc, dict) and sc.get("p_min") is not None:  # the pooled scale test, which sees a uniform change
+        lines.append(f"  scale test (Sidak over channels): p_min = {sc['p_min']:.3g} "
+                     f"{'>=' if sc.get('pass') else '<'} threshold {sc['threshold']:.3g}")
+    lines[-1] += ": " + ("the same within noise" if v["same"] else "they DIFFER beyond noise")
     ratios = ", ".join(f"{c} {r[0]:.5f} +- {r[1]:.5f}" if r else f"{c} -" for c, r in v["ratio"].items())
     lines.append(f"  mean ratio new/old (+- standard error): {ratios}")
     d = v["detectable"]
