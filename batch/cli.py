@@ -37,7 +37,7 @@ DEFAULTS = {
     "references": None, "known": None, "list": False, "art_ggx": False, "sweep": False, "ladder": None, "sweep_modes": None, "stability": False,
     "approximate": False, "renderers": None, "cluster": None, "cluster_timeout": DEFAULT_CLUSTER_TIMEOUT, "dashboard": None, "resume": None,
     "junit": None,
-    "baseline": None,
+    "baseline": None, "film": "rgb",
 }
 
 
@@ -238,6 +238,15 @@ def _mode(v):
 _MODE = text_kind(_mode, "mode")
 
 
+FILMS = ("rgb", "cmf")  # --film (batch/backends/mitsuba/backend.py FILMS)
+
+
+def _film(v):
+    if v not in FILMS:
+        raise ValueError(f"is not a film: one of {', '.join(FILMS)}")
+    return v
+
+
 def _device(v):
     if v not in DEVICES:
         raise ValueError(f"is not a device: one of {', '.join(DEVICES)}")
@@ -255,7 +264,7 @@ TYPES = {
     "cluster": text_kind(_cluster, "address"), "cluster_timeout": number(0, 3600, lo_open=True),
     "dashboard": text_kind(_dashboard, "[HOST]:PORT"), "resume": text_kind(_nonempty, "path"),
     "renderers": text_kind(_nonempty, "path"), "junit": text_kind(_nonempty, "path"),
-    "baseline": text_kind(_nonempty, "path"),
+    "baseline": text_kind(_nonempty, "path"), "film": text_kind(_film, "film"),
 }
 
 
@@ -340,6 +349,10 @@ def parser():
                     help="sample counts of the sweep (default 4,16,64,256)")
     ap.add_argument("--sweep-modes", type=T["sweep_modes"], metavar="MODE,...",
                     help="backend modes to sweep (e.g. llvm_ad_spectral,scalar_spectral,llvm_ad_rgb)")
+    ap.add_argument("--film", type=T["film"], metavar="rgb|cmf",
+                    help="-r mitsuba: the film spectra are integrated by: rgb, Mitsuba's own (its 5 nm CIE tables and "
+                         "matrix: the recorded deviation mitsuba-cie-y-normalisation; default), or cmf, the scene format's "
+                         "colour (CIE 1931 at 1 nm, the IEC 61966-2-1 matrix; unpolarised scenes only)")
     ap.add_argument("--stability", action="store_true",
                     help="also run the stability case (grazing GGX, roughness and IOR furnaces, Malus)")
     ap.add_argument("--approximate", action="store_true",
