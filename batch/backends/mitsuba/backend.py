@@ -95,6 +95,9 @@ class MitsubaBackend:
         mode, why = self._mode_for(scene)
         if mode is None or self.film == "rgb":
             return mode, why
+        if scene.get("render", {}).get("integrator") == "ptracer":
+            return None, ("the CMF film (specfilm) under the particle tracer: measured 1.2 % of the expected flux on "
+                          "dispersion_prism's screen (prism energy probe), so light-traced scenes keep Mitsuba's RGB film")
         if "polarization" in scene.get("needs", []) or mode.endswith("_polarized"):
             return None, ("the CMF film (specfilm) records unpolarised radiance only (Film::prepare_sample takes an "
                           "UnpolarizedSpectrum): a polarised scene keeps Mitsuba's RGB film")
