@@ -248,7 +248,7 @@ def existing_state(out, name, scene):
 
 
 # -- replacing: the old reference against the new -------------------------------------------------
-SHOWN = ("backend", "mode", "spp", "passes", "resolution", "scale", "versions", "date")
+SHOWN = ("backend", "mode", "colour", "spp", "passes", "resolution", "scale", "versions", "date")
 
 
 def _cell(value):
