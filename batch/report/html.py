@@ -31,7 +31,7 @@ import numpy as np
 
 from .. import exr, previews, records
 from ..verdict.status import ORDER
-from . import grouping
+from . import grouping, results
 
 STOKES_VIEWS = ["S0", "S1", "S2", "S3", "DoP", "AoP"]
 DATA_JS = "view.js"
@@ -105,7 +105,7 @@ def _summary_rows(runs, anchors, listed=None):
         m, pr = _dict(r.get("metrics")), _list(r.get("probes"))
         probes = f"{sum(isinstance(p, dict) and p.get('pass') is True for p in pr)}/{len(pr)} pass" if pr else ""
         rows.append({"css": _css(r.get("status")), "anchor": anchors.get(i), "scene": _text(r.get("scene")),
-                     "backend": _text(r.get("backend")), "mode": _text(r.get("mode")), "status": _text(r.get("status")),
+                     "backend": _text(r.get("backend")), "mode": _text(results.mode_text(r)), "status": _text(r.get("status")),
                      "spp": _text(r.get("spp") or ""), "time": _fmt(r.get("time_s"), "{:.2f}"),
                      "rmse": _fmt(m.get("rmse")), "relmse": _fmt(m.get("relmse")), "mape": _fmt(m.get("mape")),
                      "flip": _fmt(m.get("flip")), "probes": probes, "reason": _text(r.get("reason")),

@@ -110,3 +110,10 @@ def judged_without_reference(run):
     """True for a render judged (by its probes) although no usable reference was found: never a
     plain ok (its reason says why the reference could not be used)."""
     return bool(run.get("reference_problem")) and run.get("status") not in ("unjudged", "skipped", "unsupported")
+
+
+def mode_text(run):
+    """A run entry's mode as shown: Mitsuba's variant, with its film where it is not Mitsuba's own
+    (--film cmf: the scene format's colour)."""
+    mode = run.get("mode") or ""
+    return f"{mode} (cmf film)" if run.get("film") == "cmf" else str(mode)

@@ -3,7 +3,7 @@ from pathlib import Path
 
 from ..records import noise_test_text
 from ..verdict.status import rank
-from .results import judged_without_reference
+from .results import judged_without_reference, mode_text
 
 
 def _num(x, fmt="{:.4g}"):
@@ -26,7 +26,7 @@ def table(runs):
         res = "x".join(map(str, r["resolution"])) if r.get("resolution") else ""
         reason = _cell(r.get("reason") or "")
         shown = f"{r['status']} (without reference)" if judged_without_reference(r) else r["status"]
-        rows.append(f"| {_cell(shown)} | {_cell(r['scene'])} | {_cell(r['backend'])} | {_cell(r.get('mode') or '')} | {_num(r.get('spp'), '{}')} "
+        rows.append(f"| {_cell(shown)} | {_cell(r['scene'])} | {_cell(r['backend'])} | {_cell(mode_text(r))} | {_num(r.get('spp'), '{}')} "
                     f"| {res} | {_num(r.get('time_s'), '{:.2f}')} | {_num(m.get('rmse'))} | {_num(m.get('relmse'))} "
                     f"| {_num(m.get('mape'))} | {_num(m.get('flip'))} | {test} | {reason[:300]} |")
     return "\n".join(rows)
