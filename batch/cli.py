@@ -37,7 +37,7 @@ DEFAULTS = {
     "references": None, "known": None, "list": False, "art_ggx": False, "sweep": False, "ladder": None, "sweep_modes": None, "stability": False,
     "approximate": False, "renderers": None, "cluster": None, "cluster_timeout": DEFAULT_CLUSTER_TIMEOUT, "dashboard": None, "resume": None,
     "junit": None,
-    "baseline": None, "study": None, "illuminants": None, "visible_de00": 1.0,
+    "baseline": None, "study": None, "illuminants": None, "visible_de00": 1.0, "film": "rgb",
 }
 
 
@@ -273,6 +273,15 @@ def _flip_native(v):
     raise ValueError(f"must be true, false, \"on\", \"off\" or \"auto\", got {v!r}")
 
 
+FILMS = ("rgb", "cmf")  # --film (batch/backends/mitsuba/backend.py FILMS)
+
+
+def _film(v):
+    if v not in FILMS:
+        raise ValueError(f"is not a film: one of {', '.join(FILMS)}")
+    return v
+
+
 def _device(v):
     if v not in DEVICES:
         raise ValueError(f"is not a device: one of {', '.join(DEVICES)}")
@@ -293,6 +302,7 @@ TYPES = {
     "baseline": text_kind(_nonempty, "path"), "flip": Kind("on|off|auto", _flip_text, _flip_native),
     "study": text_kind(_study, "study"), "illuminants": _comma_list(_ILLUMINANT, "NAME,..."),
     "visible_de00": number(0, 100, lo_open=True),
+    "film": text_kind(_film, "film"),
 }
 
 
@@ -390,6 +400,10 @@ def parser():
                          "LED-RGB1, LED-V1, LED-V2)")
     ap.add_argument("--visible-de00", type=T["visible_de00"], metavar="DE",
                     help="--study spectral-vs-rgb: the CIEDE2000 95th percentile that counts as visible (default 1.0)")
+    ap.add_argument("--film", type=T["film"], metavar="rgb|cmf",
+                    help="-r mitsuba: the film spectra are integrated by: rgb, Mitsuba's own (its 5 nm CIE tables and "
+                         "matrix: the recorded deviation mitsuba-cie-y-normalisation; default), or cmf, the scene format's "
+                         "colour (CIE 1931 at 1 nm, the IEC 61966-2-1 matrix; unpolarised scenes only)")
     ap.add_argument("--stability", action="store_true",
                     help="also run the stability case (grazing GGX, roughness and IOR furnaces, Malus)")
     ap.add_argument("--approximate", action="store_true",

@@ -155,6 +155,9 @@ def parser():
     ap.add_argument("-e", "--exec", action="append", type=T["exec"], metavar="[NAME=]PATH",
                     help="the renderer's executable, e.g. mitsuba=/opt/mitsuba/mitsuba (a bare PATH is -r's)")
     ap.add_argument("--variant", type=T["variant"], help="force a Mitsuba variant (-r mitsuba; default: cheapest that models the scene)")
+    ap.add_argument("--film", type=T["film"], default="rgb", metavar="rgb|cmf",
+                    help="-r mitsuba: rgb (Mitsuba's own film; default) or cmf (the scene format's colour: CIE 1931 "
+                         "at 1 nm and the IEC 61966-2-1 matrix; unpolarised scenes only)")
     ap.add_argument("--device", type=T["device"], default="auto", metavar="cpu|gpu|auto",
                     help="-r mitsuba: render on the GPU (cuda_ad_* variants; an error where CUDA does not render), the "
                          "CPU, or the GPU where a CUDA probe renders (default auto)")
@@ -183,6 +186,23 @@ def parser():
     ap.add_argument("--min-samples", type=T["min_samples"], help="with --replace: samples pooled per block of that test "
                     "(default 65536, as the runner's; larger blocks see smaller uniform changes)")
     return ap
+
+
+def colour_route(backend, mode):
+    """How a reference's RGB was made (its provenance's ``colour``): the film, the observer and
+    the matrix, as far as this project knows them for the backend."""
+    from spectral_bench.batch.backends.mitsuba import spectral as mitsuba_spectral
+    if backend.name == "mitsuba":
+        if backend.options.get("film") == "cmf":
+            return {"film": mitsuba_spectral.CMF_FILM, "observer": "cie1931", "matrix": "IEC 61966-2-1"}
+        if mode and ("mono" in mode or mode.endswith("_rgb")):
+            return {"film": f"Mitsuba hdrfilm ({mode}): constant spectra, exact for the flat spectrum of the scene",
+                    "observer": "cie1931", "matrix": "IEC 61966-2-1"}
+        return {"film": f"Mitsuba hdrfilm ({mode})", "observer": "mitsuba3 (5 nm CIE 1931, 1 / 106.7502)",
+                "matrix": "Mitsuba's xyz_to_srgb (six digits)"}
+    decl = getattr(backend, "decl", None)
+    observer = decl.get("observer") if isinstance(decl, dict) else None  # a declared spectral renderer's
+    return {"film": f"{backend.name} ({mode})", "observer": observer or "the renderer's own", "matrix": "unknown"}
 
 
 def chosen_backend(args):
@@ -219,7 +239,10 @@ def chosen_backend(args):
         raise Usage("--accept: only with --replace (it lets a reference be replaced by one that differs beyond noise)")
     if args.device == "gpu" and name != "mitsuba":
         raise Usage(f"--device gpu: Mitsuba's CUDA variants, but -r {name} renders the references")
+    if args.film != "rgb" and name != "mitsuba":
+        raise Usage(f"--film {args.film}: a Mitsuba film, but -r {name} renders the references")
     opts = {"renderer": [name], "exec": execs, "variant": args.variant, "device": args.device, "art_ggx": args.art_ggx,
+            "film": args.film,
             "approximate": False, "renderers": declared or None}
     return runner.make_backend(name, opts), name
 
@@ -260,7 +283,7 @@ def existing_state(out, name, scene):
 
 
 # -- replacing: the old reference against the new -------------------------------------------------
-SHOWN = ("backend", "mode", "spp", "passes", "resolution", "scale", "versions", "date")
+SHOWN = ("backend", "mode", "colour", "spp", "passes", "resolution", "scale", "versions", "date")
 
 
 def _cell(value):
@@ -400,6 +423,7 @@ def _make(args, argv, out, held, backend):
                 "time_s": round(seconds, 2), "date": dt.datetime.now().isoformat(timespec="seconds"),
                 "versions": versions, "engine": args.cluster or "local",
                 "machine": f"{platform.machine()} {platform.system()}, {os.cpu_count()} cores", "command": command}
+        prov["colour"] = colour_route(backend, mode)
         if getattr(backend, "decl", None) is not None:
             prov["declaration"] = backend.decl
         if backend.options.get("executable"):

@@ -231,8 +231,10 @@ def new_entry(job, **kw):
     """A metrics.json run record for a render job (batch/records.py ``run_record``: the one builder)."""
     from .. import records
     r = job["scene"]["render"]
+    film = job["backend_options"].get("film")  # Mitsuba's: its own film or the scene format's colour
     return records.run_record(job["scene_name"], job["scene"], job["backend"], mode=job["mode"], spp=job["spp"],
-                              resolution=[r["width"], r["height"]], job=job_id(job), **kw)
+                              resolution=[r["width"], r["height"]], job=job_id(job), **({"film": film} if film else {}),
+                              **kw)
 
 
 def describe(exc):

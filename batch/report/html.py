@@ -111,7 +111,7 @@ def _summary_rows(runs, anchors, listed=None):
         m, pr = _dict(r.get("metrics")), _list(r.get("probes"))
         probes = f"{sum(isinstance(p, dict) and p.get('pass') is True for p in pr)}/{len(pr)} pass" if pr else ""
         rows.append({"css": _css(r.get("status")), "anchor": anchors.get(i), "scene": _text(r.get("scene")),
-                     "backend": _text(r.get("backend")), "mode": _text(r.get("mode")), "status": _text(r.get("status")),
+                     "backend": _text(r.get("backend")), "mode": _text(results.mode_text(r)), "status": _text(r.get("status")),
                      "spp": _text(r.get("spp") or ""), "time": _fmt(r.get("time_s"), "{:.2f}"),
                      "rmse": _fmt(m.get("rmse")), "relmse": _fmt(m.get("relmse")), "mape": _fmt(m.get("mape")),
                      "flip": _fmt(m.get("flip")), "probes": probes or ("none" if r.get("status") in results.JUDGED else ""),

@@ -158,3 +158,8 @@ def judged_by(run):
     parts.append(f"reference by {maker}" if maker else "no reference")
     line = "; ".join(parts)
     return f"{line} ({SELF_CHECK})" if checked_against_itself(run) else line
+def mode_text(run):
+    """A run entry's mode as shown: Mitsuba's variant, with its film where it is not Mitsuba's own
+    (--film cmf: the scene format's colour)."""
+    mode = run.get("mode") or ""
+    return f"{mode} (cmf film)" if run.get("film") == "cmf" else str(mode)

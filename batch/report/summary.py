@@ -4,7 +4,7 @@ from pathlib import Path
 from ..markdown import cell as _cell
 from ..records import noise_test_text
 from ..verdict.status import rank
-from .results import JUDGED, SELF_CHECK, checked_against_itself, judged_without_reference, probes_measured
+from .results import JUDGED, SELF_CHECK, checked_against_itself, judged_without_reference, mode_text, probes_measured
 
 
 def _num(x, fmt="{:.4g}"):
@@ -28,7 +28,7 @@ def table(runs):
         reason = _cell(r.get("reason") or "")
         shown = (f"{r['status']} (without reference)" if judged_without_reference(r) else
                  f"{r['status']} (checked against itself)" if checked_against_itself(r) else r["status"])
-        rows.append(f"| {_cell(shown)} | {_cell(r['scene'])} | {_cell(r['backend'])} | {_cell(r.get('mode') or '')} | {_num(r.get('spp'), '{}')} "
+        rows.append(f"| {_cell(shown)} | {_cell(r['scene'])} | {_cell(r['backend'])} | {_cell(mode_text(r))} | {_num(r.get('spp'), '{}')} "
                     f"| {res} | {_num(r.get('time_s'), '{:.2f}')} | {_num(m.get('rmse'))} | {_num(m.get('relmse'))} "
                     f"| {_num(m.get('mape'))} | {_num(m.get('flip'))} | {test} | {probes_cell(r)} | {reason[:300]} |")
     if any(checked_against_itself(r) for r in runs):

@@ -40,15 +40,17 @@ class Deviation:
     scenes: list = field(default_factory=lambda: ["*"])
     modes: list = field(default_factory=lambda: ["*"])
     versions: list = field(default_factory=lambda: ["*"])
+    films: list = field(default_factory=lambda: ["*"])  # the render's film (Mitsuba: rgb or cmf; "" for others)
     scale: float = 1.0
     scale_se: float = 0.0
     observer: str = None
 
-    def applies(self, scene, backend, mode, version):
+    def applies(self, scene, backend, mode, version, film=None):
         def any_match(value, patterns):
             return any(fnmatch.fnmatchcase(str(value or ""), p) for p in patterns)
         return (fnmatch.fnmatchcase(backend, self.backend) and any_match(scene, self.scenes)
-                and any_match(mode, self.modes) and any_match(version, self.versions))
+                and any_match(mode, self.modes) and any_match(version, self.versions)
+                and any_match(film, self.films))
 
     def explains(self, check_name):
         return any(fnmatch.fnmatchcase(check_name, p) for p in self.checks)
@@ -84,4 +86,5 @@ def load(path=None):
 def applicable(deviations, entry):
     """The deviations that apply to one job record (scene, backend, mode, renderer version)."""
     version = " ".join(f"{k} {v}" for k, v in sorted((entry.get("versions") or {}).items()))
-    return [d for d in deviations if d.applies(entry["scene"], entry["backend"], entry.get("mode"), version)]
+    film = entry.get("film") or ("rgb" if entry["backend"] == "mitsuba" else "")  # a record from before films
+    return [d for d in deviations if d.applies(entry["scene"], entry["backend"], entry.get("mode"), version, film)]

@@ -32,7 +32,7 @@ import numpy as np
 from ....exporters import camera_filter, colorimetry, mitsuba_writer
 from ... import exr
 from .. import warm
-from . import cuda, llvm
+from . import cuda, llvm, spectral as spectral_film
 from .. import passes as passes_mod
 from ..passes import BackendFailure
 
@@ -43,6 +43,9 @@ NATIVE = {"spectral", "polarization"}
 PLUGIN_NEEDS = {"thin_film", "dispersion", "fluorescence"}  # sb_thin_film_conductor; sb_dispersive_dielectric
 # (unpolarised); sb_fluorescent_diffuse + sb_fluorescent_path (unpolarised spectral variants)
 INTEGRATORS = ("path", "ptracer")  # the IR's render.integrator values Mitsuba renders
+# the film the exported scene renders through: Mitsuba's hdrfilm (its 5 nm CIE tables and rounded
+# matrix: known_deviations.toml mitsuba-cie-y-normalisation) or the IR's colour (spectral.py cmf_xml)
+FILMS = ("rgb", "cmf")
 
 
 def scalar_twin(variant):
@@ -56,14 +59,17 @@ class MitsubaBackend:
     name = "mitsuba"
     formats = ("mitsuba",)
 
-    def __init__(self, executable=None, force_variant=None, device="auto"):
+    def __init__(self, executable=None, force_variant=None, device="auto", film="rgb"):
+        if film not in FILMS:
+            raise ValueError(f"film {film!r}: one of {', '.join(FILMS)}")
         if device not in cuda.DEVICES:
             raise ValueError(f"device {device!r}: one of {', '.join(cuda.DEVICES)}")
         self.executable = executable
         self.force_variant = force_variant
         self.device = device
         # what rebuilds this backend (jobs are data; a job rebuilt elsewhere probes its own CUDA)
-        self.options = {"executable": executable, "force_variant": force_variant, "device": device}
+        self.film = film
+        self.options = {"executable": executable, "force_variant": force_variant, "device": device, "film": film}
 
     def availability(self):
         """(available, reason)."""
@@ -84,7 +90,20 @@ class MitsubaBackend:
         return cuda.refusal(self.device)
 
     def mode_for(self, scene):
-        """(variant, None) or (None, reason the scene is unsupported)."""
+        """(variant, None) or (None, reason the scene is unsupported). With the CMF film, a spectral
+        variant always (specfilm integrates spectra) and never a polarised scene."""
+        mode, why = self._mode_for(scene)
+        if mode is None or self.film == "rgb":
+            return mode, why
+        if scene.get("render", {}).get("integrator") == "ptracer":
+            return None, ("the CMF film (specfilm) under the particle tracer: measured 1.2 % of the expected flux on "
+                          "dispersion_prism's screen (prism energy probe), so light-traced scenes keep Mitsuba's RGB film")
+        if "polarization" in scene.get("needs", []) or mode.endswith("_polarized"):
+            return None, ("the CMF film (specfilm) records unpolarised radiance only (Film::prepare_sample takes an "
+                          "UnpolarizedSpectrum): a polarised scene keeps Mitsuba's RGB film")
+        return mode.replace("_mono", "_spectral").replace("_rgb", "_spectral"), None
+
+    def _mode_for(self, scene):
         needs = set(scene.get("needs", []))
         missing = sorted(needs - NATIVE - PLUGIN_NEEDS)
         if missing:
@@ -129,7 +148,11 @@ class MitsubaBackend:
         return prefix + "rgb"
 
     def export(self, scene, out_dir):
-        return mitsuba_writer.write(scene, out_dir)
+        path = mitsuba_writer.write(scene, out_dir)
+        if self.film == "cmf":  # the IR's own colour: X, Y, Z against the 1 nm CMFs (spectral.py)
+            path = Path(path)
+            path.write_text(spectral_film.cmf_xml(path.read_text(), str(path)))
+        return path
 
     def render(self, xml_path, variant, spp, out_exr, passes=1, seed=0, timeout=1800, log_path=None):
         """Render in independent passes (batch/backends/passes.py); returns the render record."""
@@ -172,6 +195,9 @@ def film_to_ir(names, img, export_dir):
     channels alike; then the IR's ideal camera polariser (exporters/camera_filter.py), applied to
     every pass so that the noise is the filtered image's."""
     img = np.asarray(img, dtype=np.float64)
+    if list(names[:3]) == list(spectral_film.CMF_CHANNELS):  # the CMF film: the IR's colour
+        img = np.concatenate([spectral_film.cmf_to_srgb(img[..., :3]), img[..., 3:]], axis=-1)
+        names = ["R", "G", "B"] + list(names[3:])
     if names and names[0] == "Y":
         tint = _flat_spectrum_rgb()
         img = np.concatenate([img[..., :1] * tint, img[..., 1:]], axis=-1)

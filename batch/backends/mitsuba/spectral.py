@@ -61,6 +61,38 @@ def spectral_variant(variant):
 
 def spectral_xml(xml_text, band_list, where="scene.xml"):
     """The scene XML with its sensor's film replaced by a specfilm of box bands ``band_list``."""
+    return specfilm_xml(xml_text, [(band_name(k), (lo, hi), (1.0, 1.0)) for k, (lo, hi) in enumerate(band_list)], where)
+
+
+# -- the IR's colour as a film (issue 33): three channels whose responses are the CIE 1931 2 degree
+# colour-matching functions at 1 nm (exporters/data, colour-science's table), so each channel is
+# the integral of L times x_bar, y_bar or z_bar, linearly interpolated between the 1 nm samples:
+# the trapezoid rule of exporters/colorimetry.py exactly. Divided by the integral of y_bar (a flat
+# spectrum of 1 has Y = 1) and mapped to linear sRGB by the IEC 61966-2-1 matrix, it is the colour
+# docs/scene-format.md defines, without Mitsuba's 5 nm tables or its rounded matrix.
+CMF_CHANNELS = ("X", "Y", "Z")
+CMF_FILM = "specfilm, CIE 1931 2 degree CMFs at 1 nm (exporters/data/cie_1931_2deg_cmfs.json), IEC 61966-2-1 matrix"
+
+
+def cmf_xml(xml_text, where="scene.xml"):
+    """The scene XML with its film replaced by the X, Y, Z specfilm of the IR's observer."""
+    from ....exporters import colorimetry
+    wl, xb, yb, zb, _norm = colorimetry.observer(colorimetry.GROUND_TRUTH)
+    return specfilm_xml(xml_text, [(n, wl, c) for n, c in zip(CMF_CHANNELS, (xb, yb, zb))], where)
+
+
+def cmf_to_srgb(img):
+    """A CMF film's X, Y, Z channels (integrals against the 1 nm CMFs) as the IR's linear sRGB."""
+    import numpy as np
+
+    from ....exporters import colorimetry
+    norm = colorimetry.observer(colorimetry.GROUND_TRUTH)[4]
+    return np.asarray(colorimetry.xyz_to_srgb(np.asarray(img, dtype=np.float64) / norm))
+
+
+def specfilm_xml(xml_text, channels, where="scene.xml"):
+    """The scene XML with its sensor's film replaced by a specfilm whose channels are ``channels``
+    [(name, wavelengths, response values)], each response an irregular (piecewise-linear) spectrum."""
     root = ET.fromstring(xml_text)
     integrator = root.find("integrator")
     if integrator is not None and integrator.get("type") == "stokes":
@@ -74,10 +106,10 @@ def spectral_xml(xml_text, band_list, where="scene.xml"):
             film.remove(child)
     film.set("type", "specfilm")
     ET.SubElement(film, "string", name="component_format", value="float32")
-    for k, (lo, hi) in enumerate(band_list):
-        srf = ET.SubElement(film, "spectrum", type="irregular", name=band_name(k))
-        ET.SubElement(srf, "string", name="wavelengths", value=f"{lo!r}, {hi!r}")
-        ET.SubElement(srf, "string", name="values", value="1, 1")
+    for name, wavelengths, values in channels:
+        srf = ET.SubElement(film, "spectrum", type="irregular", name=name)
+        ET.SubElement(srf, "string", name="wavelengths", value=", ".join(repr(float(w)) for w in wavelengths))
+        ET.SubElement(srf, "string", name="values", value=", ".join(repr(float(v)) for v in values))
     return ET.tostring(root, encoding="unicode")
 
 
