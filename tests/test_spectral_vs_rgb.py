@@ -104,3 +104,33 @@ def test_the_panel_button_runs_the_study_on_the_open_scene(tmp_path):
 def study_words():
     from spectral_bench.batch.studies import spectral_vs_rgb
     return tuple(spectral_vs_rgb.VERDICTS)
+
+
+@pytest.mark.slow
+def test_an_ordinary_blend_answers_what_spectral_changes(tmp_path):
+    """Issue 35's done-when: an ordinary .blend made by a bpy script (four Principled spheres, one
+    gold; a point light, a 300 W area light, a world colour), no annotation: the study exits 0 with
+    a dE00 map per render pair, every conversion or loss a warning naming object and field; under
+    F11 the difference is visible."""
+    import subprocess
+    import sys
+    blend = tmp_path / "ordinary.blend"
+    made = subprocess.run([sys.executable, str(ROOT / "scripts" / "make_ordinary_blend.py"), str(blend)],
+                          capture_output=True, text=True, timeout=300)
+    assert made.returncode == 0 and blend.is_file(), made.stderr[-2000:]
+    out = tmp_path / "out"
+    proc = run_batch("--study", "spectral-vs-rgb", "-i", blend, "-s", "ordinary", "-r", "mitsuba", "--illuminants", "F11",
+                     "--scale", "0.5", "--spp", "512", "-o", out)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    rows = {r["light"]: r for r in metrics(out).entries("studies")}
+    assert set(rows) == {"own", "F11"}
+    for r in rows.values():
+        assert all((out / r["images"][k]).is_file() for k in ("spectral", "rgb", "de00"))
+        warned = {(w["object"], w["field"].split(".")[0]) for w in r["scene_warnings"]}
+        assert {("point_light", "data"), ("area_light", "data"), ("world[sky]", "node_tree")} <= warned, warned
+        assert any(w["object"] == "sphere_gold" and "Au" in w["message"] for w in r["scene_warnings"])
+    f11 = rows["F11"]
+    assert f11["status"] == "visible" and f11["de00"]["noise_p95"] < f11["de00"]["p95"], f11["de00"]
+    assert rows["own"]["de00"]["p95"] < f11["de00"]["p95"] / 2, (rows["own"]["de00"], f11["de00"])
+    summary = (out / "summary.md").read_text()
+    assert "## Conversions from the source scene" in summary and "| ordinary | sphere_gold |" in summary
