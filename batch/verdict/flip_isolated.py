@@ -108,6 +108,7 @@ _LOCK = threading.Lock()  # held while a request is in the child (and while a ch
 # a bound on memory when FLIP falls behind the verdicts), served in order by one thread.
 QUEUED = 8
 _QUEUE = queue.Queue(QUEUED)
+_STARTER = cf.ThreadPoolExecutor(max_workers=1, thread_name_prefix="flip-start")  # see prestart
 _SERVER, _SERVER_LOCK = [], threading.Lock()
 
 
@@ -125,7 +126,9 @@ def prestart():
     if _WORKER or not _LOCK.acquire(blocking=False):
         return
     try:
-        _worker()
+        # started from a thread that lives as long as this process: a kept child dies with the
+        # thread that started it (batch/backends/child.py), and a caller's thread may be short-lived
+        _STARTER.submit(_worker).result()
     finally:
         _LOCK.release()
 
