@@ -288,6 +288,9 @@ class SPECTRAL_BENCH_PT_benchmark_results(_Base, bpy.types.Panel):
                     box.label(text=str(base[0]["reason"])[:200])
             if run.get("reason"):
                 box.label(text=run["reason"][:160], icon="ERROR" if results.judged_without_reference(run) else "NONE")
+            why = (run.get("diagnosis") or {}).get("text") if isinstance(run.get("diagnosis"), dict) else None
+            if why:  # the fitted error models (issue 34): "likely: ..." or "no model explains it"
+                box.label(text=f"why: {why}"[:200], icon="QUESTION")
             for text in results.reference_problems(run):  # every reference passed over, with its file
                 box.label(text=f"reference problem: {text}"[:200], icon="ERROR")
             ref = run.get("reference") or {}
