@@ -100,7 +100,7 @@ def diagnose(entry, rendered, names, image, stderr, held, ztest, res_dir):
     try:
         ev = diagnosis.Evidence(entry, rendered, names, image, stderr, entry.get("passes"), held.get("at"),
                                 ztest, held.get("picked"))
-        found = diagnosis.diagnose(ev)
+        found = diagnosis.diagnose(ev, quick=entry["status"] != "failed")
     except Exception as exc:  # noqa: BLE001 - advice must never take the verdict down
         entry["diagnosis"] = {"criterion": diagnosis.CRITERION, "models": [], "likely": None,
                               "text": "no diagnosis", "errors": [{"model": "*", "error": f"{type(exc).__name__}: {exc}"[:300]}]}

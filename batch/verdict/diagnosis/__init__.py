@@ -17,10 +17,15 @@ Each model is a Model: its name, family, the parameters it fits, the evidence it
 variances; or "probe:<kind>": the render against a probe's closed-form truth) and a one-line
 explanation. Its ``fit(evidence)`` returns a Fit or None (the model does not apply here).
 
-Fitting: weighted least squares on the evidence's blocks (or probe pixels/regions), each residual
-divided by its standard error from the render's own noise (and the reference's); nonlinear models
-through scipy.optimize.least_squares from a few starting points (the best kept), standard errors
-from the Gauss-Newton covariance (J^T J)^-1 at the optimum. A model reports chi-square before
+Fitting: weighted least squares on the evidence's blocks (or probe regions). On the reference
+evidence the weights are the scale test's (the block variance the reference predicts: weights
+that cannot correlate with the render's noise, so they cannot bias the fit), and the standard
+errors White's heteroscedasticity-consistent sandwich on the residuals (HC1: right even where the
+render's own per-pixel standard error, from two passes of a heavy-tailed estimator, under-reports
+a highlight; with the noise test's block variances instead, the GGX alpha fits of three seeds
+spread twice as wide as their standard errors). On a probe region each block is divided by its
+standard error from the spread of its pixels' residuals against the fitted truth. Nonlinear
+models through scipy.optimize.least_squares from a few starting points (the best kept). A model reports chi-square before
 (``chi2_none``) and after (``chi2``), the share of the excess chi-square it removes (``explains``:
 (chi2_none - chi2) / (chi2_none - n), n the number of residuals, the chi-square noise alone gives)
 and whether its residual passes the evidence's own test at the same alpha (``fully_explains``:
@@ -59,6 +64,7 @@ class Model:
     explanation: str       # one line for the user
     fit: Callable          # Evidence -> Fit or None
     deviation: Optional[Callable] = None  # Fit -> known_deviations.toml fields (scale, observer) or None
+    slow: bool = False     # a nonlinear fit over images or a quadrature: fitted for failed renders only
 
 
 @dataclass
@@ -190,12 +196,17 @@ class _Shifted:
 
 
 # -- fitting ---------------------------------------------------------------------------------------
-def least_squares(residual, starts, bounds=None, var_ratio=None):
+def least_squares(residual, starts, bounds=None, var_ratio=None, channels=1):
     """(best x, its standard errors, chi2) of sum(residual(x)^2) from several starting points
     (scipy.optimize.least_squares, trust region); se from (J^T J)^-1 at the optimum, or, with
     ``var_ratio`` (each residual's true variance over the one it was divided by), from the
     sandwich A^-1 J^T diag(var_ratio) J A^-1 with A = J^T J (weights that are not the inverse
-    variances still give the right standard error: Huber 1967, White 1980)."""
+    variances still give the right standard error: Huber 1967, White 1980); ``var_ratio =
+    "residuals"``: the residuals at the optimum stand for their variances, clustered by block
+    (``channels`` consecutive residuals, a block's colour channels, are one cluster: a path
+    tracer's R, G and B come from the same paths and are strongly correlated), with the CR1
+    small-sample factor G / (G - 1) (n - 1) / (n - k) (the cluster-robust sandwich of Liang and
+    Zeger 1986: right whatever the blocks' variances and the channels' correlation)."""
     from scipy import optimize
     best = None
     for x0 in starts:
@@ -212,7 +223,13 @@ def least_squares(residual, starts, bounds=None, var_ratio=None):
     jtj = jac.T @ jac
     try:
         cov = np.linalg.pinv(jtj)
-        if var_ratio is not None:
+        if isinstance(var_ratio, str):
+            n, k = best.fun.size, len(best.x)
+            scores = (jac * best.fun[:, None]).reshape(-1, channels, len(best.x)).sum(axis=1)
+            g = scores.shape[0]
+            factor = g / max(g - 1, 1) * (n - 1) / max(n - k, 1)
+            cov = cov @ (scores.T @ scores) @ cov * factor
+        elif var_ratio is not None:
             cov = cov @ (jac.T @ (jac * np.asarray(var_ratio).ravel()[:, None])) @ cov
         se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     except np.linalg.LinAlgError:
@@ -239,9 +256,8 @@ def reference_model(predict, starts=None, bounds=None, k=None):
                        corrected=pred)
         if predict(_first(starts, ev), ev) is None:
             return None
-        v_fit = ev.ztest.var_model if ev.ztest.var_model is not None else ev.ztest.var
         found = least_squares(lambda x: ev.fit_residual(predict(x, ev)), starts(ev) if callable(starts) else starts,
-                              bounds, var_ratio=ev.ztest.var / v_fit)
+                              bounds, var_ratio="residuals", channels=ev.ztest.diff.shape[-1])
         if found is None:
             return None
         x, se, _ = found
@@ -324,10 +340,12 @@ def region_fit(region, predict, starts, bounds=None, k=None):
     found = least_squares(lambda x: region.residual(predict(x)), starts, bounds)
     if found is None:
         return None
+    channels = region.mean.shape[-1]
     # the spread inside a block against a wrong truth holds the truth's own shape, not noise:
     # the standard errors are taken again against the fitted truth, and the fit repeated on them
     region.reweight(predict(found[0]))
-    found = least_squares(lambda x: region.residual(predict(x)), [found[0]], bounds) or found
+    found = least_squares(lambda x: region.residual(predict(x)), [found[0]], bounds, var_ratio="residuals",
+                          channels=channels) or found
     x, se, chi2 = found
     r0 = region.residual(predict(None))
     return Fit(list(map(float, x)), list(map(float, se)), chi2, float(r0 @ r0), r0.size,
@@ -359,14 +377,18 @@ def speaks_to(model, failing):
     return any(fnmatch.fnmatchcase(c, p) for c in failing for p in EVIDENCE_CHECKS.get(model.evidence, ("*",)))
 
 
-def diagnose(ev, models=None):
+def diagnose(ev, models=None, quick=False):
     """The ranked diagnosis of one render (a dict for metrics.json's ``diagnosis``): every model
-    whose evidence speaks to a failing check, fitted, ranked (module docstring)."""
+    whose evidence speaks to a failing check, fitted, ranked (module docstring). ``quick``: the
+    slow models left out (a known or fixed render, diagnosed for the record: the default run's
+    Mitsuba renders are known, and must not pay seconds each)."""
     import time
     t0 = time.perf_counter()
     failing = failing_checks(ev.entry)
     fits = []
-    for model in [m for m in models or registry() if speaks_to(m, failing)]:
+    chosen = [m for m in models or registry() if speaks_to(m, failing)]
+    skipped = [m.name for m in chosen if quick and m.slow]
+    for model in [m for m in chosen if not (quick and m.slow)]:
         try:
             f = model.fit(ev)
         except Exception as exc:  # noqa: BLE001 - one model that breaks never takes the verdict down
@@ -395,6 +417,8 @@ def diagnose(ev, models=None):
         out["text"] = f"no model explains it (best: {short(ranked[0])})"
     if broken:
         out["errors"] = broken
+    if skipped:
+        out["skipped"] = skipped
     out["time_s"] = round(time.perf_counter() - t0, 3)
     out["_best_fit"] = best[1] if best else None  # in memory only (the corrected image); popped by the caller
     return out

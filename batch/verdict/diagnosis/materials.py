@@ -63,13 +63,17 @@ def _ggx_plates(scene):
 def _reference_plate_model(change, starts):
     """A fit on the reference evidence: the render predicted as the reference plus the change of
     the plates' direct light (the GGX probe's quadrature) when ``change(bsdf, x)`` edits every
-    plate's BSDF; the light the plates get from elsewhere (a floor) is taken as unchanged."""
+    plate's BSDF. The light a plate gets from elsewhere (a floor: the reference minus the
+    closed form's direct light, on the plate) changes with the material too, by a factor no
+    closed form gives here: where there is such light, a second parameter scales its change
+    (``indirect``: 0 unchanged), a nuisance fitted beside the material's parameter."""
     def fit(ev):
         from ..probes import ggx
         found = _ggx_plates(ev.scene) if ev.has_reference else None
         if not found or ev.ref_names[:3] != ["R", "G", "B"]:
             return None
         plates, lights = found
+        others = len(ev.scene["objects"]) > len(plates) + len(lights)
         h, w = ev.ref_mean.shape[:2]
         cache = {}
 
@@ -86,13 +90,16 @@ def _reference_plate_model(change, starts):
                 cache[key] = total
             return cache[key]
         base = direct(None)
+        on_plate = np.any(base != 0, axis=-1)[..., None]
+        indirect = np.where(on_plate, ev.ref_mean[..., :3] - base, 0.0)
 
         def predict(x, ev):
             out = ev.ref_mean.copy()
-            out[..., :3] += direct(x) - base
+            out[..., :3] += direct(x[:1]) - base + (x[1] * indirect if others else 0.0)
             return out
-        return reference_model(predict, starts=starts(ev.scene["objects"][plates[0]]["bsdf"]),
-                               bounds=([1e-3], [1.0]))(ev)
+        x0 = [s + ([0.0] if others else []) for s in starts(ev.scene["objects"][plates[0]]["bsdf"])]
+        bounds = ([1e-3, -1.0], [1.0, 1.0]) if others else ([1e-3], [1.0])
+        return reference_model(predict, starts=x0, bounds=bounds)(ev)
     return fit
 
 
@@ -161,13 +168,13 @@ def _emitter_units(ev):
 
 
 MODELS = [
-    Model("GGX alpha", FAMILY, ("alpha",), "reference+ggx",
+    Model("GGX alpha", FAMILY, ("alpha", "indirect"), "reference+ggx",
           "the microfacet roughness is not the declared alpha (or alpha vs alpha squared conventions)",
-          lambda ev: _alpha_fit(ev)),
+          lambda ev: _alpha_fit(ev), slow=True),
     Model("Beckmann for GGX", FAMILY, (), "probe:ggx",
-          "a Beckmann distribution rendered where GGX is declared", _fixed(_beckmann)),
+          "a Beckmann distribution rendered where GGX is declared", _fixed(_beckmann), slow=True),
     Model("conductor without k", FAMILY, (), "probe:ggx",
-          "the conductor's extinction coefficient k dropped (only eta used)", _fixed(_no_k)),
+          "the conductor's extinction coefficient k dropped (only eta used)", _fixed(_no_k), slow=True),
     Model("emitter radiance x pi", FAMILY, ("factor",), "reference",
           "emitter units: radiance where exitance was due, or the other way (a factor pi)",
           _emitter_units, deviation=lambda f: {"scale": float(np.pi if f.values[0] > 1 else 1 / np.pi), "scale_se": 0.0}),
