@@ -87,7 +87,7 @@ class Fit:
     @property
     def explains(self):
         excess = self.chi2_none - self.n
-        if excess <= 0:
+        if excess <= 0 or self.minus2logl is not None:  # a model of the variances removes no chi-square of the mean
             return None
         return float(np.clip((self.chi2_none - self.chi2) / excess, 0.0, 1.0))
 
