@@ -108,6 +108,8 @@ class Evidence:
         self.stderr, self.passes, self.at, self.ztest = stderr, passes, at, ztest
         self.picked = picked  # (names, render, stderr) on the channels the reference shares
         self._edges = None
+        self.quick = False  # set by diagnose: the slow models (and recomputed probes) left out
+        self.cache = {}     # what several models share (a probe computed again once)
 
     # -- the reference evidence ------------------------------------------------------------------
     @property
@@ -388,6 +390,7 @@ def diagnose(ev, models=None, quick=False):
     fits = []
     chosen = [m for m in models or registry() if speaks_to(m, failing)]
     skipped = [m.name for m in chosen if quick and m.slow]
+    ev.quick = quick
     for model in [m for m in chosen if not (quick and m.slow)]:
         try:
             f = model.fit(ev)
