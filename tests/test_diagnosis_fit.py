@@ -168,3 +168,16 @@ def test_a_model_that_breaks_is_recorded_not_raised():
     found = diagnosis.diagnose(ev, [boom, *diagnosis.registry()])
     assert found["errors"] == [{"model": "boom", "error": "ZeroDivisionError: division by zero"}]
     assert found["likely"] == "uniform scale"
+
+
+def test_illuminant_normalisation_beats_a_free_scale():
+    """A scene lit by a flat spectrum of 2: a renderer normalising it (to Y = 1, at 560 nm or to
+    its peak: all halve it) is named, with no parameter, before the uniform scale that fits as
+    well with one; its ready entry carries the factor."""
+    names, ref = reference()
+    ev, _ = evidence(ref * 0.5, ref, names)
+    ev.scene["environment"] = {"radiance": {"type": "constant", "value": 2.0}}
+    found = diagnosis.diagnose(ev)
+    assert found["likely"] == "illuminant normalised", found["models"][:3]
+    assert "scale = 0.5" in found["known_deviation"]
+    within_two_se(first(found), "factor", 0.5)

@@ -167,6 +167,34 @@ def _emitter_units(ev):
     return f
 
 
+def _ior_fit(ev):
+    """The dielectric's IOR fitted on the Fresnel probe's region (the reflection through the
+    camera's polariser, or unpolarised): the closed form at each trial IOR."""
+    from .polarisation import fresnel_image, fresnel_setup
+    got = fresnel_setup(ev)
+    if got is None:
+        return None
+    scene, di, li, rgb, light, block = got
+    h, w = rgb.shape[:2]
+    pol = scene["camera"].get("polarizer")
+    angle = None if not pol else float(pol["angle"])
+    declared = float(scene["objects"][di]["bsdf"]["int_ior"])
+    mask, truth = fresnel_image(scene, di, li, w, h, light, angle)
+    if mask.sum() < 8:
+        return None
+
+    def predict(x):
+        if x is None:
+            return truth
+        sc = copy.deepcopy(scene)
+        sc["objects"][di]["bsdf"]["int_ior"] = float(x[0])
+        return np.where(mask[..., None], fresnel_image(sc, di, li, w, h, light, angle)[1], 0.0)
+    region = RegionEvidence(rgb, truth, mask, block)
+    if len(region) < 2:
+        return None
+    return region_fit(region, predict, [[declared]], bounds=([1.0], [4.0]))
+
+
 MODELS = [
     Model("GGX alpha", FAMILY, ("alpha", "indirect"), "reference+ggx",
           "the microfacet roughness is not the declared alpha (or alpha vs alpha squared conventions)",
@@ -175,6 +203,9 @@ MODELS = [
           "a Beckmann distribution rendered where GGX is declared", _fixed(_beckmann), slow=True),
     Model("conductor without k", FAMILY, (), "probe:ggx",
           "the conductor's extinction coefficient k dropped (only eta used)", _fixed(_no_k), slow=True),
+    Model("dielectric IOR", FAMILY, ("ior",), "probe:fresnel",
+          "the dielectric's index of refraction is not the declared one (another IOR, or one of another medium)",
+          _ior_fit, slow=True),
     Model("emitter radiance x pi", FAMILY, ("factor",), "reference",
           "emitter units: radiance where exitance was due, or the other way (a factor pi)",
           _emitter_units, deviation=lambda f: {"scale": float(np.pi if f.values[0] > 1 else 1 / np.pi), "scale_se": 0.0}),

@@ -51,15 +51,13 @@ def _components(scale):
     return predict
 
 
-def _polariser_fit(ev):
-    """The camera polariser's angle fitted on the Fresnel probe's region (the closed form of the
-    reflection's Stokes vector through a polariser at any angle: I = (S0 + S1 cos 2t + S2 sin 2t) / 2)."""
+def fresnel_setup(ev):
+    """(scene, dielectric, light, rgb render, the light's RGB, block) where the Fresnel probe
+    applies (a smooth dielectric rectangle and a rectangle light), else None."""
     from ....exporters import colorimetry
     from .. import compare
-    from ..probes import fresnel
     scene, names, image = ev.scene, ev.names, ev.image
-    pol = scene["camera"].get("polarizer")
-    if not pol or "R" not in names:
+    if "R" not in names:
         return None
     objs = scene["objects"]
     diel = [i for i, o in enumerate(objs) if (o.get("bsdf") or {}).get("type") == "dielectric"
@@ -67,19 +65,44 @@ def _polariser_fit(ev):
     lights = [i for i, o in enumerate(objs) if o.get("emitter") and o["shape"]["type"] == "rectangle"]
     if not diel or not lights:
         return None
-    h, w = image.shape[:2]
-    mask, factor, _eta, _cos = fresnel._expected(scene, diel[0], lights[0], w, h, None)
-    if mask.sum() < 8:
-        return None
     light = colorimetry.xyz_to_srgb(colorimetry.spectrum_xyz(objs[lights[0]]["emitter"]["radiance"]))
     rgb = image[..., [names.index(c) for c in "RGB"]].astype(np.float64)
+    return scene, diel[0], lights[0], rgb, light, compare.block_size(scene["render"]["spp"], image.shape)
+
+
+def fresnel_image(scene, di, li, w, h, light, angle):
+    """(mask, expected RGB per pixel) of the reflection: through an ideal polariser at ``angle``
+    degrees, I = (S0 + S1 cos 2t + S2 sin 2t) / 2, or S0 without one (None)."""
+    from ..probes import fresnel
+    mask, factor, _eta, _cos = fresnel._expected(scene, di, li, w, h, None)
+    if angle is None:
+        i = factor[..., 0]
+    else:
+        t = np.radians(2 * angle)
+        i = 0.5 * (factor[..., 0] + factor[..., 1] * np.cos(t) + factor[..., 2] * np.sin(t))
+    return mask, np.where(mask[..., None], i[..., None] * light, 0.0)
+
+
+def _polariser_fit(ev):
+    """The camera polariser's angle fitted on the Fresnel probe's region (the closed form of the
+    reflection's Stokes vector through a polariser at any angle)."""
+    from ..probes import fresnel
+    got = fresnel_setup(ev)
+    pol = ev.scene["camera"].get("polarizer")
+    if got is None or not pol:
+        return None
+    scene, di, li, rgb, light, block = got
+    h, w = rgb.shape[:2]
+    mask, factor, _eta, _cos = fresnel._expected(scene, di, li, w, h, None)
+    if mask.sum() < 8:
+        return None
     declared = float(pol["angle"])
 
     def predict(x):
         t = np.radians(2 * (declared if x is None else x[0]))
         i = 0.5 * (factor[..., 0] + factor[..., 1] * np.cos(t) + factor[..., 2] * np.sin(t))
         return np.where(mask[..., None], i[..., None] * light, 0.0)
-    region = RegionEvidence(rgb, predict(None), mask, compare.block_size(scene["render"]["spp"], image.shape))
+    region = RegionEvidence(rgb, predict(None), mask, block)
     if len(region) < 2:
         return None
     f = region_fit(region, predict, [[declared], [declared + 90.0], [declared + 45.0], [declared - 45.0]])
@@ -103,5 +126,5 @@ MODELS = [
           reference_model(_components((0.0, 0.0, 0.0)))),
     Model("polariser angle", FAMILY, ("angle deg",), "probe:fresnel",
           "the camera polariser at another angle than declared (e.g. measured from the other axis)",
-          _polariser_fit),
+          _polariser_fit, slow=True),
 ]
