@@ -69,7 +69,7 @@ def toml(name, table):
 def run_one(tmp, name, table, scene, spp, seed, scale):
     path = tmp / f"{name}.toml"
     path.write_text(toml(name, table))
-    out = tmp / f"{name}_{seed}"
+    out = Path(tempfile.mkdtemp(dir=tmp, prefix=f"{name}_{seed}_")) / "run"  # a fresh folder for every run
     t = time.perf_counter()
     subprocess.run([sys.executable, str(RUN), "--renderers", str(path), "-r", name, "-s", scene, "--scale", str(scale),
                     "--spp", str(spp), "--seed", str(seed), "-o", str(out)], capture_output=True, text=True,
@@ -110,6 +110,7 @@ def main(argv=None):
                     failed += run["status"] == "failed"
                     diag = run.get("diagnosis") or {}
                     top = (diag.get("models") or [None])[0]
+                    print(f"{plant}={value} seed {seed}: {run['status']}; {diag.get('text', 'no diagnosis')}", flush=True)
                     if model is None:
                         first += run["status"] == "failed" and diag.get("likely") is None
                     elif top and top["model"] == model:
