@@ -33,9 +33,9 @@ seeds spread twice as wide as their standard errors; the sandwich gives 0.00047 
 (seeds: 0.9993, 1.0005, 0.9993 on a correct render) and 0.00013-0.00024 for alpha. On a probe
 region each block is divided by its standard error from the spread of its pixels' residuals
 against the fitted truth. Nonlinear models through scipy.optimize.least_squares from a few
-starting points (the best kept). A model reports chi-square before (``chi2_none``) and after (``chi2``), the share of the excess chi-square it removes (``explains``:
-(chi2_none - chi2) / (chi2_none - n), n the number of residuals, the chi-square noise alone gives)
-and whether its residual passes the evidence's own test at the same alpha (``fully_explains``:
+starting points (the best kept). A model reports chi-square before (``chi2_none``) and after
+(``chi2``), the share of the excess chi-square it removes (``explains``: (chi2_none - chi2) /
+(chi2_none - n), n the number of residuals, the chi-square noise alone gives) and whether its residual passes the evidence's own test at the same alpha (``fully_explains``:
 the noise test's block and scale tests, or the probe's Sidak-corrected tests).
 
 Parameters pay through AIC (Akaike 1974): AIC = -2 log L + 2 k, with -2 log L = chi2 for models of
