@@ -35,8 +35,9 @@ region each block is divided by its standard error from the spread of its pixels
 against the fitted truth. Nonlinear models through scipy.optimize.least_squares from a few
 starting points (the best kept). A model reports chi-square before (``chi2_none``) and after
 (``chi2``), the share of the excess chi-square it removes (``explains``: (chi2_none - chi2) /
-(chi2_none - n), n the number of residuals, the chi-square noise alone gives) and whether its residual passes the evidence's own test at the same alpha (``fully_explains``:
-the noise test's block and scale tests, or the probe's Sidak-corrected tests).
+(chi2_none - n), n the number of residuals, the chi-square noise alone gives) and whether its
+residual passes the evidence's own test at the same alpha (``fully_explains``: the noise test's
+block and scale tests, or the probe's Sidak-corrected tests).
 
 Parameters pay through AIC (Akaike 1974): AIC = -2 log L + 2 k, with -2 log L = chi2 for models of
 the mean (and N log s^2 + chi2 / s^2 for the noise model, which scales the variances). Ranking:
