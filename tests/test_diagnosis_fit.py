@@ -181,3 +181,17 @@ def test_illuminant_normalisation_beats_a_free_scale():
     assert found["likely"] == "illuminant normalised", found["models"][:3]
     assert "scale = 0.5" in found["known_deviation"]
     within_two_se(first(found), "factor", 0.5)
+
+
+def test_known_deviation_entry_is_valid_toml_for_any_name():
+    """The printed entry quotes anyone's text (scene, backend, mode): it parses back to the same
+    values, however hostile (quotes, backslashes, newlines, DEL, emoji, a lone surrogate)."""
+    import tomllib
+    names, ref = reference()
+    ev, _ = evidence(ref * 1.01, ref, names)
+    hostile = 'a"b\\c\nd\x7fe\U0001F600f\ud800g'
+    ev.entry.update(scene=hostile, backend=hostile, mode=hostile)
+    found = diagnosis.diagnose(ev)
+    (dev,) = tomllib.loads(found["known_deviation"])["deviation"]
+    assert dev["backend"] == hostile.replace("\ud800", "\ufffd") and dev["scenes"] == [dev["backend"]]
+    assert dev["checks"] == ["noise test"] and abs(dev["scale"] - 1.01) < 0.002

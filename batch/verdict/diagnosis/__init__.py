@@ -483,7 +483,12 @@ def known_deviation_entry(entry, model, f):
         return None
     import datetime
     import json as _json
-    q = _json.dumps  # TOML basic strings are JSON strings for this text
+
+    def q(text):
+        """A TOML basic string: JSON's escapes are TOML's, but TOML has no surrogate escapes (so
+        no ensure_ascii) and forbids a raw DEL; a lone surrogate (no character) becomes U+FFFD."""
+        text = "".join("\ufffd" if "\ud800" <= c <= "\udfff" else c for c in str(text))
+        return _json.dumps(text, ensure_ascii=False).replace("\x7f", "\\u007f")
     failing = failing_checks(entry)
     ident = f"{entry.get('backend')}-{entry.get('scene')}-{model.name}".replace(" ", "-")
     lines = ["[[deviation]]",
