@@ -193,7 +193,6 @@ class ZTest:
     weight: np.ndarray = field(repr=False, default=None)
     var_model: np.ndarray = field(repr=False, default=None)  # the block variance the reference predicts (the weights' V_b)
     var_ref: np.ndarray = field(repr=False, default=None)    # the reference's own share of ``var``
-    floor: float = 0.0
     scale: dict = None
     block_passed: bool = True
     finite: bool = True
@@ -334,7 +333,7 @@ def z_test(test, ref, spp, own_var_of_mean=None, own_passes=None, alpha=0.01, bl
                  semap=expand_blocks(np.sqrt(var), ey, ex),
                  samples_per_block=int(block * block * spp), noise=noise, dof_min=float(np.min(dof)),
                  diff=d, ref_block_mean=ref_block_mean, var=var, dof=dof, weight=weight, var_model=v_model,
-                 var_ref=v_ref, floor=floor, scale=scale,
+                 var_ref=v_ref, scale=scale,
                  block_passed=block_ok, finite=all_finite)
 
 

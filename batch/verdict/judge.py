@@ -93,9 +93,11 @@ DIAGNOSED = ("failed", "known", "fixed")  # a passing render is never diagnosed
 
 def diagnose(entry, rendered, names, image, stderr, held, ztest, res_dir):
     """The error models fitted to a failing (or known/fixed) render (batch/verdict/diagnosis/):
-    ``entry["diagnosis"]``, the reason's "likely: ..." or "no model explains it", and the render
-    corrected by the best fit (``corrected.exr``, the report's "why" view). Advice only: the
-    status stays; a diagnosis that breaks is recorded as its error, never raised."""
+    ``entry["diagnosis"]``, the reason's "likely: ..." (a failed render's) or "no model explains
+    it", and the reference as the likely model predicts the render (``diagnosis_model.exr``,
+    linked from the report's "why" box) where that model fits the reference evidence. Advice
+    only: the status stays; a diagnosis that breaks is recorded as its error, never raised. A
+    known or fixed render gets the quick models only (batch/verdict/diagnosis/ ``diagnose``)."""
     from . import diagnosis
     try:
         ev = diagnosis.Evidence(entry, rendered, names, image, stderr, entry.get("passes"), held.get("at"),
