@@ -294,6 +294,9 @@ class SPECTRAL_BENCH_PT_benchmark_results(_Base, bpy.types.Panel):
             if results.judged_by(run):  # what judged it; a renderer's own reference alone is said so
                 box.label(text=f"judged by: {results.judged_by(run)}"[:200],
                           icon="INFO" if results.checked_against_itself(run) else "NONE")
+            why = (run.get("diagnosis") or {}).get("text") if isinstance(run.get("diagnosis"), dict) else None
+            if why:  # the fitted error models (issue 34): "likely: ..." or "no model explains it"
+                box.label(text=f"why: {why}"[:200], icon="QUESTION")
             for text in results.reference_problems(run):  # every reference passed over, with its file
                 box.label(text=f"reference problem: {text}"[:200], icon="ERROR")
             ref = run.get("reference") or {}

@@ -42,7 +42,8 @@ SCHEMA_VERSION = 2
 # Where paths live, per top-level list: dotted fields, "[]" steps into a list's items. A reader
 # resolves them against the run folder; the writer makes them relative to it.
 PATHS = {
-    "runs": ("image", "export", "reference.path", "reference.image", "reference_problems[].file", "baseline.zmap"),  # baseline.image: relative to the baseline run
+    "runs": ("image", "export", "reference.path", "reference.image", "reference_problems[].file", "baseline.zmap",
+             "diagnosis.image"),  # baseline.image: relative to the baseline run
     "jobs": ("image", "image_path", "row.image", "point.reference_problems[].file"),
     "sweeps": ("chart", "points[].reference_problems[].file"),
     "studies": ("images.spectral", "images.rgb", "images.de00"),

@@ -231,22 +231,12 @@ def read(path, expect=None):
 
 # ---- colour -------------------------------------------------------------------------------------
 
-def _cie1964():
-    """CIE 1964 10-degree standard observer, 360-830 nm at 1 nm, from colour-science
-    (colour.MSDS_CMFS["CIE 1964 10 Degree Standard Observer"]: CIE 015:2018 tables)."""
-    import colour
-    cmfs = colour.MSDS_CMFS["CIE 1964 10 Degree Standard Observer"].copy().align(colour.SpectralShape(360, 830, 1))
-    wl = np.asarray(cmfs.wavelengths, dtype=np.float64)
-    xb, yb, zb = np.asarray(cmfs.values, dtype=np.float64).T
-    return wl, xb, yb, zb, float(np.trapz(yb, wl))
-
-
 # observers to_rgb integrates with: (wavelengths, x_bar, y_bar, z_bar, normalisation). "mitsuba3"
 # is Mitsuba 3's RGB film (exporters/colorimetry.py), to compare a Mitsuba spectral render with
 # its RGB render; "art46" is not here: it models a band film, not an observer of band data
 OBSERVERS = {
     "cie1931": lambda: colorimetry.observer("cie1931"),
-    "cie1964": _cie1964,
+    "cie1964": lambda: colorimetry.observer("cie1964"),
     "mitsuba3": lambda: colorimetry.observer("mitsuba3"),
 }
 

@@ -8,6 +8,8 @@ Observers: "cie1931" (the 1 nm table above) is the ground truth. Others describe
 film deviates from it, for known deviations (batch/verdict/known.py): "mitsuba3" is Mitsuba 3's
 film, the same table's 5 nm entries interpolated linearly and normalised by 1 / 106.7502
 (mitsuba/core/spectrum.h, MI_CIE_Y_NORMALIZATION), measured in known_deviations.toml.
+"cie1964" is the CIE 1964 10-degree observer (colour-science's CIE 015:2018 table, normalised like
+the ground truth: a flat spectrum of 1 has Y = 1): a film integrating with it instead of 1931.
 """
 from functools import lru_cache
 
@@ -16,7 +18,7 @@ import numpy as np
 from . import spectra
 
 GROUND_TRUTH = "cie1931"
-OBSERVERS = ("cie1931", "mitsuba3", "art46")
+OBSERVERS = ("cie1931", "mitsuba3", "art46", "cie1964")
 # ART 2.1.2's film (-s46e): 46 bands of 10 nm from 320 nm, each the box average of the radiance
 # over its band (ArSpectrum46.c; measured band by band), labelled by the band centres and read by
 # the ART backend as a spectral EXR (batch/spectral_exr.py: hat functions between the centres)
@@ -46,6 +48,12 @@ def observer(name=GROUND_TRUTH):
         return (wl, *cmfs, 106.7502593994140625)
     if name == "art46":
         return (wl, *(_band_stairs(wl, c) for c in (xb, yb, zb)), float(np.trapz(yb, wl)))
+    if name == "cie1964":
+        import colour
+        cmfs = colour.MSDS_CMFS["CIE 1964 10 Degree Standard Observer"].copy().align(colour.SpectralShape(360, 830, 1))
+        wl = np.asarray(cmfs.wavelengths, dtype=np.float64)
+        xb, yb, zb = np.asarray(cmfs.values, dtype=np.float64).T
+        return wl, xb, yb, zb, float(np.trapz(yb, wl))
     raise KeyError(f"unknown observer {name!r} (known: {', '.join(OBSERVERS)})")
 
 

@@ -501,7 +501,32 @@ def _viewer(out, run, deviations=None):
             "tev": _tev(run, folder, ref if ref_url else None, out), "regions": json.dumps(regions),
             "marks": json.dumps(_prism_marks(run)), "prism": _prism_line(run), "baseline": _baseline(out, run),
             "numbers": [f"{_text(k)}: {_fmt(v)}" for k, v in _dict(run.get("metrics")).items()],
-            "reference_problems": _reference_problems(run), "conversions": _conversions(run)}
+            "reference_problems": _reference_problems(run), "conversions": _conversions(run), "why": _why(out, run)}
+
+
+def _why(out, run):
+    """The report's "why" box of a diagnosed render (metrics.json ``diagnosis``, issue 34): the
+    diagnosis in words, each ranked model as a line, the ready known_deviations.toml entry, and a
+    link to the reference as the likely model predicts the render (an EXR inside the run folder).
+    None without a diagnosis. Every value is anyone's text: shown escaped, numbers checked."""
+    from ..verdict import diagnosis
+    diag = run.get("diagnosis")
+    if not isinstance(diag, dict):
+        return None
+    lines = []
+    for m in diag.get("models") if isinstance(diag.get("models"), list) else []:
+        if not isinstance(m, dict) or not isinstance(m.get("params"), dict):
+            continue
+        try:
+            line = diagnosis.short(m)
+        except (TypeError, ValueError, KeyError):
+            line = _text(m.get("model"))
+        full = "fully explains" if m.get("fully_explains") is True else "does not fully explain"
+        lines.append(f"{line} ({full}; {_text(m.get('evidence'))}): {_text(m.get('explanation'))}"
+                     + (f" [{_text(m['note'])}]" if m.get("note") else ""))
+    url = _local_url(out, diag["image"]) if isinstance(diag.get("image"), str) else None
+    return {"text": _text(diag.get("text")), "models": lines, "toml": _text(diag.get("known_deviation") or ""),
+            "image": url or ""}
 
 
 def _section(text, heading):

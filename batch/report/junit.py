@@ -13,9 +13,10 @@ systems read it (testsuites > testsuite > testcase; failure and skipped carry a 
 
 Every test case also has properties "status", "judged by" (the probes measured and who made the
 reference; "checked against itself: detects change, not error" where a renderer's own reference was
-its only judge: batch/report/results.py) and, where the run has them, "baseline" (the
---baseline verdict) and "noise test" (batch/records.py noise_test_text), and its reason and
-noise test in <system-out>. Written with xml.etree (attribute and text escaping is the library's);
+its only judge: batch/report/results.py) and, where the run has them, "baseline" (the --baseline
+verdict), "noise test" (batch/records.py noise_test_text) and "diagnosis" (the fitted error models'
+verdict, issue 34: a failure's message, its reason, carries it too), and its reason, noise test,
+judged by and diagnosis in <system-out>. Written with xml.etree (attribute and text escaping is the library's);
 characters XML 1.0 cannot carry (control characters, lone surrogates) are replaced first, since
 reasons quote files and renderers' output.
 """
@@ -67,6 +68,10 @@ def testcase(run):
     test = noise_test_text(run.get("test"))
     if test:
         _property(props, "noise test", test)
+    diagnosis = run.get("diagnosis")
+    why = diagnosis.get("text") if isinstance(diagnosis, dict) else None
+    if why:
+        _property(props, "diagnosis", why)
     baseline = run.get("baseline")
     if isinstance(baseline, dict) and baseline.get("status"):
         _property(props, "baseline", baseline["status"])
@@ -77,7 +82,8 @@ def testcase(run):
     elif element == "skipped":
         ET.SubElement(case, "skipped", message=prefix + reason)
     out = [f"status: {_text(status)}"] + ([f"reason: {reason}"] if reason else []) + \
-          ([f"noise test: {_text(test)}"] if test else []) + ([f"judged by: {_text(judged_by(run))}"] if judged_by(run) else [])
+          ([f"noise test: {_text(test)}"] if test else []) + ([f"judged by: {_text(judged_by(run))}"] if judged_by(run) else []) + \
+          ([f"diagnosis: {_text(why)}"] if why else [])
     ET.SubElement(case, "system-out").text = "\n".join(out)
     return case
 

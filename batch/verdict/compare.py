@@ -191,6 +191,8 @@ class ZTest:
     dof: np.ndarray = field(repr=False, default=None)
     # the scale test (module docstring): per-block weights, its threshold and result
     weight: np.ndarray = field(repr=False, default=None)
+    var_model: np.ndarray = field(repr=False, default=None)  # the block variance the reference predicts (the weights' V_b)
+    var_ref: np.ndarray = field(repr=False, default=None)    # the reference's own share of ``var``
     scale: dict = None
     block_passed: bool = True
     finite: bool = True
@@ -317,7 +319,7 @@ def z_test(test, ref, spp, own_var_of_mean=None, own_passes=None, alpha=0.01, bl
     threshold = stats.sidak_threshold(block_alpha, m)
     p_min = float(np.min(p)) if m else 1.0
     zmap = expand_blocks(z, ey, ex)
-    weight = scale = None
+    weight = scale = v_model = None
     if scale_test:
         # weights from the reference alone (its per-sample variance over spp, plus its own noise)
         v_model = block_sums(ref.sigma2, ey, ex) / max(spp, 1) / n**2 + v_ref + floor
@@ -330,7 +332,8 @@ def z_test(test, ref, spp, own_var_of_mean=None, own_passes=None, alpha=0.01, bl
                  passed=bool(block_ok and (scale is None or scale["pass"]) and all_finite), zmap=zmap,
                  semap=expand_blocks(np.sqrt(var), ey, ex),
                  samples_per_block=int(block * block * spp), noise=noise, dof_min=float(np.min(dof)),
-                 diff=d, ref_block_mean=ref_block_mean, var=var, dof=dof, weight=weight, scale=scale,
+                 diff=d, ref_block_mean=ref_block_mean, var=var, dof=dof, weight=weight, var_model=v_model,
+                 var_ref=v_ref, scale=scale,
                  block_passed=block_ok, finite=all_finite)
 
 

@@ -59,11 +59,12 @@ def render_verdict(entry, scene, rendered, image, res_dir, settings, deviations)
     later = []  # FLIP, computing in its child while the probes run here
     auto = []  # --flip auto: FLIP's start, made once the status is known
     maps = {}
+    held = {}  # what the noise test compared (the diagnosis fits its models on it)
     try:
         if unusable:
             entry["reference_problem"] = unusable
         else:
-            ztest = noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings, later, auto)
+            ztest = noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings, later, auto, held)
         observers = sorted({d.observer for d in known.applicable(deviations, entry) if d.observer})
         entry["probes"] = probes.evaluate(rendered, names, test_all, reference=None if unusable else ref,
                                           stderr=stderr, passes=entry["passes"], observers=observers, maps=maps)
@@ -91,7 +92,37 @@ def render_verdict(entry, scene, rendered, image, res_dir, settings, deviations)
     if unusable and entry["status"] != "unjudged" and not entry["reason"].startswith(PROBES_ALONE):
         # judged, but without the reference: the reason says so whatever the status
         entry["reason"] = f"{PROBES_ALONE}: {unusable}" + (f"; {entry['reason']}" if entry["reason"] else "")
+    if entry["status"] in DIAGNOSED:
+        diagnose(entry, rendered, names, test_all, stderr, held, ztest, res_dir)
     return entry
+
+
+DIAGNOSED = ("failed", "known", "fixed")  # a passing render is never diagnosed
+
+
+def diagnose(entry, rendered, names, image, stderr, held, ztest, res_dir):
+    """The error models fitted to a failing (or known/fixed) render (batch/verdict/diagnosis/):
+    ``entry["diagnosis"]``, the reason's "likely: ..." (a failed render's) or "no model explains
+    it", and the reference as the likely model predicts the render (``diagnosis_model.exr``,
+    linked from the report's "why" box) where that model fits the reference evidence. Advice
+    only: the status stays; a diagnosis that breaks is recorded as its error, never raised. A
+    known or fixed render gets the quick models only (batch/verdict/diagnosis/ ``diagnose``)."""
+    from . import diagnosis
+    try:
+        ev = diagnosis.Evidence(entry, rendered, names, image, stderr, entry.get("passes"), held.get("at"),
+                                ztest, held.get("picked"))
+        found = diagnosis.diagnose(ev, quick=entry["status"] != "failed")
+    except Exception as exc:  # noqa: BLE001 - advice must never take the verdict down
+        entry["diagnosis"] = {"criterion": diagnosis.CRITERION, "models": [], "likely": None,
+                              "text": "no diagnosis", "errors": [{"model": "*", "error": f"{type(exc).__name__}: {exc}"[:300]}]}
+        return
+    best = found.pop("_best_fit", None)
+    if best is not None and best.corrected is not None and found["likely"]:
+        previews.write_half(res_dir / diagnosis.CORRECTED, best.corrected[..., :3])
+        found["image"] = str(res_dir / diagnosis.CORRECTED)
+    entry["diagnosis"] = found
+    if entry["status"] == "failed":
+        entry["reason"] = f"{entry['reason']}; {found['text']}"
 
 
 # Probes whose expected values are radiances (or a ratio to them, expected 1): a uniform radiance
@@ -142,12 +173,15 @@ def detectable(ztest, probe_records, alpha=None):
     return out
 
 
-def noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings, later=None, auto=None):
+def noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings, later=None, auto=None, held=None):
     """The noise test against the reference, on the render's own noise (entry["test"]); the
     diff, z-score and FLIP images. Returns the in-memory test (for re-judging) or None.
     ``later``: a list that receives what finishes FLIP (call it), which then computes meanwhile;
     None: FLIP is waited for here. With ``settings["flip"] == "auto"``, ``auto`` receives FLIP's
-    start instead (call it with a list for its finisher, once the status says FLIP is wanted)."""
+    start instead (call it with a list for its finisher, once the status says FLIP is wanted).
+    ``held``: a dict that receives what was compared (the reference at this resolution ``at``;
+    ``picked``: the shared channel names, the render and its standard error on them), for the
+    diagnosis."""
     entry["reference"] = {"path": str(ref.path), "spp": ref.spp, "backend": ref.provenance.get("backend"),
                           "mode": ref.provenance.get("mode"), "versions": ref.provenance.get("versions"),
                           "date": ref.provenance.get("date")}
@@ -172,6 +206,8 @@ def noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings, la
         entry["test"] = {"pass": None, "reason": f"cannot compare with the reference: {exc}"}
         return None
     mean = at.mean[..., :3]
+    if held is not None:
+        held.update(at=at, picked=(shared, test_all, stderr))
     entry["metrics"].update(compare.metrics(test, mean))
     same = (entry["backend"], entry["mode"]) == (ref.provenance.get("backend"), ref.provenance.get("mode"))
     zt = None

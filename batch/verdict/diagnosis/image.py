@@ -1,0 +1,217 @@
+"""Image error models: what a renderer's output conventions do to an otherwise right image. Each
+predicts the render from the reference's pixels (evidence "reference": the noise test's blocks)."""
+from functools import lru_cache
+
+import numpy as np
+
+from . import Model, channel_parts, reference_model
+
+FAMILY = "image"
+
+
+def _intensity(names):
+    """Channels that hold intensities (R, G, B, S0.*): where a transfer curve or an offset acts."""
+    return np.array([s is None or s == 0 for _, s in channel_parts(names)])
+
+
+def _colours(names):
+    return np.array([c for c, _ in channel_parts(names)])
+
+
+def _uniform(x, ev):
+    return ev.ref_mean * x[0]
+
+
+def _per_channel(x, ev):
+    return ev.ref_mean * np.asarray(x)[_colours(ev.ref_names)]
+
+
+def _offset(x, ev):
+    return ev.ref_mean + np.where(_intensity(ev.ref_names), np.asarray(x)[_colours(ev.ref_names)], 0.0)
+
+
+def _odd(fn):
+    """An odd extension of a curve on |v| (negative values keep their sign), with its first and
+    second derivatives: fn(a) -> (f, f', f'') for a >= 0."""
+    def curve(v):
+        v = np.asarray(v, dtype=np.float64)
+        f, f1, f2 = fn(np.abs(v))
+        sign = np.sign(v)
+        return sign * f, f1, sign * f2
+    return curve
+
+
+@_odd
+def srgb_encode_d(a):
+    lin = a <= 0.0031308
+    p = np.power(np.maximum(a, 1e-300), 1 / 2.4)
+    return (np.where(lin, 12.92 * a, 1.055 * p - 0.055), np.where(lin, 12.92, 1.055 / 2.4 * p / np.maximum(a, 1e-300)),
+            np.where(lin, 0.0, 1.055 / 2.4 * (1 / 2.4 - 1) * p / np.maximum(a, 1e-300) ** 2))
+
+
+@_odd
+def srgb_decode_d(a):
+    lin = a <= 0.04045
+    u = (a + 0.055) / 1.055
+    return (np.where(lin, a / 12.92, u ** 2.4), np.where(lin, 1 / 12.92, 2.4 / 1.055 * u ** 1.4),
+            np.where(lin, 0.0, 2.4 * 1.4 / 1.055 ** 2 * u ** 0.4))
+
+
+def srgb_encode(v):
+    return srgb_encode_d(v)[0]
+
+
+def srgb_decode(v):
+    return srgb_decode_d(v)[0]
+
+
+def _gamma_d(g):
+    @_odd
+    def curve(a):
+        a = np.maximum(a, 1e-12)  # the expansion's terms stay finite at black (where they are capped anyway)
+        p = np.power(a, 1.0 / g)
+        return p, p / (g * a), (1.0 / g) * (1.0 / g - 1.0) * p / a ** 2
+    return curve
+
+
+def _curve(curve_of):
+    """Predict through a curve applied to each pass's output (the renderer encodes what it writes):
+    the mean of the passes is then f(m) + f''(m) / 2 * var_pass(m) (second order; Jensen's gap,
+    which a path tracer's per-pass noise makes as large as the noise of a block), var_pass in the
+    linear domain from the render's own per-pixel standard error: P stderr^2 / f'(m)^2 (capped at
+    m^2, where the expansion stops holding)."""
+    def predict(x, ev):
+        m = ev.ref_mean
+        f, f1, f2 = curve_of(x)(m)
+        pass_var = (ev.picked[2].astype(np.float64) ** 2 * max(int(ev.passes or 1), 1)) if ev.picked[2] is not None else 0.0
+        var_lin = np.minimum(pass_var / np.maximum(f1, 1e-300) ** 2, m ** 2)
+        return np.where(_intensity(ev.ref_names), f + 0.5 * f2 * var_lin, m)
+    return predict
+
+
+@lru_cache(maxsize=None)
+def colour_matrix(source, target):
+    """3 x 3 linear RGB matrix from colour space ``source`` to ``target`` (colour-science; "XYZ"
+    for CIE XYZ)."""
+    import colour
+    if source == "XYZ":
+        return np.asarray(colour.RGB_COLOURSPACES[target].matrix_XYZ_to_RGB, dtype=np.float64)
+    if target == "XYZ":
+        return np.asarray(colour.RGB_COLOURSPACES[source].matrix_RGB_to_XYZ, dtype=np.float64)
+    return np.asarray(colour.matrix_RGB_to_RGB(colour.RGB_COLOURSPACES[source], colour.RGB_COLOURSPACES[target]),
+                      dtype=np.float64)
+
+
+def _mix(matrix_of):
+    """Predict by a 3 x 3 matrix acting on each triplet of colour channels (R, G, B and each
+    Stokes component's R, G, B)."""
+    def predict(x, ev):
+        m, names = ev.ref_mean, ev.ref_names
+        mat = matrix_of()
+        out = m.copy()
+        parts = channel_parts(names)
+        for s in sorted({st for _, st in parts}, key=lambda v: -1 if v is None else v):
+            idx = [next((i for i, p in enumerate(parts) if p == (c, s)), None) for c in range(3)]
+            if None in idx:
+                continue
+            out[..., idx] = m[..., idx] @ mat.T
+        return out
+    return predict
+
+
+def _flip(axis):
+    def predict(x, ev):
+        return np.flip(ev.ref_mean, axis=axis)
+    return predict
+
+
+def _transpose(x, ev):
+    m = ev.ref_mean
+    return None if m.shape[0] != m.shape[1] else np.swapaxes(m, 0, 1)
+
+
+def _shift(x, ev):
+    from scipy import ndimage
+    return ndimage.shift(ev.ref_mean, (x[1], x[0], 0.0), order=1, mode="nearest")
+
+
+def _zoom(x, ev):
+    """The reference's image magnified by x[0] about the image centre (a fov measured on another
+    axis, or in another unit)."""
+    from scipy import ndimage
+    m = ev.ref_mean
+    h, w = m.shape[:2]
+    z = x[0]
+    centre = np.array([(h - 1) / 2, (w - 1) / 2, 0.0])
+    mat = np.diag([1 / z, 1 / z, 1.0])
+    return ndimage.affine_transform(m, mat, offset=centre - mat @ centre, order=1, mode="nearest")
+
+
+def _zoom_starts(ev):
+    h, w = ev.ref_mean.shape[:2]
+    return [[1.0]] + ([[w / h], [h / w]] if w != h else [])
+
+
+def _clamp(x, ev):
+    return np.where(_intensity(ev.ref_names), np.minimum(ev.ref_mean, x[0]), ev.ref_mean)
+
+
+def _clamp_starts(ev):
+    top = float(np.max(ev.ref_mean[..., _intensity(ev.ref_names)]))
+    return [[top * f] for f in (0.9, 0.5, 0.2)]
+
+
+def _scale_deviation(f):
+    return {"scale": f.values[0], "scale_se": f.se[0]}
+
+
+def _colour_space(label, source, target):
+    return Model(f"colour space: {label}", FAMILY, (), "reference",
+                 f"linear data converted from {source} to {target} where none was due (a colour-space mix-up)",
+                 reference_model(_mix(lambda: colour_matrix(source, target))))
+
+
+MODELS = [
+    Model("uniform scale", FAMILY, ("scale",), "reference",
+          "the image is a constant factor too bright or too dark (units, exposure, a normalisation)",
+          reference_model(_uniform, starts=[[1.0]]), deviation=_scale_deviation),
+    Model("per-channel scale", FAMILY, ("scale R", "scale G", "scale B"), "reference",
+          "each colour channel off by its own factor (white balance, another white point)",
+          reference_model(_per_channel, starts=[[1.0, 1.0, 1.0]])),
+    Model("additive offset", FAMILY, ("offset R", "offset G", "offset B"), "reference",
+          "a constant added to every pixel (a bias, an ambient term, a black level)",
+          reference_model(_offset, starts=[[0.0, 0.0, 0.0]])),
+    Model("sRGB transfer applied", FAMILY, (), "reference",
+          "the sRGB transfer curve applied to linear output (the image is display-encoded)",
+          reference_model(_curve(lambda x: srgb_encode_d))),
+    Model("sRGB transfer missing", FAMILY, (), "reference",
+          "display-encoded input decoded once too often (an sRGB decode applied to linear data)",
+          reference_model(_curve(lambda x: srgb_decode_d))),
+    Model("gamma", FAMILY, ("gamma",), "reference",
+          "a power-law encoding 1/gamma applied to linear output",
+          reference_model(_curve(lambda x: _gamma_d(x[0])), starts=[[2.2], [1.0]], bounds=([0.1], [10.0])), slow=True),
+    _colour_space("Rec.709 read as Rec.2020", "ITU-R BT.2020", "sRGB"),
+    _colour_space("Rec.2020 written as Rec.709", "sRGB", "ITU-R BT.2020"),
+    _colour_space("Rec.709 read as ACEScg", "ACEScg", "sRGB"),
+    _colour_space("ACEScg written as Rec.709", "sRGB", "ACEScg"),
+    _colour_space("XYZ written as RGB", "sRGB", "XYZ"),
+    _colour_space("RGB read as XYZ", "XYZ", "sRGB"),
+    Model("channel order BGR", FAMILY, (), "reference", "red and blue channels swapped (BGR order)",
+          reference_model(_mix(lambda: np.eye(3)[::-1]))),
+    Model("flipped vertically", FAMILY, (), "reference", "the image is upside down (row 0 at the bottom)",
+          reference_model(_flip(0))),
+    Model("flipped horizontally", FAMILY, (), "reference", "the image is mirrored left to right",
+          reference_model(_flip(1))),
+    Model("transposed", FAMILY, (), "reference", "rows and columns swapped (x and y exchanged)",
+          reference_model(_transpose)),
+    Model("shift", FAMILY, ("dx px", "dy px"), "reference",
+          "the image moved by a fraction of a pixel or a whole one (the pixel-centre convention)",
+          reference_model(_shift, starts=[[0.0, 0.0], [0.5, 0.5], [-0.5, -0.5], [1.0, 0.0], [-1.0, 0.0],
+                                           [0.0, 1.0], [0.0, -1.0]], bounds=([-4.0, -4.0], [4.0, 4.0])), slow=True),
+    Model("zoom", FAMILY, ("zoom",), "reference",
+          "the image magnified about its centre (a field of view measured on the other axis)",
+          reference_model(_zoom, starts=_zoom_starts, bounds=([0.2], [5.0])), slow=True),
+    Model("clamped highlights", FAMILY, ("clamp",), "reference",
+          "values above a ceiling cut off (a clamp, an 8-bit or display-range output)",
+          reference_model(_clamp, starts=_clamp_starts), slow=True),
+]
