@@ -4,6 +4,8 @@ the new reference judged against the old on both their noises) and the mean rati
 channel with its standard error; both films named from the provenances.
 
     .venv/bin/python benchmarks/reference_colour_change.py [--history references/history] [--write]
+    .venv/bin/python benchmarks/reference_colour_change.py --smoke DIR   (a tiny reference made with
+        Mitsuba's film, then replaced through the CMF film, in DIR: the table of that replacement)
 
 --write prepends the table to benchmarks/REFERENCE_COLOUR.md. The history folder itself is not
 committed (git keeps the references' history); run this where the re-make ran.
@@ -60,11 +62,25 @@ def table(items):
     return "\n".join(lines)
 
 
+def smoke(folder):
+    """One tiny reference (fluorescent_sphere_lone at scale 0.25, 64 spp) made with Mitsuba's film,
+    then replaced through the CMF film (--accept), in ``folder``; returns its history folder."""
+    import subprocess
+    make = [sys.executable, str(HERE.parent / "batch" / "make_references.py"), "-s", "fluorescent_sphere_lone",
+            "--scale", "0.25", "--spp", "64", "--passes", "2", "--out", str(folder)]
+    for extra in ([], ["--film", "cmf", "--seed", "3000", "--replace", "--accept"]):
+        subprocess.run(make + extra, check=True, capture_output=True, text=True, cwd=HERE.parent)
+    return folder / "history"
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--history", default=str(HERE.parent / "references" / "history"))
     ap.add_argument("--write", action="store_true")
+    ap.add_argument("--smoke", metavar="DIR", help="make and replace one tiny reference in DIR first (seconds)")
     args = ap.parse_args(argv)
+    if args.smoke:
+        args.history = str(smoke(Path(args.smoke)))
     items = rows(args.history)
     if not items:
         print(f"no replaced references under {args.history}", file=sys.stderr)

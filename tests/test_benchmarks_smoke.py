@@ -20,6 +20,7 @@ LIBRARIES = {"record.py"}  # imported by the scripts, not run
 NEEDS = {"crosscheck_fluorescence.py": "art"}  # a script that needs another renderer skips without it, naming why
 TABLE = r"(?m)^\|[-|: ]+\|\s*$"  # a Markdown table's separator row
 SMOKE = {  # script -> (arguments that make it run in seconds, what its output must contain: a regex)
+    "bench_diagnosis.py": (["--seeds", "1", "--only", "flip", "--out", "{tmp}/DIAGNOSIS.md"], TABLE),
     "bench_dispersion.py": (["--size", "16", "--spp", "4", "--repeat", "1", "--calls", "1"], TABLE),
     "bench_engines.py": (["--smoke"], TABLE),
     "bench_export_render.py": (["--scale", "0.05", "--repeat", "1"], TABLE),
@@ -41,6 +42,7 @@ SMOKE = {  # script -> (arguments that make it run in seconds, what its output m
     "fuzz_scenes.py": (["--count", "40", "--schema-count", "4", "--chunk", "20", "--workers", "1"], TABLE),
     "plugin_lane_estimators.py": ([], r"variance one-lane / mixture"),
     "power_by_scene.py": (["-s", "ggx_copper_50"], TABLE),
+    "reference_colour_change.py": (["--smoke", "{tmp}"], TABLE),
     "reference_storage.py": (["--smoke"], TABLE),
     "rgb_microfacet_check.py": (["--smoke", "--spp", "4", "--passes", "2"], TABLE),
 }
