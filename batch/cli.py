@@ -239,10 +239,16 @@ _MODE = text_kind(_mode, "mode")
 STUDIES = ("spectral-vs-rgb",)  # --study (batch/studies/spectral_vs_rgb.py)
 
 
-def _study(v):
-    if v not in STUDIES:
-        raise ValueError(f"is not a study: one of {', '.join(STUDIES)}")
-    return v
+def _one_of(choices, what):
+    """A check that a value is one of ``choices`` (the message names ``what`` and lists them)."""
+    def check(v):
+        if v not in choices:
+            raise ValueError(f"is not a {what}: one of {', '.join(choices)}")
+        return v
+    return check
+
+
+_study = _one_of(STUDIES, "study")
 
 
 def _illuminant(v):
@@ -276,16 +282,8 @@ def _flip_native(v):
 FILMS = ("rgb", "cmf")  # --film (batch/backends/mitsuba/backend.py FILMS)
 
 
-def _film(v):
-    if v not in FILMS:
-        raise ValueError(f"is not a film: one of {', '.join(FILMS)}")
-    return v
-
-
-def _device(v):
-    if v not in DEVICES:
-        raise ValueError(f"is not a device: one of {', '.join(DEVICES)}")
-    return v
+_film = _one_of(FILMS, "film")
+_device = _one_of(DEVICES, "device")
 TYPES = {
     "input": text_kind(_nonempty, "path"), "case": text_kind(_nonempty, "name"), "scene": text_kind(_nonempty, "name"),
     "renderer": text_kind(_renderer, "backend"), "exec": text_kind(_exec, "[BACKEND=]PATH"), "spp": SPP,
