@@ -291,9 +291,12 @@ def main():
     ap.add_argument("--default", action="store_true", help="the default suite (every scene at its own settings)")
     ap.add_argument("--smoke", action="store_true", help="one scene, tiny settings (checks the script runs)")
     ap.add_argument("--write", action="store_true", help="record the tables in benchmarks/ENGINES.md")
+    ap.add_argument("--flip", choices=("on", "off", "auto"), help="the run's --flip (default: the runner's, on)")
     args = ap.parse_args()
     argv, title = (([], "default suite") if args.default else (SMOKE, "smoke") if args.smoke
                    else (TINY, "tiny suite"))
+    if args.flip:
+        argv, title = [*argv, "--flip", args.flip], f"{title}, --flip {args.flip}"
     load0 = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as tmp:
         wall, cpu, code, events, runs = measure(argv, Path(tmp) / "out")
