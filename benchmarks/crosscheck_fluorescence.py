@@ -88,7 +88,8 @@ def render(backend, scene, folder, spp, passes, seed, art_output="spectral"):
     if mode is None:
         return None, why
     path = backend.export(scene, folder / backend.name)
-    if backend.name == "art" and art_output == "spectral":
+    if backend.name == "art" and art_output == "spectral" and "IMAGECONVERSION_ARTRAW_TO_SPECTRAL_EXR" not in path.read_text():
+        # the writer's spectral EXR route is its default now; an older .arm (ARTCSP) is switched to it
         text = path.read_text()
         assert SPECTRAL_ROUTE[0] in text, "the ART writer's actions changed"
         lines = [l for l in text.replace(*SPECTRAL_ROUTE).splitlines() if "IMAGECONVERSION_ARTCSP_TO_EXR" not in l]
@@ -160,7 +161,8 @@ def main():
                 for rec in probes.evaluate(sc, names, img, stderr=se):
                     if rec["name"].startswith("lone "):
                         record[name].setdefault("probe", {})[backend_name] = rec
-                        e, m, se = (np.asarray(rec[k]) for k in ("expected", "measured", "se"))
+                        e, m = (np.asarray(rec[k]) for k in ("expected", "measured"))
+                        se = np.asarray(rec["stat"]["se"])  # the region mean's standard error per channel
                         cells = " | ".join(f"{mv:.4g} vs {ev:.4g} ({(mv - ev) / abs(ev) * 100:+.1f} %, "
                                            f"z {(mv - ev) / sv:+.1f})" for ev, mv, sv in zip(e, m, se))
                         rows.append(f"| {name}{' (sphere alone)' if args.lone else ''} | probe rho L + integral P L, "
