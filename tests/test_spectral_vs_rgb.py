@@ -134,3 +134,20 @@ def test_an_ordinary_blend_answers_what_spectral_changes(tmp_path):
     assert rows["own"]["de00"]["p95"] < f11["de00"]["p95"] / 2, (rows["own"]["de00"], f11["de00"])
     summary = (out / "summary.md").read_text()
     assert "## Conversions from the source scene" in summary and "| ordinary | sphere_gold |" in summary
+
+
+def test_only_rgb_renderers_are_the_rgb_side(tmp_path):
+    """A declared spectral renderer (available here: the example) or ART in the run is not compared
+    as if it rendered in RGB."""
+    from spectral_bench.batch import backends
+    from spectral_bench.batch.backends import command
+    from spectral_bench.batch.jobs import job, plan
+    from spectral_bench.batch.studies import spectral_vs_rgb as study
+    from spectral_bench.exporters import ir_json
+    toy = ROOT / "examples" / "your_renderer" / "toy.toml"
+    declared = command.load_file(toy)
+    made = {"mitsuba": backends.get("mitsuba"), "toy_spectral": backends.get("toy_spectral", declaration=declared["toy_spectral"])}
+    assert made["toy_spectral"].availability()[0]
+    jobs, rows = study.jobs([("red_sphere", ir_json.load(EXAMPLE))], made, {"illuminants": None}, tmp_path,
+                            job.make, plan.for_run)
+    assert sorted((j["backend"], j["extra"]["role"]) for j in jobs) == [("mitsuba", "rgb"), ("mitsuba", "spectral")]

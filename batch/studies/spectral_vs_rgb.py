@@ -47,6 +47,7 @@ PROJECT_ILLUMINANTS = {"A": "cie_a", "D50": "cie_d50", "D55": "cie_d55", "D65": 
 LED_SERIES = ("LED-B1", "LED-B2", "LED-B3", "LED-B4", "LED-B5", "LED-BH1", "LED-RGB1", "LED-V1", "LED-V2")
 ILLUMINANTS = tuple(PROJECT_ILLUMINANTS) + LED_SERIES
 LIGHT_KEYS = ("radiance", "irradiance", "intensity")  # an emitter's spectrum, whatever its kind
+RGB_ROUTES = ("mitsuba", "cycles", "luxcore")  # the renderers with an RGB side: Mitsuba's RGB variant, the RGB backends
 
 
 def illuminant_spectrum(key):
@@ -145,8 +146,8 @@ def jobs(scenes, made, opts, out, make, for_run):
                 continue
             routes = [("mitsuba", spectral, "spectral")]
             for bname, backend in made.items():
-                if not backend.availability()[0]:
-                    continue
+                if bname not in RGB_ROUTES or not backend.availability()[0]:
+                    continue  # a spectral renderer (ART, a declared one) is no RGB side of this study
                 mode, why = rgb_mode(backend, sc)
                 if mode is None:
                     rows.append({"scene": name, "light": light, "rgb": bname, "status": "unsupported", "reason": why})
@@ -268,7 +269,7 @@ def write_images(folder, rgb_name, spectral, rgb, dmap, fields, out):
     top = max(float(fields["de00"]["max"]), 2 * VISIBLE_DE00)
     import matplotlib
     cmap = matplotlib.colormaps["magma"]
-    names = {"spectral": f"spectral.png", "rgb": f"rgb_{rgb_name}.png", "de00": f"de00_{rgb_name}.png"}
+    names = {"spectral": "spectral.png", "rgb": f"rgb_{rgb_name}.png", "de00": f"de00_{rgb_name}.png"}
     Image.fromarray(srgb8(spectral)).save(folder / names["spectral"])
     Image.fromarray(srgb8(rgb)).save(folder / names["rgb"])
     Image.fromarray((cmap(np.clip(dmap / top, 0, 1))[..., :3] * 255 + 0.5).astype(np.uint8)).save(folder / names["de00"])
