@@ -277,7 +277,7 @@ def round_up_bits(values, keep=SE_BITS):
     return np.where(u >= 0x0400, rounded, u).astype(np.uint16).view(np.float16)
 
 
-def stored_render(mean, stderr, seed):
+def stored_render(mean, stderr, seed, step_se=None):
     """(mean, standard error) of a render as render.exr stores them: binary16 where they fit.
 
     The mean is rounded *stochastically* (to the neighbour above with probability equal to the
@@ -297,7 +297,10 @@ def stored_render(mean, stderr, seed):
     by about 2.5 %, no verdict changed: benchmarks/RUN_FOLDER.md). Random numbers from ``seed``, so a run is reproducible.
 
     Without a standard error (one pass), with values that are not finite, or that do not fit in
-    binary16, the mean stays float32 (and the standard error float32 or None)."""
+    binary16, the mean stays float32 (and the standard error float32 or None). ``step_se``: the
+    standard error that sets the step instead of ``stderr`` (an observer layer is rounded below the
+    noise of the reference it corrects, not below its own, much smaller one: batch/verdict/
+    observer_layers.py); the rounding variance still joins ``stderr``."""
     mean = np.asarray(mean, dtype=np.float64)
     if stderr is None:
         return mean.astype(np.float32), None
@@ -305,8 +308,9 @@ def stored_render(mean, stderr, seed):
     if not (np.all(np.isfinite(mean)) and np.all(np.isfinite(se))):
         return mean.astype(np.float32), se.astype(np.float32)
     step = half_ulp(mean)
-    coarse = 2.0 ** np.floor(np.log2(np.where(se > 0, se / NOISE_STEPS, 1.0)))
-    step = np.where(se > 0, np.maximum(step, coarse), step)
+    ss = se if step_se is None else np.broadcast_to(np.asarray(step_se, dtype=np.float64), se.shape)
+    coarse = 2.0 ** np.floor(np.log2(np.where(ss > 0, ss / NOISE_STEPS, 1.0)))
+    step = np.where(ss > 0, np.maximum(step, coarse), step)
     lo = np.floor(mean / step) * step
     hi = lo + step
     if float(np.max(np.abs(hi), initial=0.0)) >= HALF_MAX or float(np.max(np.abs(lo), initial=0.0)) >= HALF_MAX \

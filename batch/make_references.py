@@ -158,6 +158,15 @@ def parser():
     ap.add_argument("--film", type=T["film"], default="rgb", metavar="rgb|cmf",
                     help="-r mitsuba: rgb (Mitsuba's own film; default) or cmf (the scene format's colour: CIE 1931 "
                          "at 1 nm and the IEC 61966-2-1 matrix; unpolarised scenes only)")
+    from spectral_bench.exporters import colorimetry
+    others = [o for o in colorimetry.OBSERVERS if o != colorimetry.GROUND_TRUTH]
+    ap.add_argument("--layers", action="append", choices=others, metavar="OBSERVER",
+                    help="with --film cmf: also render, from the same paths, the difference each of these observers' "
+                         f"films would see ({', '.join(others)}; repeatable), kept beside the reference as "
+                         "<scene>.<observer>.exr (batch/verdict/observer_layers.py)")
+    ap.add_argument("--layers-only", action="store_true",
+                    help="with --layers: add the layers to current CMF-film references without rendering their images "
+                         "again (the layers' own --spp and --passes; the image is not touched)")
     ap.add_argument("--device", type=T["device"], default="auto", metavar="cpu|gpu|auto",
                     help="-r mitsuba: render on the GPU (cuda_ad_* variants; an error where CUDA does not render), the "
                          "CPU, or the GPU where a CUDA probe renders (default auto)")
@@ -241,8 +250,14 @@ def chosen_backend(args):
         raise Usage(f"--device gpu: Mitsuba's CUDA variants, but -r {name} renders the references")
     if args.film != "rgb" and name != "mitsuba":
         raise Usage(f"--film {args.film}: a Mitsuba film, but -r {name} renders the references")
+    if args.layers and args.film != "cmf":
+        raise Usage(f"--layers {args.layers[0]}: observer layers are rendered through the CMF film: add --film cmf")
+    if args.layers_only and not args.layers:
+        raise Usage("--layers-only: name the observers with --layers")
+    if args.layers_only and args.replace:
+        raise Usage("--layers-only adds layers to a reference and never replaces its image: drop --replace")
     opts = {"renderer": [name], "exec": execs, "variant": args.variant, "device": args.device, "art_ggx": args.art_ggx,
-            "film": args.film,
+            "film": args.film, "layers": sorted(set(args.layers or [])),
             "approximate": False, "renderers": declared or None}
     return runner.make_backend(name, opts), name
 
@@ -369,13 +384,23 @@ def _make(args, argv, out, held, backend):
             failed.append(name)
             continue
         held.callback(lock.release)
+        if args.layers_only:
+            from spectral_bench.batch.verdict import observer_layers
+            found = references.search(name, out, scene=scene)
+            own = observer_layers.own_observer(found.ref.provenance) if found.ref is not None else None
+            if found.ref is None or own != "cie1931":
+                why = (existing_state(out, name, scene) if found.ref is None
+                       else f"its reference was made with the {own or 'unrecorded'} observer, not the CMF film")
+                print(f"{name}: no layers added: {why}", flush=True)
+                failed.append(name)
+                continue
         # checked under the lock: a reference another maker has just written counts as existing
-        if not args.replace and any(p.exists() for p in (out / f"{name}.exr", out / f"{name}.json")):
+        elif not args.replace and any(p.exists() for p in (out / f"{name}.exr", out / f"{name}.json")):
             print(f"{name}: {existing_state(out, name, scene)}; left as it is (--replace renders it again)",
                   flush=True)
             continue
         spp = scene["render"]["spp"] * args.factor if args.factor else args.spp
-        work = out / ".work" / name
+        work = out / ".work" / (f"{name}.layers" if args.layers_only else name)
         todo, per_pass = pass_jobs(name, rendered, backend, mode, spp, args.passes, args.seed, work)
         plans.append((name, scene, mode, per_pass, work, todo))
         if len(todo) < args.passes:
@@ -418,6 +443,24 @@ def _make(args, argv, out, held, backend):
         r = scene["render"]
         names, mean, stderr, seconds, versions = merge(work, args.passes,
                                                        planning.scaled_size(r["width"], r["height"], args.scale))
+        layers = None
+        if args.layers:
+            from spectral_bench.batch.verdict import observer_layers
+            names, mean, stderr, layers = observer_layers.split(names, mean, stderr)
+            layer_info = {"spp": per_pass * args.passes, "passes": args.passes, "seed": args.seed, "mode": mode,
+                          "film": colour_route(backend, mode)["film"], "versions": versions, "command": command,
+                          "time_s": round(seconds, 2), "date": dt.datetime.now().isoformat(timespec="seconds")}
+            if args.layers_only:
+                ref = references.search(name, out, scene=scene).ref
+                if ref is None:
+                    raise ValueError("its reference is no longer current; no layers added")
+                paths = observer_layers.save(out, name, layers, layer_info, ref.stderr)
+                ratios = references.read_record(out / f"{name}.json")[0][observer_layers.RECORD_KEY]
+                print(f"{name}: observer layers ({layer_info['spp']} spp) -> {', '.join(p.name for p in paths)}; their noise over "
+                      f"the reference's as stored (median, R G B): " + "; ".join(
+                          f"{o} {' '.join(f'{x:.3f}' for x in ratios[o]['noise_ratio'])}" for o in layers), flush=True)
+                shutil.rmtree(work, ignore_errors=True)
+                return
         prov = {"backend": backend.name, "mode": mode, "spp": per_pass * args.passes, "passes": args.passes,
                 "seed": args.seed, "resolution": [int(mean.shape[1]), int(mean.shape[0])], "scale": args.scale,
                 "time_s": round(seconds, 2), "date": dt.datetime.now().isoformat(timespec="seconds"),
@@ -433,6 +476,8 @@ def _make(args, argv, out, held, backend):
         if not replace_or_refuse(name, scene, names, mean, stderr, prov, work):
             failed.append(name)
             return
+        if layers:
+            observer_layers.save(out, name, layers, layer_info, stderr)
         shutil.rmtree(work, ignore_errors=True)
 
     def replace_or_refuse(name, scene, names, mean, stderr, prov, work):

@@ -21,7 +21,7 @@ GROUND_TRUTH = "cie1931"
 OBSERVERS = ("cie1931", "mitsuba3", "art46", "cie1964")
 # ART 2.1.2's film (-s46e): 46 bands of 10 nm from 320 nm, each the box average of the radiance
 # over its band (ArSpectrum46.c; measured band by band), labelled by the band centres and read by
-# the ART backend as a spectral EXR (batch/spectral_exr.py: hat functions between the centres)
+# the ART backend as a spectral EXR of box bands (batch/spectral_exr.py, box_weights)
 ART_BANDS_NM = (320.0, 10.0, 46)
 
 
@@ -35,39 +35,51 @@ MITSUBA_XYZ_TO_SRGB = np.array([[3.240479, -1.537150, -0.498535],
 
 @lru_cache(maxsize=None)
 def observer(name=GROUND_TRUTH):
-    """(wavelengths, x_bar, y_bar, z_bar, normalisation) on the 1 nm grid of 360-830 nm."""
+    """(wavelengths, x_bar, y_bar, z_bar, normalisation) on the 1 nm grid of 360-830 nm, such that
+    xyz_to_srgb (the IEC 61966-2-1 matrix) of this observer's XYZ is the film's RGB: a film's own
+    matrix is folded into its CMFs (which may then be negative; film() keeps the two apart)."""
+    if name == "mitsuba3":
+        wl, xb, yb, zb, norm, matrix = film(name)
+        return (wl, *(np.linalg.solve(_srgb_matrix(), matrix) @ np.array([xb, yb, zb])), norm)
+    wl, xb, yb, zb, norm, _matrix = film(name)
+    return wl, xb, yb, zb, norm
+
+
+@lru_cache(maxsize=None)
+def film(name=GROUND_TRUTH):
+    """(wavelengths, x_bar, y_bar, z_bar, normalisation, XYZ -> linear sRGB matrix) of an observer
+    as a film applies it: non-negative CMFs (a film's sensor responses), then its matrix."""
     wl, xb, yb, zb = spectra.cie_1931_cmfs()
     if name == "cie1931":
-        return wl, xb, yb, zb, float(np.trapz(yb, wl))
+        return wl, xb, yb, zb, float(np.trapz(yb, wl)), _srgb_matrix()
     if name == "mitsuba3":
         knots = (wl % 5) == 0
         cmfs = np.array([np.interp(wl, wl[knots], c[knots]) for c in (xb, yb, zb)])
-        # Mitsuba's film then maps XYZ to sRGB with its own rounded matrix; folded into the CMFs so
-        # that xyz_to_srgb (the IEC 61966-2-1 matrix) of this observer's XYZ is Mitsuba's RGB
-        cmfs = np.linalg.solve(_srgb_matrix(), MITSUBA_XYZ_TO_SRGB) @ cmfs
-        return (wl, *cmfs, 106.7502593994140625)
+        # Mitsuba's film then maps XYZ to sRGB with its own rounded matrix
+        return (wl, *cmfs, 106.7502593994140625, MITSUBA_XYZ_TO_SRGB)
     if name == "art46":
-        return (wl, *(_band_stairs(wl, c) for c in (xb, yb, zb)), float(np.trapz(yb, wl)))
+        return (wl, *(_band_stairs(wl, c) for c in (xb, yb, zb)), float(np.trapz(yb, wl)), _srgb_matrix())
     if name == "cie1964":
         import colour
         cmfs = colour.MSDS_CMFS["CIE 1964 10 Degree Standard Observer"].copy().align(colour.SpectralShape(360, 830, 1))
         wl = np.asarray(cmfs.wavelengths, dtype=np.float64)
         xb, yb, zb = np.asarray(cmfs.values, dtype=np.float64).T
-        return wl, xb, yb, zb, float(np.trapz(yb, wl))
+        return wl, xb, yb, zb, float(np.trapz(yb, wl)), _srgb_matrix()
     raise KeyError(f"unknown observer {name!r} (known: {', '.join(OBSERVERS)})")
 
 
 def _band_stairs(wl, cmf):
     """A CMF as ART's band film is read, on the 1 nm grid. ART's film holds the box average of the
-    radiance over each 10 nm band; the reader (batch/spectral_exr.py) weights band k by the
-    integral of its hat function times the CMF (hat_weights). So the film sees the radiance
-    through a stair: constant over band k at that weight over the band width; a band edge takes
-    the mean of its two neighbours (half a band's value at the film's ends), zero outside the film,
-    so that the trapezoid rule on the 1 nm grid integrates the stair as the step function it is."""
+    radiance over each 10 nm band, and the reader weights band k by the integral of the CMF over
+    that band (box_weights: batch/spectral_exr.py reads ART's bands as boxes, what they measure).
+    So the film sees the radiance through a stair: over band k, the CMF's mean over the band; a
+    band edge takes the mean of its two neighbours (half a band's value at the film's ends), zero
+    outside the film, so that the trapezoid rule on the 1 nm grid integrates the stair as the step
+    function it is."""
     start, width, count = ART_BANDS_NM
     centres = start + width * (np.arange(count) + 0.5)
-    norm = 1.0  # hat_weights divides by the normalisation; the stair carries the bare integral
-    per_band = hat_weights(centres, wl, np.asarray(cmf)[None, :], norm)[:, 0] / width
+    edges = np.stack([centres - width / 2, centres + width / 2], axis=-1)
+    per_band = box_weights(edges, wl, np.asarray(cmf)[None, :], 1.0)[:, 0] / width  # norm 1: the bare integral
     pos = (wl - start) / width
     inside = (pos >= 0) & (pos <= count)
     band = np.clip(np.floor(pos).astype(int), 0, count - 1)
@@ -91,6 +103,24 @@ def hat_weights(band_wl, wl, cmfs, norm):
     band_wl = np.asarray(band_wl, dtype=np.float64)
     hats = np.array([np.interp(wl, band_wl, row, left=0.0, right=0.0) for row in np.eye(band_wl.size)])
     return np.trapz(hats[:, None, :] * np.asarray(cmfs, dtype=np.float64)[None, :, :], wl, axis=-1) / norm
+
+
+def box_weights(edges, wl, cmfs, norm):
+    """Weights W (N x K) that integrate a spectrum known as its means over N bands ``edges``
+    ([(lo, hi)], nm) against K colour-matching functions ``cmfs`` (K x M, tabulated at ``wl``):
+    the spectrum is taken constant over each band at its mean, so W[k] is the integral of the CMF
+    over band k (trapezoid rule on ``wl`` with the band's edges added, the CMF interpolated linearly
+    there), divided by the normalisation. A box-band film's channels s give XYZ = s @ W."""
+    wl = np.asarray(wl, dtype=np.float64)
+    cmfs = np.atleast_2d(np.asarray(cmfs, dtype=np.float64))
+    out = np.zeros((len(edges), cmfs.shape[0]))
+    for k, (lo, hi) in enumerate(np.asarray(edges, dtype=np.float64)):
+        lo, hi = max(lo, wl[0]), min(hi, wl[-1])
+        if hi <= lo:
+            continue
+        x = np.union1d(wl[(wl > lo) & (wl < hi)], [lo, hi])
+        out[k] = [np.trapz(np.interp(x, wl, c), x) for c in cmfs]
+    return out / norm
 
 
 def xyz(values_at_cmf_wavelengths, obs=GROUND_TRUTH):

@@ -76,6 +76,9 @@ DEFAULT_REFERENCES = [
     "macbeth_chart_D65",                                                 # spectral accuracy
     "polarizing_plane_0", "polarizing_plane_90",                         # polarization
 ]
+# the observer layers the extension carries: Mitsuba's film (the renderer Blender users run here);
+# ART's (art46, 10 MB more) are in the all-references zip
+EXTENSION_LAYERS = ("mitsuba3",)
 WHEEL_CACHE = ROOT / "build" / "wheels"
 README = ROOT / "README.md"
 README_BLOCK = re.compile(r"(<!-- extension-size -->\n)(.*?)(<!-- /extension-size -->)", re.S)
@@ -95,18 +98,36 @@ def select_references(stage, which):
     """Keep the references named by ``which`` ("default", "all", "none" or "a,b,c") in the staged
     copy; returns (shipped, all) scene names."""
     folder = stage / "references"
-    every = sorted(p.stem for p in folder.glob("*.exr")) if folder.is_dir() else []
+    # a reference is <scene>.exr + <scene>.json, with its observer layers <scene>.<observer>.exr
+    # (batch/verdict/observer_layers.py) if it has them: files go with the scene before the first dot
+    every = sorted(p.stem for p in folder.glob("*.exr") if "." not in p.stem) if folder.is_dir() else []
     if which == "all" or not folder.is_dir():
         return every, every
     keep = (set() if which == "none" else set(DEFAULT_REFERENCES) if which == "default"
             else {n.strip() for n in which.split(",") if n.strip()})
-    unknown = keep - {p.stem for p in folder.glob("*.exr")}
+    unknown = keep - set(every)
     if unknown:
         raise SystemExit(f"--references: no reference for {sorted(unknown)} in {ROOT / 'references'}")
     for path in folder.iterdir():
-        if path.stem not in keep:
+        if path.name.split(".", 1)[0] not in keep:
             path.unlink()
+    drop_layers(folder, EXTENSION_LAYERS)
     return sorted(keep), every
+
+
+def drop_layers(folder, keep):
+    """Leave only the observer layers of ``keep`` in a staged references folder: their files and
+    their entries in each record (the reference's image and its sha256 are untouched)."""
+    import json
+    for meta_path in folder.glob("*.json"):
+        meta = json.loads(meta_path.read_text())
+        layers = meta.get("observer_layers")
+        if not isinstance(layers, dict):
+            continue
+        for obs in [o for o in layers if o not in keep]:
+            del layers[obs]
+            (folder / f"{meta_path.stem}.{obs}.exr").unlink(missing_ok=True)
+        meta_path.write_text(json.dumps(meta, indent=1, sort_keys=True) + "\n")
 
 
 def download_wheels(platform, dest, cache=WHEEL_CACHE):

@@ -124,10 +124,12 @@ def render(scene, tmp_path, spp, size=None):
 
 
 def noise_test(reference_name, image, stderr, spp, passes=2):
-    """The noise test of a render (with its own noise) against a committed reference."""
-    from spectral_bench.batch.verdict import compare, references
+    """The noise test of a render (with its own noise) against a committed reference (with its
+    observer layers, for ``rejudge(..., observer=)``)."""
+    from spectral_bench.batch.verdict import compare, observer_layers, references
     ref = references.load(reference_name)
-    at = compare.reference_at(ref.mean, ref.stderr, ref.spp, image.shape, ref.provenance.get("passes", 8))
+    at = compare.reference_at(ref.mean, ref.stderr, ref.spp, image.shape, ref.provenance.get("passes", 8),
+                              observer_layers.offsets(ref, image.shape[-1]))
     own = None if stderr is None else stderr.astype("float64") ** 2
     return compare.z_test(image, at, spp, own_var_of_mean=own, own_passes=passes)
 

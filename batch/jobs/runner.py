@@ -159,7 +159,8 @@ def make_backend(name, opts):
 
 # the run's options each built-in backend takes beyond its executable
 BACKEND_OPTIONS = {
-    "mitsuba": lambda o: {"force_variant": o["variant"], "device": o.get("device") or "auto", "film": o.get("film") or "rgb"},
+    "mitsuba": lambda o: {"force_variant": o["variant"], "device": o.get("device") or "auto", "film": o.get("film") or "rgb",
+                          "layers": tuple(o.get("layers") or ())},
     "art": lambda o: {"ggx": bool(o["art_ggx"])},
     "cycles": lambda o: {"approximate": bool(o.get("approximate"))},
     "luxcore": lambda o: {"approximate": bool(o.get("approximate"))},

@@ -132,14 +132,20 @@ class ReferenceAt:
     var_of_mean: np.ndarray
     sigma2: np.ndarray
     dof: float
+    # {observer: (difference, its variance)}: the reference as that observer's film would have seen
+    # it, minus the reference (batch/verdict/observer_layers.py), at this resolution; scalars 0.0
+    # for the reference's own observer
+    offsets: dict = field(default_factory=dict)
 
     def channels(self, sl):
-        return ReferenceAt(self.mean[..., sl], self.var_of_mean[..., sl], self.sigma2[..., sl], self.dof)
+        return ReferenceAt(self.mean[..., sl], self.var_of_mean[..., sl], self.sigma2[..., sl], self.dof,
+                           {k: tuple(x if np.isscalar(x) else x[..., sl] for x in v) for k, v in self.offsets.items()})
 
 
-def reference_at(ref_mean, ref_stderr, ref_spp, shape, ref_passes=8):
+def reference_at(ref_mean, ref_stderr, ref_spp, shape, ref_passes=8, offsets=None):
     """The reference box-filtered to the test resolution: integer factors fy = H/h and fx = W/w
-    of its own (independent per axis; n = fy fx small pixels per big one)."""
+    of its own (independent per axis; n = fy fx small pixels per big one). ``offsets``: its
+    observer layers ({observer: (difference, variance)}, observer_layers.offsets), carried along."""
     H, W = ref_mean.shape[:2]
     h, w = shape[:2]
     f = factors(ref_mean.shape, shape)
@@ -157,7 +163,9 @@ def reference_at(ref_mean, ref_stderr, ref_spp, shape, ref_passes=8):
         spread = downsample(ref_mean.astype(np.float64) ** 2, fy, fx) - mean ** 2
         spread -= (1 - 1 / n) * downsample(var_mean, fy, fx)
         sigma2 += np.maximum(spread, 0.0)
-    return ReferenceAt(mean, var_of_mean, sigma2, float(n * max(ref_passes - 1, 1)))
+    at_offsets = {k: (d if np.isscalar(d) else downsample(d, fy, fx), v if np.isscalar(v) else downsample(v, fy, fx) / n)
+                  for k, (d, v) in (offsets or {}).items()}
+    return ReferenceAt(mean, var_of_mean, sigma2, float(n * max(ref_passes - 1, 1)), at_offsets)
 
 
 def metrics(test, ref):
@@ -196,6 +204,8 @@ class ZTest:
     scale: dict = None
     block_passed: bool = True
     finite: bool = True
+    # {observer: (block mean of the difference, its variance)} (ReferenceAt.offsets per block)
+    offsets: dict = field(repr=False, default_factory=dict)
 
     def as_dict(self):
         out = {"name": "block test, Sidak-corrected",
@@ -208,17 +218,26 @@ class ZTest:
             out["scale_test"] = dict(self.scale)
         return out
 
-    def _judge(self, d, var):
+    def _judge(self, d, var, ref_block_mean=None):
         """(block test passed, scale test record) for block differences ``d`` with variances ``var``."""
         p = stats.two_sided_p(d / np.sqrt(var), self.dof) if d.size else np.ones(0)
         block_ok = bool(np.min(p) >= self.threshold) if p.size else True
-        return block_ok, (scale_stats(d, var, self.dof, self.weight, self.ref_block_mean, self.alpha)
+        m = self.ref_block_mean if ref_block_mean is None else ref_block_mean
+        return block_ok, (scale_stats(d, var, self.dof, self.weight, m, self.alpha)
                           if self.weight is not None else None)
 
-    def rejudge(self, scale, scale_se=0.0):
-        """Would the render pass if the reference were ``scale`` (+- scale_se) times brighter?"""
-        d = self.diff - (scale - 1.0) * self.ref_block_mean
-        block_ok, sc = self._judge(d, self.var + (scale_se * self.ref_block_mean) ** 2)
+    def rejudge(self, scale, scale_se=0.0, observer=None):
+        """Would the render pass if the reference were ``scale`` (+- scale_se) times brighter, seen
+        by ``observer``'s film (the reference plus that observer's layer, whose own variance joins
+        the test's)? None when the reference has no layer for ``observer``: cannot tell."""
+        off, var_off = 0.0, 0.0
+        if observer is not None:
+            if observer not in self.offsets:
+                return None
+            off, var_off = self.offsets[observer]
+        m = self.ref_block_mean + off
+        d = self.diff - off - (scale - 1.0) * m
+        block_ok, sc = self._judge(d, self.var + var_off + (scale_se * m) ** 2, m)
         return block_ok and (sc is None or sc["pass"])
 
     def detectable(self, power=POWER):
@@ -327,6 +346,8 @@ def z_test(test, ref, spp, own_var_of_mean=None, own_passes=None, alpha=0.01, bl
         scale = scale_stats(d, var, dof, weight, ref_block_mean, alpha)
     all_finite = bool(np.all(finite))
     block_ok = bool(p_min >= threshold)
+    offsets = {k: (dd if np.isscalar(dd) else block_sums(dd, ey, ex) / n, vv if np.isscalar(vv) else block_sums(vv, ey, ex) / n**2)
+               for k, (dd, vv) in ref.offsets.items()}
     return ZTest(alpha=alpha, block=block, blocks=m, p_min=p_min, threshold=threshold,
                  z_max=float(np.abs(z).max()), frac_over_3=float(np.mean(np.abs(z) > 3)),
                  passed=bool(block_ok and (scale is None or scale["pass"]) and all_finite), zmap=zmap,
@@ -334,7 +355,7 @@ def z_test(test, ref, spp, own_var_of_mean=None, own_passes=None, alpha=0.01, bl
                  samples_per_block=int(block * block * spp), noise=noise, dof_min=float(np.min(dof)),
                  diff=d, ref_block_mean=ref_block_mean, var=var, dof=dof, weight=weight, var_model=v_model,
                  var_ref=v_ref, scale=scale,
-                 block_passed=block_ok, finite=all_finite)
+                 block_passed=block_ok, finite=all_finite, offsets=offsets)
 
 
 def image_sanity(img):

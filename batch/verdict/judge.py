@@ -9,7 +9,7 @@ import numpy as np
 
 from .. import exr
 from .. import previews
-from . import compare, flip_isolated, known, probes, references, stats, status
+from . import compare, flip_isolated, known, observer_layers, probes, references, stats, status
 
 
 def find_reference(name, scene, directories, shape=None, names=None):
@@ -182,9 +182,13 @@ def noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings, la
     ``held``: a dict that receives what was compared (the reference at this resolution ``at``;
     ``picked``: the shared channel names, the render and its standard error on them), for the
     diagnosis."""
+    layers = observer_layers.load(ref)
     entry["reference"] = {"path": str(ref.path), "spp": ref.spp, "backend": ref.provenance.get("backend"),
                           "mode": ref.provenance.get("mode"), "versions": ref.provenance.get("versions"),
-                          "date": ref.provenance.get("date")}
+                          "date": ref.provenance.get("date"), "observer": observer_layers.own_observer(ref.provenance),
+                          "observer_layers": sorted(layers)}
+    if (why := observer_layers.problem_of(ref)) is not None:
+        entry["reference"]["observer_layers_problem"] = why
     # judged on the channels both have (a renderer may add Stokes channels the reference lacks)
     shared = [n for n in ref.names if n in names]
     if shared[:3] != ["R", "G", "B"]:
@@ -201,7 +205,8 @@ def noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings, la
         ref_mean, ref_stderr = ref.mean, ref.stderr
     test = test_all[..., :3]
     try:
-        at = compare.reference_at(ref_mean, ref_stderr, ref.spp, test_all.shape, ref.provenance.get("passes", 8))
+        at = compare.reference_at(ref_mean, ref_stderr, ref.spp, test_all.shape, ref.provenance.get("passes", 8),
+                                  observer_layers.offsets(ref, len(shared), layers))
     except ValueError as exc:
         entry["test"] = {"pass": None, "reason": f"cannot compare with the reference: {exc}"}
         return None
@@ -292,7 +297,8 @@ def sweep_point(job, record):
     if unusable:
         point["reason"] = unusable
         return point
-    at = compare.reference_at(ref.mean, ref.stderr, ref.spp, img.shape, ref.provenance.get("passes", 8))
+    at = compare.reference_at(ref.mean, ref.stderr, ref.spp, img.shape, ref.provenance.get("passes", 8),
+                              observer_layers.offsets(ref, img.shape[-1]))
     point.update(compare.metrics(img[..., :3], at.mean[..., :3]))
     point["predicted_rmse"] = float(np.sqrt(np.mean(at.sigma2[..., :3]) / record["spp"] + np.mean(at.var_of_mean[..., :3])))
     point["noise_floor_rmse"] = float(np.sqrt(np.mean(at.var_of_mean[..., :3])))
@@ -301,4 +307,9 @@ def sweep_point(job, record):
                             own_passes=record["passes"], alpha=job["verdict"]["alpha"],
                             min_samples=compare.min_samples_for(job["scene_name"], job["verdict"]["min_samples"]))
         point["test"] = zt.as_dict()
+        if not zt.passed:  # a rung that fails exactly as a recorded deviation says (its film) converges to that
+            entry = {"scene": job["scene_name"], "backend": job["backend"], "mode": job["mode"],
+                     "versions": record.get("versions"), "film": (job.get("backend_options") or {}).get("film")}
+            point["test"]["known"] = sorted(d.id for d in known.applicable(known.load(job["verdict"].get("known")), entry)
+                                            if d.explains("noise test") and zt.rejudge(d.scale, d.scale_se, d.observer))
     return point

@@ -6,7 +6,11 @@ checks it explains (patterns over check names: probe names, or "noise test"), an
 deviation: the renderer's value is ``scale`` times the expected one (with the uncertainty
 ``scale_se`` of that factor), the expected one computed, if ``observer`` is given, with that
 observer (exporters/colorimetry.py: how the renderer's film integrates spectra) instead of the CIE
-1931 ground truth. A check is re-judged under the model:
+1931 ground truth. For the noise test, "expected" is the reference as that observer's film would
+have seen it: the reference plus its observer layer (batch/verdict/observer_layers.py, rendered from
+the same paths as the CMF-film reference; the reference's own observer needs none); a reference
+without a layer for the observer cannot re-judge the noise test, which then keeps its verdict. A
+check is re-judged under the model:
 
   plain check fails, check under the model passes  -> known   (fails exactly as recorded)
   plain check passes, check under the model fails  -> fixed   (the recorded deviation would have

@@ -49,7 +49,7 @@ def checks_of(entry, ztest=None):
         out.append(Check("finite values", False))
     test = entry.get("test")
     if test is not None:
-        rj = (lambda d, zt=ztest: zt.rejudge(d.scale, d.scale_se)) if ztest is not None else None
+        rj = (lambda d, zt=ztest: zt.rejudge(d.scale, d.scale_se, d.observer)) if ztest is not None else None
         out.append(Check("noise test", test.get("pass"), rj))
     for p in entry.get("probes") or []:
         if p.get("stat"):

@@ -59,7 +59,7 @@ class MitsubaBackend:
     name = "mitsuba"
     formats = ("mitsuba",)
 
-    def __init__(self, executable=None, force_variant=None, device="auto", film="rgb"):
+    def __init__(self, executable=None, force_variant=None, device="auto", film="rgb", layers=()):
         if film not in FILMS:
             raise ValueError(f"film {film!r}: one of {', '.join(FILMS)}")
         if device not in cuda.DEVICES:
@@ -69,7 +69,13 @@ class MitsubaBackend:
         self.device = device
         # what rebuilds this backend (jobs are data; a job rebuilt elsewhere probes its own CUDA)
         self.film = film
+        # with the CMF film: observers whose difference layers every pass also renders (spectral.py)
+        self.layers = tuple(layers)
+        if self.layers and film != "cmf":
+            raise ValueError("observer layers need the CMF film")
         self.options = {"executable": executable, "force_variant": force_variant, "device": device, "film": film}
+        if self.layers:
+            self.options["layers"] = list(self.layers)
 
     def availability(self):
         """(available, reason)."""
@@ -151,7 +157,7 @@ class MitsubaBackend:
         path = mitsuba_writer.write(scene, out_dir)
         if self.film == "cmf":  # the IR's own colour: X, Y, Z against the 1 nm CMFs (spectral.py)
             path = Path(path)
-            path.write_text(spectral_film.cmf_xml(path.read_text(), str(path)))
+            path.write_text(spectral_film.observers_xml(path.read_text(), self.layers, str(path)))
         return path
 
     def render(self, xml_path, variant, spp, out_exr, passes=1, seed=0, timeout=1800, log_path=None):
@@ -198,6 +204,7 @@ def film_to_ir(names, img, export_dir):
     if list(names[:3]) == list(spectral_film.CMF_CHANNELS):  # the CMF film: the IR's colour
         img = np.concatenate([spectral_film.cmf_to_srgb(img[..., :3]), img[..., 3:]], axis=-1)
         names = ["R", "G", "B"] + list(names[3:])
+        names, img = spectral_film.layers_to_ir(names, img)
     if names and names[0] == "Y":
         tint = _flat_spectrum_rgb()
         img = np.concatenate([img[..., :1] * tint, img[..., 1:]], axis=-1)

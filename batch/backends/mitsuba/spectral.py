@@ -76,9 +76,52 @@ CMF_FILM = "specfilm, CIE 1931 2 degree CMFs at 1 nm (exporters/data/cie_1931_2d
 
 def cmf_xml(xml_text, where="scene.xml"):
     """The scene XML with its film replaced by the X, Y, Z specfilm of the IR's observer."""
+    return observers_xml(xml_text, (), where)
+
+
+# -- observer layers (issue 33): beside the IR's X, Y, Z, the same paths seen through the CMFs of
+# other observers (exporters/colorimetry.py: how a renderer's film integrates spectra, named by a
+# recorded deviation), channels "<observer>_X", "_Y", "_Z". film_to_ir (backend.py) turns each
+# triple into the difference of that observer's RGB from the IR's, per pass: a reference keeps those
+# differences (batch/verdict/observer_layers.py) so that a render through another film can be
+# re-judged against the reference as that film would have seen it.
+LAYER_SEP = "_"
+
+
+def layer_channels(observers):
+    """[(name, wavelengths, response)] of the CMF film plus each observer's three CMFs."""
     from ....exporters import colorimetry
-    wl, xb, yb, zb, _norm = colorimetry.observer(colorimetry.GROUND_TRUTH)
-    return specfilm_xml(xml_text, [(n, wl, c) for n, c in zip(CMF_CHANNELS, (xb, yb, zb))], where)
+    out = []
+    for obs in (colorimetry.GROUND_TRUTH, *observers):
+        wl, xb, yb, zb, _norm, _matrix = colorimetry.film(obs)  # non-negative responses (specfilm needs them)
+        names = CMF_CHANNELS if obs == colorimetry.GROUND_TRUTH else [f"{obs}{LAYER_SEP}{c}" for c in CMF_CHANNELS]
+        out += [(n, wl, c) for n, c in zip(names, (xb, yb, zb))]
+    return out
+
+
+def observers_xml(xml_text, observers, where="scene.xml"):
+    """The scene XML with its film replaced by the CMF film plus ``observers``' CMF channels."""
+    return specfilm_xml(xml_text, layer_channels(observers), where)
+
+
+def layers_to_ir(names, img):
+    """(names, image): each observer triple "<obs>_X, _Y, _Z" (after the CMF film's channels,
+    already R, G, B) replaced by "<obs>.R, .G, .B", that observer's linear sRGB minus the IR's."""
+    import numpy as np
+
+    from ....exporters import colorimetry
+    names, img = list(names), np.asarray(img, dtype=np.float64)
+    keep, layers = [], []
+    for i, n in enumerate(names):
+        obs, sep, c = n.rpartition(LAYER_SEP)
+        if sep and c == "X" and obs in colorimetry.OBSERVERS and names[i + 1:i + 3] == [f"{obs}_Y", f"{obs}_Z"]:
+            norm, matrix = colorimetry.film(obs)[4:]
+            delta = img[..., i:i + 3] / norm @ np.asarray(matrix).T - img[..., :3]
+            layers.append(([f"{obs}.{k}" for k in "RGB"], delta))
+        elif not (sep and c in "YZ" and obs in colorimetry.OBSERVERS):
+            keep.append(i)
+    out_names = [names[i] for i in keep] + [n for ns, _ in layers for n in ns]
+    return out_names, np.concatenate([img[..., keep]] + [d for _, d in layers], axis=-1)
 
 
 def cmf_to_srgb(img):
