@@ -16,10 +16,11 @@ numpy is not bundled: Blender ships its own (scipy 1.17 needs numpy >= 1.26.4).
 
 Where the room goes (linux-x64, measured): the wheels take 116 MB (mitsuba 63 MB and scipy 35 MB,
 both imported at run time: scipy by the verdict's statistics and by colour-science; zip archives
-already, they do not compress further), every reference 79 MB (EXRs already ZIP-compressed inside:
+already, they do not compress further), every reference 79 MB and their observer layers 38 MB (EXRs already ZIP-compressed inside:
 deflating them again gains 0 %; a stronger lossless EXR codec such as HTJ2K needs OpenEXR 3.4, which
 Blender 4.2's own image reader predates). So the extension ships the references of
-``DEFAULT_REFERENCES`` (every case represented, 33 MB) and the build writes every reference into
+``DEFAULT_REFERENCES`` (every case represented, 41 MB with Mitsuba's film's observer layers,
+``EXTENSION_LAYERS``) and the build writes every reference with every layer into
 ``spectral_bench_references-<version>.zip`` beside it: unzipped, it is the references folder of the
 extension's preferences ("Folder, Then Extension").
 
@@ -159,16 +160,19 @@ def download_wheels(platform, dest, cache=WHEEL_CACHE):
 
 
 def write_references_zip(out, version, names):
-    """Every reference (EXR and record) of ``names`` into out/spectral_bench_references-<version>.zip,
-    under a folder spectral_bench_references/ (the EXRs are compressed already: stored as they are)."""
+    """Every reference (EXR, record and every observer layer) of ``names`` into
+    out/spectral_bench_references-<version>.zip, under a folder spectral_bench_references/ (the EXRs
+    are compressed already: stored as they are)."""
     path = out / f"spectral_bench_references-{version}.zip"
     tmp = path.with_suffix(".zip.part")
+    folder = ROOT / "references"
     with zipfile.ZipFile(tmp, "w") as z:
         for name in names:
-            for suffix, how in ((".exr", zipfile.ZIP_STORED), (".json", zipfile.ZIP_DEFLATED)):
-                source = ROOT / "references" / f"{name}{suffix}"
+            files = [folder / f"{name}.json", folder / f"{name}.exr", *sorted(folder.glob(f"{name}.*.exr"))]
+            for source in files:
                 if source.is_file():
-                    z.write(source, f"spectral_bench_references/{name}{suffix}", compress_type=how)
+                    how = zipfile.ZIP_DEFLATED if source.suffix == ".json" else zipfile.ZIP_STORED
+                    z.write(source, f"spectral_bench_references/{source.name}", compress_type=how)
     tmp.replace(path)
     return path
 

@@ -162,8 +162,15 @@ def test_the_documented_build_fits_with_margin_records_its_size_and_ships_every_
     committed = readme_sizes((ROOT / "README.md").read_text())
     assert abs(committed["linux-x64"] - size_mb) <= 1.0, (committed, size_mb)
     names = zipfile.ZipFile(zip_path).namelist()
-    assert sorted(n[len("references/"):-4] for n in names if n.startswith("references/") and n.endswith(".exr")) \
-        == sorted(build.DEFAULT_REFERENCES)
+    shipped = [n[len("references/"):-4] for n in names if n.startswith("references/") and n.endswith(".exr")]
+    assert sorted(n for n in shipped if "." not in n) == sorted(build.DEFAULT_REFERENCES)
+    # the observer layers of EXTENSION_LAYERS only, each beside its reference and listed in its record
+    layers = sorted(n for n in shipped if "." in n)
+    assert layers and {n.split(".")[1] for n in layers} == set(build.EXTENSION_LAYERS)
+    with zipfile.ZipFile(zip_path) as z:
+        for n in layers:
+            scene, obs = n.split(".")
+            assert set(json.loads(z.read(f"references/{scene}.json"))["observer_layers"]) == {obs}, n
     (refs,) = (platform_build / "dist").glob("spectral_bench_references-*.zip")
     every = sorted(p.name for p in (ROOT / "references").iterdir() if p.suffix in (".exr", ".json"))
     assert sorted(n.split("/", 1)[1] for n in zipfile.ZipFile(refs).namelist()) == every
