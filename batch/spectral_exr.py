@@ -233,7 +233,7 @@ def read(path, expect=None):
 
 # observers to_rgb integrates with: (wavelengths, x_bar, y_bar, z_bar, normalisation). "mitsuba3"
 # is Mitsuba 3's RGB film (exporters/colorimetry.py), to compare a Mitsuba spectral render with
-# its RGB render; "art46" is not here: it models a band film, not an observer of band data
+# its RGB render; "art46" is not here: it is ART's band film as read with the "box" band model below
 OBSERVERS = {
     "cie1931": lambda: colorimetry.observer("cie1931"),
     "cie1964": lambda: colorimetry.observer("cie1964"),
@@ -241,22 +241,47 @@ OBSERVERS = {
 }
 
 
+def box_edges(wavelengths_nm, width_nm=None):
+    """[(lo, hi)] of box bands centred on ``wavelengths_nm``: ``width_nm`` wide, or (None) meeting
+    midway between neighbouring centres, the outer ones half a spacing out."""
+    c = np.asarray(wavelengths_nm, dtype=np.float64)
+    if width_nm is not None:
+        return np.stack([c - width_nm / 2, c + width_nm / 2], axis=-1)
+    mid = (c[1:] + c[:-1]) / 2
+    return np.stack([np.r_[c[0] - (mid[0] - c[0]), mid], np.r_[mid, c[-1] + (c[-1] - mid[-1])]], axis=-1)
+
+
+# how a renderer's channels hold its spectrum (issue 33): "hat" (default) and "point", samples at
+# the channel wavelengths, read as their piecewise-linear interpolation; "box", each channel the
+# mean radiance over its band (ART's film, ArSpectrum46.c; a specfilm of box responses), read as a
+# spectrum constant over each band (colorimetry.box_weights)
+BAND_MODELS = ("hat", "point", "box")
+
+
 @lru_cache(maxsize=64)
-def rgb_weights(wavelengths_nm, observer="cie1931"):
-    """N x 3 matrix from N samples (at the tuple ``wavelengths_nm``) to linear sRGB."""
+def rgb_weights(wavelengths_nm, observer="cie1931", bands="hat", band_width_nm=None):
+    """N x 3 matrix from N channels (at the tuple ``wavelengths_nm``, holding the spectrum as the
+    band model ``bands`` says) to linear sRGB."""
     if observer not in OBSERVERS:
         raise ValueError(f"unknown observer {observer!r} (known: {', '.join(OBSERVERS)})")
+    if bands not in BAND_MODELS:
+        raise ValueError(f"unknown band model {bands!r} (known: {', '.join(BAND_MODELS)})")
     wl, xb, yb, zb, norm = OBSERVERS[observer]()
-    xyz = colorimetry.hat_weights(np.array(wavelengths_nm), wl, np.stack([xb, yb, zb]), norm)  # N x 3
+    cmfs = np.stack([xb, yb, zb])
+    if bands == "box":
+        xyz = colorimetry.box_weights(box_edges(wavelengths_nm, band_width_nm), wl, cmfs, norm)  # N x 3
+    else:
+        xyz = colorimetry.hat_weights(np.array(wavelengths_nm), wl, cmfs, norm)  # N x 3
     weights = colorimetry.xyz_to_srgb(xyz)
     weights.setflags(write=False)  # shared by every caller through the cache
     return weights
 
 
-def to_rgb(image, observer="cie1931"):
+def to_rgb(image, observer="cie1931", bands="hat", band_width_nm=None):
     """(names, H x W x C float64): linear sRGB R, G, B of S0 and, for a polarised image,
-    S0.R ... S3.B after them (the project's channel order)."""
-    weights = rgb_weights(tuple(float(w) for w in image.wavelengths_nm), observer)
+    S0.R ... S3.B after them (the project's channel order), its channels read under the band model
+    ``bands`` (BAND_MODELS)."""
+    weights = rgb_weights(tuple(float(w) for w in image.wavelengths_nm), observer, bands, band_width_nm)
     planes = {k: image.stokes[k] @ weights for k in sorted(image.stokes)}
     names, parts = ["R", "G", "B"], [planes[0]]
     if image.polarised:

@@ -111,8 +111,9 @@ def test_missing_artist_gives_skipped_jobs_never_passed(golden, tmp_path):
 def test_art46_observer_is_the_backends_band_film(tmp_path):
     """The art46 observer (exporters/colorimetry.py) must be exactly what the backend computes
     from ART's band film: each 10 nm band's box average, read from a spectral EXR named as ART
-    names its channels, weighted by its hat function times the CMFs (batch/spectral_exr.py). And
-    it must differ from the CIE observer where the deviation says it does (a saturated colour)."""
+    names its channels, weighted by the CMFs' integral over the band (the "box" band model,
+    batch/spectral_exr.py). And it must differ from the CIE observer where the deviation says it
+    does (a saturated colour)."""
     import numpy as np
     import OpenEXR
     from spectral_bench.batch.backends.art.backend import stokes_to_rgb

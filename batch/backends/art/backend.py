@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from ....exporters import art_writer
+from ....exporters.colorimetry import ART_BANDS_NM as ART_BANDS  # (first centre - width / 2, width, count)
 from ... import spectral_exr
 from .. import passes as passes_mod
 from ..passes import BackendFailure
@@ -96,9 +97,11 @@ def art_version(artist):
 def stokes_to_rgb(path):
     """R, G, B and, for a polarised render, S0.R ... S3.B from ART's spectral EXR: the Fichet 2021
     layout (channels 'S<k>.<nm>,<frac>nm', the band centres) read and integrated with the CIE 1931
-    CMFs by batch/spectral_exr.py (R, G, B alone when only S0 is there: an unpolarised render)."""
+    CMFs by batch/spectral_exr.py (R, G, B alone when only S0 is there: an unpolarised render).
+    ART's film holds each 10 nm band's box average (exporters/colorimetry.py ART_BANDS_NM): read
+    with the "box" band model, each band weighted by the CMFs' integral over it."""
     try:
-        return spectral_exr.to_rgb(spectral_exr.read(path))
+        return spectral_exr.to_rgb(spectral_exr.read(path), bands="box", band_width_nm=ART_BANDS[1])
     except spectral_exr.SpectralEXRError as exc:
         raise BackendFailure(f"ART's spectral EXR: {exc}") from exc
 
