@@ -290,6 +290,13 @@ def to_rgb(image, observer="cie1931", bands="hat", band_width_nm=None):
     return names, np.concatenate(parts, axis=-1)
 
 
+def pass_bands(image, bands="hat", band_width_nm=None):
+    """One pass's S0 bands as the pass loop keeps them (batch/backends/passes.py): {"wavelengths_nm",
+    "cube": H x W x N, "bands": the band model, "band_width_nm"}."""
+    return {"wavelengths_nm": [float(w) for w in image.wavelengths_nm], "cube": image.stokes[0],
+            "bands": bands, "band_width_nm": band_width_nm}
+
+
 def read_render(path, writes="rgb", observer="cie1931", expect=None):
     """(names, H x W x C image) of what a renderer wrote: ``writes`` "rgb" reads R, G, B then
     S0.R ... (batch/exr.py read_image), "spectral" a Fichet 2021 spectral EXR integrated with

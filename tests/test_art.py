@@ -136,8 +136,9 @@ def test_art46_observer_is_the_backends_band_film(tmp_path):
         model = colorimetry.xyz_to_srgb(colorimetry.xyz(radiance(wl), "art46"))
         truth = colorimetry.xyz_to_srgb(colorimetry.xyz(radiance(wl)))
         np.testing.assert_allclose(img[0, 0], model, rtol=2e-4, atol=2e-4 * np.abs(model).max())  # float32 bands
-        if sigma < 20:  # saturated: the band film is measurably not the CIE integral
-            assert (np.abs(model - truth) / np.abs(truth)).max() > 0.01, (centre, model, truth)
+        if sigma < 20:  # saturated: the band film is still not the CIE integral (read as boxes through
+            # their histospline, 10 nm bands miss a 12 nm-wide line by about 1e-3; read as constant, 1 %)
+            assert (np.abs(model - truth) / np.abs(truth)).max() > 5e-4, (centre, model, truth)
 
 
 # -- scripts/build_art.sh: a wrong source is a clear error (exit 2), before anything is installed ----------------------

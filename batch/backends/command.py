@@ -34,6 +34,7 @@ from .passes import BackendFailure
 
 READS = ("json", "mitsuba", "art", "luxcore", "cycles")
 WRITES = ("rgb", "spectral")
+BAND_MODELS = ("hat", "point", "box")  # batch/spectral_exr.py BAND_MODELS (no import at load: the extension lists declarations)
 NEEDS = ("spectral", "polarization", "thin_film", "dispersion", "fluorescence")
 OBSERVERS = ("cie1931", "cie1964")
 # placeholder -> what it becomes (README, "Add your renderer")
@@ -88,6 +89,12 @@ def _timeout(v):
     return float(v)
 
 
+def _band_width(v):
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v <= 100:
+        raise ValueError(f"must be a band width in nm, a number in (0, 100], got {v!r}")
+    return float(v)
+
+
 def _env(v):
     if not isinstance(v, dict) or not all(isinstance(k, str) and k and "=" not in k and "\x00" not in k
                                           and isinstance(x, str) and "\x00" not in x for k, x in v.items()):
@@ -119,6 +126,9 @@ KEYS = {
     "timeout": (False, _timeout, "seconds per pass (default: the run's --timeout)"),
     "env": (False, _env, "environment variables added for the command"),
     "observer": (False, _choice(OBSERVERS), "with writes = spectral: the observer integrating the bands (default cie1931)"),
+    "bands": (False, _choice(BAND_MODELS), "with writes = spectral: what a channel holds: hat (default) or point, "
+              "samples at its wavelength; box, the mean radiance over its band (edges midway between centres)"),
+    "band_width_nm": (False, _band_width, "with bands = box: the bands' width in nm (default: the spacing of the centres)"),
     "groups": (False, _groups, "groups of -r this renderer joins (e.g. spectral: it runs by default)"),
     "description": (False, _text, "one line shown in lists and the Blender panel"),
 }
@@ -168,8 +178,11 @@ def parse(name, table, source="(settings)", here=None):
         except ValueError as exc:
             raise DeclarationError(f"{where}: {key}: {exc}") from None
     decl.setdefault("writes", "rgb")
-    if "observer" in decl and decl["writes"] != "spectral":
-        raise DeclarationError(f"{where}: observer: only a renderer that writes = \"spectral\" is integrated by the benchmark")
+    for key in ("observer", "bands", "band_width_nm"):
+        if key in decl and decl["writes"] != "spectral":
+            raise DeclarationError(f"{where}: {key}: only a renderer that writes = \"spectral\" is integrated by the benchmark")
+    if "band_width_nm" in decl and decl.get("bands") != "box":
+        raise DeclarationError(f"{where}: band_width_nm: only with bands = \"box\" (a sample has no width)")
     used = []
     for key in ("command", "version"):
         for item in decl.get(key, []):
@@ -297,15 +310,19 @@ class CommandBackend:
         if not out.is_file():
             raise BackendFailure(f"{self.name} exited with 0 but wrote no {out.name} (the command's {{output}})")
         try:
-            names, img = read_output(out, self.decl["writes"], self.decl.get("observer", "cie1931"),
-                                     (width, height) if width else None)
+            names, img, spectral = read_output(out, self.decl["writes"], self.decl.get("observer", "cie1931"),
+                                               (width, height) if width else None, self.band_model())
         except Exception as exc:  # noqa: BLE001 - whatever the EXR reader raises on a corrupt file fails this pass (retried)
             raise BackendFailure(f"{self.name} wrote {out} ({{output}}), which cannot be read as a "
                                  f"{self.decl['writes']} EXR: {type(exc).__name__}: {str(exc)[:300]}") from exc
         if img.shape[:2] != (height, width) and width:
             raise BackendFailure(f"{self.name} wrote a {img.shape[1]}x{img.shape[0]} image; the scene is {width}x{height}")
         shutil.rmtree(work, ignore_errors=True)
-        return {"names": names, "image": img, "time_s": wall}
+        return {"names": names, "image": img, "time_s": wall, "spectral": spectral}
+
+    def band_model(self):
+        """(model, band width in nm or None) of a spectral renderer's channels (spectral_exr.BAND_MODELS)."""
+        return self.decl.get("bands", "hat"), self.decl.get("band_width_nm")
 
     def version(self):
         if not self.decl.get("version"):
@@ -330,17 +347,21 @@ def _version(cmd, here, env):
     return f"unknown (the version command printed nothing, exit {code})"
 
 
-def read_output(path, writes, observer, expect=None):
-    """(channel names, H x W x C) of what a pass wrote: an RGB EXR's R, G, B (+ S0.R ... S3.B), or a
-    Fichet 2021 spectral EXR integrated to the same channels (batch/spectral_exr.py). ``expect``:
-    the scene's (width, height), checked in the EXR's header before any pixel is read."""
+def read_output(path, writes, observer, expect=None, band_model=("hat", None)):
+    """(channel names, H x W x C, spectral or None) of what a pass wrote: an RGB EXR's R, G, B
+    (+ S0.R ... S3.B), or a Fichet 2021 spectral EXR integrated to the same channels under its band
+    model (batch/spectral_exr.py), with its S0 bands kept for the band checks (``spectral``:
+    {"wavelengths_nm", "cube": H x W x N, "bands", "band_width_nm"}). ``expect``: the scene's
+    (width, height), checked in the EXR's header before any pixel is read."""
     if writes == "spectral":
         from .. import spectral_exr
-        return spectral_exr.read_render(path, "spectral", observer, expect)
+        image = spectral_exr.read(path, expect)
+        names, img = spectral_exr.to_rgb(image, observer, *band_model)
+        return names, img, spectral_exr.pass_bands(image, *band_model)
     from .. import exr
     names, img = exr.read_image(path, expect=expect)
     keep = [i for i, n in enumerate(names) if n not in ("A", "W")]
-    return [names[i] for i in keep], img[..., keep]
+    return [names[i] for i in keep], img[..., keep], None
 
 
 def _pass_number(out):

@@ -73,6 +73,10 @@ class Accumulation:
     mean: np.ndarray = field(default=None, repr=False)
     m2: np.ndarray = field(default=None, repr=False)
     info: dict = field(default_factory=dict)
+    # a spectral renderer's S0 bands, accumulated like the image (its own Accumulation), and what
+    # they are (wavelengths, band model: batch/spectral_exr.py pass_bands without the cube)
+    spectral: "Accumulation" = field(default=None, repr=False)
+    bands: dict = None
     times: list = field(default_factory=list)
     taken: list = field(default_factory=list)
     retried: list = field(default_factory=list)
@@ -123,6 +127,7 @@ def render(backend, path, mode, spp, out_exr, passes=1, seed=0, timeout=1800, lo
                     raise BackendFailure(f"pass {k + 1}/{passes} (seed {s}) wrote channels {result['names']} of "
                                          f"shape {img.shape}, the first pass {acc.names} of shape {acc.shape}")
                 acc.add(img)
+                _add_bands(acc, result.get("spectral"), k, passes, s)
                 times.append(float(result["time_s"]))
                 taken.append(result.get("spp", per_pass))  # a renderer may take other than it was asked
     shutil.rmtree(work, ignore_errors=True)
@@ -137,6 +142,10 @@ def render(backend, path, mode, spp, out_exr, passes=1, seed=0, timeout=1800, lo
         extra = {f"stderr.{n}": stderr[..., i] for i, n in enumerate(names)}
     exr.write_image(out_exr, names, mean, extra)
     record = dict(info)
+    if acc.spectral is not None:
+        from .. import spectral_passes
+        record["spectral"] = spectral_passes.write(out_exr.parent, acc.bands, acc.spectral.mean,
+                                                   acc.spectral.var_of_mean() if acc.spectral.count > 1 else None)
     record.update({"variant": mode, "spp": int(round(sum(taken))), "passes": passes, "seed": seed,
                    "time_s": sum(times), "wall_s": acc.wall_s, "pass_times": list(times),
                    "resolution": [int(shape[1]), int(shape[0])], "channels": names})
@@ -145,6 +154,23 @@ def render(backend, path, mode, spp, out_exr, passes=1, seed=0, timeout=1800, lo
     if retried:
         record["retried"] = list(retried)
     return record
+
+
+def _add_bands(acc, spectral, k, passes, seed):
+    """One pass's spectral bands (or None) into the accumulation; every pass must bring the same."""
+    if spectral is None:
+        if acc.spectral is not None:
+            raise BackendFailure(f"pass {k + 1}/{passes} (seed {seed}) wrote no spectral bands; the first pass did")
+        return
+    cube = np.asarray(spectral["cube"], dtype=np.float64)
+    meta = {key: v for key, v in spectral.items() if key != "cube"}
+    if acc.spectral is None:
+        if acc.count > 1:
+            raise BackendFailure(f"pass {k + 1}/{passes} (seed {seed}) wrote spectral bands; the first pass did not")
+        acc.spectral, acc.bands = Accumulation(per_pass=acc.per_pass), meta
+    elif meta != acc.bands or cube.shape != acc.spectral.shape:
+        raise BackendFailure(f"pass {k + 1}/{passes} (seed {seed}) wrote other spectral bands than the first pass")
+    acc.spectral.add(cube)
 
 
 def _one_pass(session, k, passes, spp, seed, out, timeout, log, retried):

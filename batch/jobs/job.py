@@ -88,7 +88,8 @@ def execute(job):
     record.update(time_s=info["time_s"], wall_s=info["wall_s"], spp=info["spp"], passes=info.get("passes", 1),
                   versions=info.get("versions"), pass_times=info.get("pass_times"), image_path=str(image), image=str(image.relative_to(out)),
                   job_wall_s=time.perf_counter() - t0)
-    for key in ("approximated", "retried"):  # an RGB backend's approximations (--approximate); passes retried
+    for key in ("approximated", "retried", "spectral"):  # an RGB backend's approximations (--approximate);
+        # passes retried; a spectral render's bands (batch/spectral_passes.py)
         if info.get(key):
             record[key] = info[key]
     return record
@@ -127,7 +128,7 @@ def _judge_render(job, record, deviations):
         entry.update(status="failed", reason=record["reason"])
         return entry
     entry.update({k: record[k] for k in ("time_s", "wall_s", "spp", "passes", "pass_times", "image", "versions",
-                                         "approximated", "retried", "sequential")
+                                         "approximated", "retried", "sequential", "spectral")
                   if k in record})
     if deviations is None:
         deviations = known.load(job["verdict"].get("known"))

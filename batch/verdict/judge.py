@@ -3,13 +3,15 @@ job record with metrics, the noise test against the scene's reference, the analy
 images a reader looks at (previews, differences, z-score, FLIP, the GGX probe's residuals) and a status
 (batch/verdict/status.py). A function of files and settings: it never renders.
 """
-from pathlib import PurePosixPath
+from pathlib import Path, PurePosixPath
 
 import numpy as np
 
 from .. import exr
 from .. import previews
+from .. import spectral_passes
 from . import compare, flip_isolated, known, observer_layers, probes, references, stats, status
+from .probes import bands as band_probes
 
 
 def find_reference(name, scene, directories, shape=None, names=None):
@@ -66,8 +68,12 @@ def render_verdict(entry, scene, rendered, image, res_dir, settings, deviations)
         else:
             ztest = noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings, later, auto, held)
         observers = sorted({d.observer for d in known.applicable(deviations, entry) if d.observer})
+        spectral = _spectral_bands(entry, Path(image).parent)
         entry["probes"] = probes.evaluate(rendered, names, test_all, reference=None if unusable else ref,
-                                          stderr=stderr, passes=entry["passes"], observers=observers, maps=maps)
+                                          stderr=stderr, passes=entry["passes"], observers=observers, maps=maps,
+                                          spectral=spectral)
+        if spectral is not None:
+            entry["bands"] = band_probes.record(entry["probes"], spectral)
         previews.write_probe_residual(res_dir, maps.get("residual_map"))  # the report's "probe residual" view
     except BaseException:
         for finish in later:  # a verdict that breaks still collects its FLIP (its child is free for the next)
@@ -79,6 +85,9 @@ def render_verdict(entry, scene, rendered, image, res_dir, settings, deviations)
     if unusable and not any(p["pass"] is not None for p in entry["probes"]):
         entry["unjudged_because"] = unusable + ("" if entry["probes"] else "; no analytic probe applies")
     status.decide(entry, deviations, ztest)
+    worst = [p["worst"]["text"] for p in entry["probes"] if p["name"].startswith(band_probes.PREFIX) and p["pass"] is False]
+    if worst and entry["status"] == "failed":  # where the spectrum is wrong, in the reason the terminal shows
+        entry["reason"] += "; worst bands: " + "; ".join(worst[:4]) + (f" and {len(worst) - 4} more" if len(worst) > 4 else "")
     if auto and entry["status"] != "ok":  # --flip auto: the error map where the verdict is not ok
         finishers = []
         for start in auto:
@@ -95,6 +104,18 @@ def render_verdict(entry, scene, rendered, image, res_dir, settings, deviations)
     if entry["status"] in DIAGNOSED:
         diagnose(entry, rendered, names, test_all, stderr, held, ztest, res_dir)
     return entry
+
+
+def _spectral_bands(entry, folder):
+    """A spectral render's bands (batch/spectral_passes.py), read once and their large file removed
+    (the preview stays); None for a render without them. The entry keeps what they were."""
+    record = entry.pop("spectral", None)
+    got = spectral_passes.read(folder, record, remove=True) if record else None
+    if got is None:
+        return None
+    wl, mean, stderr, meta = got
+    return dict(meta, wavelengths_nm=wl, mean=mean, stderr=stderr, preview=record.get("preview"),
+                source=record.get("source", "declared"))
 
 
 DIAGNOSED = ("failed", "known", "fixed")  # a passing render is never diagnosed

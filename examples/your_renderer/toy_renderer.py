@@ -14,9 +14,12 @@ given, and writes the EXR the benchmark reads back:
 The rendering itself is Mitsuba 3 (the ``mitsuba`` Python package) standing in for a renderer of
 your own: replace ``render_rgb`` / ``render_bands`` with your renderer and keep the rest.
 ``--gain`` multiplies the image: a way to see the benchmark catch a renderer that is 1 % too
-bright (tests/test_declared_renderer.py does exactly that).
+bright (tests/test_declared_renderer.py does exactly that). ``--band-swap NM`` makes the spectral
+output 2 % brighter in the band holding NM and 2 % darker in the next: a metamer, the same R, G, B
+within noise, which only the benchmark's band checks see (tests/test_bands.py).
 
     python toy_renderer.py scene.xml --out pass.exr --spp 64 --seed 0 [--format spectral] [--gain 1.0]
+                           [--band-swap NM]
     python toy_renderer.py --version
 """
 import argparse
@@ -109,6 +112,8 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--format", choices=("rgb", "spectral"), default="rgb")
     ap.add_argument("--gain", type=float, default=1.0)
+    ap.add_argument("--band-swap", type=float, metavar="NM",
+                    help="spectral output: the band holding NM 2 %% brighter and the next one 2 %% darker (a metamer)")
     ap.add_argument("--version", action="store_true")
     args = ap.parse_args(argv)
     if args.version:
@@ -120,6 +125,10 @@ def main(argv=None):
         write_rgb(args.out, render_rgb(args.scene, args.spp, args.seed) * args.gain)
     else:
         centres, img = render_bands(args.scene, args.spp, args.seed)
+        if args.band_swap is not None:
+            k = int(np.argmin(np.abs(centres - args.band_swap)))
+            img[..., k] *= 1.02
+            img[..., k + 1] *= 0.98
         write_spectral(args.out, centres, img * args.gain)
     return 0
 

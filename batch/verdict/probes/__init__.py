@@ -11,31 +11,32 @@ a closed form, independently of any renderer (plain numpy; colour-science for CI
   wavelength: band positions and order; Fresnel: the flux on the screen).
 - fluorescence.py: a lone (fluorescent) Lambertian sphere under a uniform environment
   (rho L + integral P L, judged against the region's own standard error).
+- bands.py: a spectral render's bands on the regions whose truth is a spectrum (``spectral``).
 
 Each probe is a dict {name, expected, measured, error, unit, pass}; ``pass`` is None when the
 probe cannot be measured at the render's resolution (fewer than MIN_PIXELS whole pixels). A probe
 may add an image (an array under one of MAP_KEYS: ggx.py's ``residual_map``); ``evaluate`` takes
 it out of the record (records are metrics.json's plain data) and hands it over in ``maps``.
 """
-from . import fluorescence, fresnel, ggx, lambert, prism, stokes, thin_film
+from . import bands, fluorescence, fresnel, ggx, lambert, prism, stokes, thin_film
 from .common import MIN_PIXELS, Measurement  # noqa: F401 - part of the interface
 
 # Every probe: a function of one Measurement returning a list of probe records; a probe that does
 # not apply to the scene returns [].
 PROBES = [lambert.patches, fresnel.brewster, ggx.plates, stokes.validity, thin_film.smooth_film, prism.probes,
-          fluorescence.lone_sphere]
+          fluorescence.lone_sphere, *bands.PROBES]
 
 
 MAP_KEYS = ("residual_map",)  # record keys that hold an image, not data
 
 
-def evaluate(scene, names, image, reference=None, stderr=None, passes=None, observers=(), maps=None):
+def evaluate(scene, names, image, reference=None, stderr=None, passes=None, observers=(), maps=None, spectral=None):
     """Every probe that applies to ``scene``, measured on ``image`` (channels ``names``; ``stderr``:
-    its per-pixel standard error from ``passes`` independent passes, or None; ``observers``: see
-    Measurement). The records are plain data: an image a probe returns is removed from its record
+    its per-pixel standard error from ``passes`` independent passes, or None; ``observers`` and
+    ``spectral``: see Measurement). The records are plain data: an image a probe returns is removed from its record
     and, when ``maps`` is a dict, put there as ``maps[key][record name]``."""
     m = Measurement(scene, list(names), image, stderr, reference, passes or (1 if stderr is None else 2),
-                    tuple(observers))
+                    tuple(observers), spectral)
     # every probe's closed form assumes the scene's light is its area emitters and environment: a
     # scene with delta lights (point, spot, directional) has no probe yet
     records = [] if scene.get("lights") else [record for probe in PROBES for record in probe(m)]

@@ -56,6 +56,9 @@ class Measurement:
     reference: object = None
     passes: int = 1
     observers: tuple = ()
+    # a spectral render's S0 bands (batch/spectral_passes.py): {"wavelengths_nm", "mean": H x W x N,
+    # "stderr", "bands": the band model, "band_width_nm"}, or None (probes/bands.py)
+    spectral: dict = None
 
 
 def probe(name, expected, measured, error, unit, passed, **extra):

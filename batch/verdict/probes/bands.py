@@ -1,0 +1,155 @@
+"""Band by band (issue 33): a render that comes with its spectrum (a declared renderer that writes
+the spectral EXR layout, batch/spectral_passes.py) is also judged per band on every probe region
+whose truth is a spectrum, so that two band errors which cancel in R, G, B (a metamer) are seen,
+and a failure says which wavelengths are wrong.
+
+Regions: the Lambertian patches of lambert.py (a chart's patches, lit plates): outgoing radiance
+rho(l) L(l) everywhere on the patch. Expected per band, from that spectrum and the renderer's
+band model (batch/spectral_exr.py BAND_MODELS): "box", its mean over the band; "hat", its
+average weighted by the band's hat function (1 at the band's wavelength, 0 at the neighbours');
+"point", its value at the band's wavelength; each on a 0.1 nm grid (trapezoid rule). Measured:
+the mean of the band over the region's pixels, with the standard error of that mean from the
+pixels' spread (independent draws of the same radiance, as lambert.py judges R, G, B), Student's t
+with n - 1 degrees of freedom. A chart adds one test per band that pools every patch: the weighted
+least-squares scale of measured over expected patches in that band, against 1 (as lambert.py's
+luminance scale pools the patches' Y), which sees a band error an order of magnitude smaller
+than one patch does. All tests (bands x (patches + 1)) share stats.ALPHA (Sidak).
+
+Each region is one check ("bands lambert <patch>", "bands lambert chart scale") whose record names
+its worst band ("patch_cyan 480-485 nm: 3.1 % low, z 6.2", ``worst``); the arrays per band
+are in its ``stat`` and in the job's ``bands`` record (judge.py), which the report plots.
+"""
+import numpy as np
+
+from ....exporters import spectra
+from ... import spectral_exr
+from .. import raycast, stats
+from . import lambert
+from .common import MIN_PIXELS, probe as _probe
+
+GRID_NM = 0.1  # the grid the expected band values are integrated on
+PREFIX = "bands "
+
+
+def band_edges(centres, model, width=None):
+    """[(lo, hi)] the band of each channel covers: its box, or the support of its hat (the
+    neighbouring centres; half a spacing out at the ends); a point sample's is its hat's, for
+    naming only."""
+    c = np.asarray(centres, dtype=np.float64)
+    if model == "box":
+        return spectral_exr.box_edges(c, width)
+    spacing = np.diff(c)
+    lo = np.r_[c[0] - spacing[0], c[:-1]]
+    hi = np.r_[c[1:], c[-1] + spacing[-1]]
+    return np.stack([lo, hi], axis=-1)
+
+
+def expected_bands(spectrum_fn, centres, model, width=None):
+    """The value each channel of a ``model`` band film holds for a radiance spectrum
+    (``spectrum_fn``: wavelengths in nm -> values)."""
+    c = np.asarray(centres, dtype=np.float64)
+    if model == "point":
+        return np.asarray(spectrum_fn(c), dtype=np.float64)
+    out = np.empty(c.size)
+    for k, (lo, hi) in enumerate(band_edges(c, model, width)):
+        x = np.arange(lo, hi + GRID_NM / 2, GRID_NM)
+        v = np.asarray(spectrum_fn(x), dtype=np.float64)
+        if model == "box":
+            out[k] = np.trapz(v, x) / (hi - lo)
+        else:
+            w = np.interp(x, c, np.eye(c.size)[k])
+            out[k] = np.trapz(v * w, x) / np.trapz(w, x)
+    return out
+
+
+def _worst(stat, edges):
+    m, e, s = (np.asarray(stat[k], dtype=np.float64) for k in ("measured", "expected", "se"))
+    z = (m - e) / np.maximum(s, 1e-300)
+    k = int(np.argmax(np.abs(z)))
+    rel = float(m[k] / e[k] - 1.0) if e[k] else None
+    return {"band": k, "band_nm": [float(edges[k][0]), float(edges[k][1])], "relative": rel, "z": float(z[k])}
+
+
+def describe(region, worst):
+    """'patch_cyan 480-485 nm: 3.1 % low, z 6.2'."""
+    lo, hi = worst["band_nm"]
+    rel = worst["relative"]
+    how = "" if rel is None else f"{abs(rel) * 100:.1f} % {'low' if rel < 0 else 'high'}, "
+    return f"{region} {lo:g}-{hi:g} nm: {how}z {worst['z']:.1f}"
+
+
+def lambert_bands(m):
+    """The Lambertian patches, band by band (module docstring); [] without a spectral render."""
+    sp = m.spectral
+    env = m.scene.get("environment")
+    if sp is None or not env:
+        return []
+    centres, cube, model, width = sp["wavelengths_nm"], sp["mean"], sp["bands"], sp.get("band_width_nm")
+    cam, objs = m.scene["camera"], m.scene["objects"]
+    h, w = cube.shape[:2]
+    hits = raycast.corner_hits(cam, w, h, objs)
+    found = [(objs[i], raycast.pixels_inside(cam, w, h, objs, i, margin=0.7, hits=hits)) for i in lambert._patches(m.scene)]
+    found = [(o, mk) for o, mk in found if mk.sum() >= MIN_PIXELS]
+    if not found:
+        return []
+    edges = band_edges(centres, model, width)
+    nb = len(centres)
+    tests = nb * (len(found) + (1 if len(found) > 1 else 0))
+    radiance = env["radiance"]
+    rows, out = [], []
+    for obj, mask in found:
+        refl = obj["bsdf"]["reflectance"]
+        expected = expected_bands(lambda x, refl=refl: spectra.evaluate(refl, x) * spectra.evaluate(radiance, x),
+                                  centres, model, width)
+        px = cube[mask].astype(np.float64)
+        n = px.shape[0]
+        measured = px.mean(axis=0)
+        se = px.std(axis=0, ddof=1) / np.sqrt(n)
+        rows.append((measured, expected, se))
+        out.append(_region_record(f"{PREFIX}lambert {obj['name']}", obj["name"], measured, expected, se, n - 1, tests,
+                                  edges, pixels=n))
+    if len(found) > 1:
+        # per band: the WLS scale of measured over expected patches, against 1
+        M, E, S = (np.array([r[i] for r in rows]) for i in range(3))  # patches x bands
+        wts = 1.0 / np.maximum(S, 1e-300) ** 2
+        den = np.sum(wts * E**2, axis=0)
+        ok = den > 0
+        scale = np.where(ok, np.sum(wts * M * E, axis=0) / np.where(ok, den, 1.0), 1.0)
+        se = np.where(ok, 1.0 / np.sqrt(np.where(ok, den, 1.0)), np.inf)
+        out.append(_region_record(f"{PREFIX}lambert chart scale", "chart", scale, np.ones(nb), se, None, tests, edges,
+                                  patches=len(found)))
+    return out
+
+
+def _region_record(name, region, measured, expected, se, dof, tests, edges, **extra):
+    stat = stats.compare_means(measured, expected, se, dof=dof, tests=tests)
+    worst = _worst(stat, edges)
+    return _probe(name, float(np.asarray(expected)[worst["band"]]), float(np.asarray(measured)[worst["band"]]),
+                  worst["relative"], "relative", stat["pass"], z=stat["z"], stat=stat,
+                  worst=dict(worst, text=describe(region, worst)), region=region, **extra)
+
+
+PROBES = [lambert_bands]
+
+
+def record(entry_probes, sp):
+    """The job's ``bands`` record (the report's spectra; README "Spectral images") from its band
+    checks, or None without a spectral render."""
+    if sp is None:
+        return None
+    centres, model, width = sp["wavelengths_nm"], sp["bands"], sp.get("band_width_nm")
+    edges = band_edges(centres, model, width)
+    regions = []
+    for p in entry_probes:
+        if not p["name"].startswith(PREFIX) or not p.get("stat"):
+            continue
+        st = p["stat"]
+        z = ((np.asarray(st["measured"]) - np.asarray(st["expected"])) / np.maximum(np.asarray(st["se"]), 1e-300))
+        regions.append({"probe": p["name"], "region": p.get("region"), "check": p["name"],
+                        "measured": st["measured"], "se": st["se"], "expected": st["expected"],
+                        "z": [float(x) for x in z], "pass": p["pass"], "worst": p.get("worst")})
+    threshold = next((p["stat"]["threshold"] for p in entry_probes if p["name"].startswith(PREFIX) and p.get("stat")), None)
+    return {"model": model, "source": sp.get("source", "declared"), "centres_nm": [float(c) for c in centres],
+            "edges_nm": None if model == "point" else [[float(a), float(b)] for a, b in edges],
+            "band_width_nm": width, "preview": sp.get("preview"), "regions": regions, "threshold": threshold,
+            "alpha": stats.ALPHA}
