@@ -94,7 +94,7 @@ def bands_record(centres, cube):
         e = np.array([_box_mean(knots, lo, hi) for lo, hi in edges])
         z = (m - e) / se
         k = int(np.argmax(np.abs(z)))
-        regions.append({"probe": "bands lambert patches", "region": name, "check": f"bands lambert patches: {name}",
+        regions.append({"probe": "lambert patches", "region": name, "check": f"bands lambert patches: {name}",
                         "measured": m.tolist(), "se": se.tolist(), "expected": e.tolist(), "z": z.tolist(),
                         "pass": bool(np.all(np.abs(z) <= z_crit)),
                         "worst": {"band_nm": edges[k], "relative": float(m[k] / e[k] - 1), "z": float(z[k])}})

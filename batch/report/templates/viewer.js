@@ -443,7 +443,7 @@ var spectralBench = (function () {
     this.box = box; this.ev = 0; this.band = 0;
     this.bands = JSON.parse(box.dataset.bands || '[]');
     this.canvas = box.querySelector('canvas.band-canvas');
-    this.status = box.querySelector('.load-status'); this.readout = box.querySelector('.readout');
+    this.status = box.querySelector('.load-status'); this.readout = box.querySelector('.band-readout');
   }
   Spectra.prototype.open = function () {
     var t = this.box.querySelector('template.plots-template'), plots = this.box.querySelector('.plots');
@@ -456,9 +456,9 @@ var spectralBench = (function () {
       self.w = d.w; self.h = d.h; self.data = d.bands;
       slider.max = String(self.bands.length - 1);
       slider.value = String(self.band = Math.floor((self.bands.length - 1) / 2));
-      var k = Math.min(2, Math.max(1, Math.floor(360 / Math.max(d.w, d.h))));
+      var k = Math.min(8, Math.max(1, 360 / Math.max(d.w, d.h)));  // shown at least 360 px on its longer side (up to 8x)
       self.canvas.width = d.w; self.canvas.height = d.h;
-      self.canvas.style.width = d.w * k + 'px'; self.canvas.style.height = d.h * k + 'px';
+      self.canvas.style.width = Math.round(d.w * k) + 'px'; self.canvas.style.height = Math.round(d.h * k) + 'px';
       self.status.textContent = ''; self.draw(); self.box.dataset.ready = '1';
     }).catch(function (e) { self.status.textContent = 'band data not shown: ' + e.message; self.box.dataset.ready = 'error'; });
     slider.addEventListener('input', function () { self.band = parseInt(slider.value, 10); self.draw(); });
