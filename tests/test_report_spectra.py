@@ -146,3 +146,26 @@ def test_slider_shows_the_bands_data_and_plots_have_every_band(run):
         assert ("FAIL" in p["cls"]) == (p["label"] == "planted") and (p["red"] > 0) == (p["label"] == "planted"), p
     planted = next(p for p in got["plots"] if p["label"] == "planted")
     assert planted["red"] <= (PLANT[1] - PLANT[0]) / 5  # only bands inside the planted range are marked
+
+
+def test_hostile_band_record_is_text_and_links_nothing_outside(run, tmp_path):
+    """Anyone's metrics.json: a region label of markup, a preview path out of the folder, arrays of
+    the wrong kind. The page shows the labels as text, links no preview outside the job's folder
+    and keeps every other region's plot; a preview that is no spectral EXR leaves the plots."""
+    import shutil
+    from spectral_bench.batch.report import html
+    out, _ = run
+    copy = tmp_path / "out"
+    shutil.copytree(out, copy)
+    data = json.loads((copy / "metrics.json").read_text())
+    rec = data["runs"][0]["bands"]
+    rec["regions"][0]["region"] = "<img src=x onerror=alert(1)>"
+    rec["regions"][1]["measured"] = "not a list"
+    rec["regions"][2]["se"] = [None] * len(rec["centres_nm"])
+    for preview, linked in (("../../../etc/passwd", False), ("render.exr", False), ("spectral_preview.exr", True)):
+        rec["preview"] = preview
+        (copy / "metrics.json").write_text(json.dumps(data))
+        page = html.render(copy)
+        assert "<img src=x" not in page and "&lt;img src=x onerror=alert(1)&gt;" in page
+        assert page.count("<svg class='spectrum") == len(PATCHES) - 1  # the region with no measured list is left out
+        assert ("spectral_preview.js' data-bands" in page) == linked and "passwd" not in page, preview
