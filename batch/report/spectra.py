@@ -106,21 +106,29 @@ def band_text(lo, hi):
     return f"{f(lo)}-{f(hi)} nm"
 
 
-def worst_text(rec, region):
-    """The region's worst band in words: ``cyan 480-490 nm: 3.1 % low, z -6.2`` (the record's
-    ``worst`` where it gives its numbers, else the band of largest |z| from the arrays); None
-    without a band to name."""
+def _worst(rec, region):
+    """(band text, how far off in words, z) of the region's worst band (the record's ``worst``
+    where it gives its numbers, else the band of largest |z| from the arrays), or None."""
     i = region["worst"]
     if i is None:
         return None
     w = region["record_worst"]
-    lo, hi = rec["edges"][i]
     m, e = region["measured"][i], region["expected"][i]
     rel = w.get("relative") if _num(w.get("relative")) else (m / e - 1 if e and math.isfinite(m) and math.isfinite(e) else None)
     z = w.get("z") if _num(w.get("z")) else region["z"][i]
+    how = f"{abs(100 * rel):.2g} % {'low' if rel < 0 else 'high'}" if rel is not None else "relative error unknown"
+    return band_text(*rec["edges"][i]), how, z
+
+
+def worst_text(rec, region):
+    """The region's worst band in words: ``macbeth cyan 480-490 nm: 3.1 % low, z -6.2``; None
+    without a band to name."""
+    got = _worst(rec, region)
+    if got is None:
+        return None
+    band, how, z = got
     name = " ".join(p for p in (region["probe"], region["region"]) if p)
-    how = (f"{abs(100 * rel):.2g} % {'low' if rel < 0 else 'high'}" if rel is not None else "relative error unknown")
-    return f"{name} {band_text(lo, hi)}: {how}, z {z:.2g}" if math.isfinite(z) else f"{name} {band_text(lo, hi)}: {how}"
+    return f"{name} {band}: {how}" + (f", z {z:.2g}" if math.isfinite(z) else "")
 
 
 def worst_lines(run):
@@ -169,8 +177,9 @@ def plot(rec, region):
                                                      f"expected {e[i]:.4g}, z {region['z'][i]:.2f}"})
     expected = " ".join(f"{r1(x(rec['centres'][i]))},{r1(y(e[i]))}" for i in range(n) if math.isfinite(e[i]))
     spans = [{"x": r1(x(edges[i][0])), "w": r1(x(edges[i][1]) - x(edges[i][0]))} for i in sorted(failing)]
-    worst = worst_text(rec, region)
-    return {"title": " ".join(p for p in (region["region"] or region["probe"],) if p), "check": region["check"],
+    worst, short = worst_text(rec, region), _worst(rec, region)
+    return {"title": region["region"] or region["probe"], "check": region["check"],
+            "note": f"{short[0]} {short[1]}" if short and region["pass"] is False else "",
             "pass": region["pass"], "points": points, "expected": expected, "failing": spans,
             "worst": worst or "", "w": PLOT_W, "h": PLOT_H, "left": PAD_L, "right": PLOT_W - PAD_R,
             "top": PAD_T, "bottom": PLOT_H - PAD_B, "nm_lo": f"{lo_nm:.0f}", "nm_hi": f"{hi_nm:.0f}",
