@@ -92,7 +92,7 @@ def test_summary_and_junit_name_the_planted_band(run):
 # reads the band canvas at the pixels __XY__ after each; counts each plot's points
 SLIDE = """
 var d=document.querySelector('details.spectra');
-var before={scripts: document.querySelectorAll('script[src$="spectral_preview.js"]').length, plots: d.querySelector('.plots').childElementCount};
+var before={scripts: document.querySelectorAll('script[src$="spectral_preview.js"], script[src$="spectral_plots.js"]').length, plots: d.querySelector('.plots').childElementCount};
 d.open=true;
 (function wait(){ if(!d.dataset.ready){ setTimeout(wait, 50); return; }
   var s=d.querySelector('input.band'), c=d.querySelector('canvas.band-canvas'), got={};
@@ -159,13 +159,18 @@ def test_hostile_band_record_is_text_and_links_nothing_outside(run, tmp_path):
     shutil.copytree(out, copy)
     data = json.loads((copy / "metrics.json").read_text())
     rec = data["runs"][0]["bands"]
-    rec["regions"][0]["region"] = "<img src=x onerror=alert(1)>"
+    rec["regions"][3]["region"] = "<img src=x onerror=alert(1)>"  # the failing one: its worst band is on the page
+    job_dir = lambda o: o / "patches" / "results" / "toy_spectral"  # noqa: E731
     rec["regions"][1]["measured"] = "not a list"
     rec["regions"][2]["se"] = [None] * len(rec["centres_nm"])
     for preview, linked in (("../../../etc/passwd", False), ("render.exr", False), ("spectral_preview.exr", True)):
         rec["preview"] = preview
         (copy / "metrics.json").write_text(json.dumps(data))
         page = html.render(copy)
-        assert "<img src=x" not in page and "&lt;img src=x onerror=alert(1)&gt;" in page
-        assert page.count("<svg class='spectrum") == len(PATCHES) - 1  # the region with no measured list is left out
-        assert ("spectral_preview.js' data-bands" in page) == linked and "passwd" not in page, preview
+        plots = json.loads(re.fullmatch(r"spectralBench\.markup\(document\.currentScript, (.*)\);\n",
+                                        (job_dir(copy) / html.PLOTS_JS).read_text(), re.S).group(1))
+        for text in (page, plots):
+            assert "<img src=x" not in text
+        assert "&lt;img src=x onerror=alert(1)&gt;" in plots and "&lt;img src=x onerror=alert(1)&gt;" in page
+        assert plots.count("<svg class='spectrum") == len(PATCHES) - 1  # the region with no measured list is left out
+        assert ("spectral_preview.js' data-plots" in page) == linked and "passwd" not in page, preview

@@ -36,6 +36,7 @@ from . import grouping, results, spectra
 STOKES_VIEWS = ["S0", "S1", "S2", "S3", "DoP", "AoP"]
 DATA_JS = "view.js"
 SPECTRAL_JS = "spectral_preview.js"  # beside spectral_preview.exr: its bands, for the band slider
+PLOTS_JS = "spectral_plots.js"  # beside a spectral job's render: its regions' plots (SVG), loaded when opened
 _UMASK = os.umask(0o022)
 os.umask(_UMASK)
 TEMPLATES = Path(__file__).resolve().parent / "templates"
@@ -152,9 +153,14 @@ def _write_data(path, w, h, layers):
                      + json.dumps([str(n) for n in names]).encode("ascii") + b', "data": "'
                      + _js_bytes(_pack(planes, bits)) + b'"}')
     parts.append(b"}});\n")
+    _write_atomically(path, b"".join(parts))
+
+
+def _write_atomically(path, data):
+    """``data`` (bytes) as the file ``path``, replaced at once (a page never loads half a file)."""
     fd, tmp = tempfile.mkstemp(suffix=".js", prefix=".tmp-", dir=path.parent)
     with os.fdopen(fd, "wb") as f:
-        f.write(b"".join(parts))
+        f.write(data)
     os.chmod(tmp, 0o666 & ~_UMASK)
     os.replace(tmp, path)
 
@@ -259,8 +265,22 @@ def _spectra(out, run, folder):
             + (f", {rec['source']}" if rec["source"] else "") + f"), {len(rec['regions'])} probe regions, {failing} failing"
             + (f"; a band fails where |z| > {rec['z_crit']:.3g} (p < {rec['threshold']:.3g}, alpha "
                f"{_fmt(rec['alpha'])} Sidak over bands and regions)" if rec["z_crit"] else ""))
-    return {"head": head, "plots": spectra.plots(rec), "src": src, "bands": json.dumps(bands),
+    return {"head": head, "plots": _plots_data(out, folder, spectra.plots(rec)), "src": src, "bands": json.dumps(bands),
             "worst": spectra.worst_lines(run)}
+
+
+def _plots_data(out, folder, plots):
+    """spectral_plots.js in the job's folder: spectralBench.markup(document.currentScript, "<svg
+    ..."), the regions' plots as templates/spectra_plots.html renders them (autoescaped), so that a
+    page of many jobs carries none of them until a section is opened. Its URL, or "" when it
+    cannot be written."""
+    path = out / Path(*folder.parts) / PLOTS_JS
+    markup = _env.get_template("spectra_plots.html").render(plots=plots)
+    try:
+        _write_atomically(path, b"spectralBench.markup(document.currentScript, " + json.dumps(markup).encode("ascii") + b");\n")
+    except OSError:
+        return ""
+    return _local_url(out, folder / PLOTS_JS) or ""
 
 
 def _num(x):

@@ -66,13 +66,17 @@ var spectralBench = (function () {
     });
   }
   var files = {};
-  function load(url) {
-    if (!files[url]) files[url] = new Promise(function (resolve, reject) {
+  function script(url, charset) {  // what the data file at url passes to spectralBench.data or .markup
+    return new Promise(function (resolve, reject) {
       var s = document.createElement('script');
-      s.charset = 'x-user-defined'; s.src = url; s.spectralBenchResolve = resolve;
+      if (charset) s.charset = charset;
+      s.src = url; s.spectralBenchResolve = resolve;
       s.onerror = function () { reject(new Error('cannot load ' + url)); };
       document.head.appendChild(s);
-    }).then(function (obj) {
+    });
+  }
+  function load(url) {
+    if (!files[url]) files[url] = script(url, 'x-user-defined').then(function (obj) {
       var n = obj.w * obj.h, names = Object.keys(obj.layers);
       return Promise.all(names.map(function (k) { return decodeLayer(obj.layers[k], n); })).then(function (ls) {
         var out = {w: obj.w, h: obj.h};
@@ -446,13 +450,18 @@ var spectralBench = (function () {
     this.status = box.querySelector('.load-status'); this.readout = box.querySelector('.band-readout');
   }
   Spectra.prototype.open = function () {
-    var t = this.box.querySelector('template.plots-template'), plots = this.box.querySelector('.plots');
-    if (t && !plots.childElementCount) plots.appendChild(t.content.cloneNode(true));
-    if (!this.box.dataset.src || this.started) { if (!this.box.dataset.src) this.box.dataset.ready = '1'; return; }
+    if (this.started) return;
     this.started = true;
-    var self = this, slider = this.box.querySelector('input.band');
+    var self = this, slider = this.box.querySelector('input.band'), plots = this.box.querySelector('.plots'), got = [];
+    if (this.box.dataset.plots) got.push(script(this.box.dataset.plots).then(function (markup) { plots.innerHTML = markup; }));
+    if (!this.box.dataset.src) {
+      Promise.all(got).then(function () { self.box.dataset.ready = '1'; }, function (e) { plots.textContent = 'plots not shown: ' + e.message; self.box.dataset.ready = 'error'; });
+      return;
+    }
     this.status.textContent = 'loading band data...';
-    load(this.box.dataset.src).then(function (d) {
+    got.push(load(this.box.dataset.src));
+    Promise.all(got).then(function (parts) {
+      var d = parts[parts.length - 1];
       self.w = d.w; self.h = d.h; self.data = d.bands;
       slider.max = String(self.bands.length - 1);
       slider.value = String(self.band = Math.floor((self.bands.length - 1) / 2));
@@ -507,5 +516,5 @@ var spectralBench = (function () {
       if (ev.key === 'f' || ev.key === 'F') { active.flipAB(); ev.preventDefault(); }
     });
   }
-  return {data: data, init: init, viewer: viewer, spectra: spectra, load: load, HALF: HALF, SRGB: SRGB};
+  return {data: data, markup: data, init: init, viewer: viewer, spectra: spectra, load: load, HALF: HALF, SRGB: SRGB};
 })();
