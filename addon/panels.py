@@ -6,7 +6,7 @@ drawn property, operator and icon exists."""
 import bpy
 
 from ..batch import records
-from ..batch.report import results
+from ..batch.report import results, spectra
 from . import benchmark, preferences, reference_sources, validation
 
 
@@ -297,6 +297,8 @@ class SPECTRAL_BENCH_PT_benchmark_results(_Base, bpy.types.Panel):
             why = (run.get("diagnosis") or {}).get("text") if isinstance(run.get("diagnosis"), dict) else None
             if why:  # the fitted error models (issue 34): "likely: ..." or "no model explains it"
                 box.label(text=f"why: {why}"[:200], icon="QUESTION")
+            for text in spectra.worst_lines(run):  # a spectral render's failing regions (issue 33), by worst band
+                box.label(text=f"worst band: {text}"[:200], icon="ERROR")
             for text in results.reference_problems(run):  # every reference passed over, with its file
                 box.label(text=f"reference problem: {text}"[:200], icon="ERROR")
             ref = run.get("reference") or {}

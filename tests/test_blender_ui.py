@@ -91,6 +91,9 @@ def _write_outputs(out):
     for name in ("reference", "diff_abs", "diff_rel", "flip", "zscore"):
         exr.write(res / f"{name}.exr", img[..., :3])
     stokes["image"] = str((res / "render.exr").relative_to(out))
+    stokes["bands"] = {"model": "box", "centres_nm": [485.0, 495.0], "threshold": 0.01, "regions": [  # issue 33's record
+        {"probe": "macbeth", "region": "cyan", "measured": [0.97, 1.0], "se": [0.005, 0.005], "expected": [1.0, 1.0],
+         "pass": False, "worst": {"band_nm": [480, 490], "relative": -0.031, "z": -6.2}}]}
     (out / "sweeps").mkdir(parents=True)
     from PIL import Image
     Image.new("RGB", (4, 4)).save(out / "sweeps" / f"{stokes['scene']}.png")
@@ -183,6 +186,7 @@ def test_every_panel_draws_with_real_data(tmp_path):
             "reference_labels": [t for t in results if t and t.startswith("reference (")],
             "noise_labels": sorted({{t for t in results if t and t.startswith("noise test:")}}),
             "judged_labels": sorted({{t for t in results if t and t.startswith("judged by:")}}),
+            "worst_labels": sorted({{t for t in results if t and t.startswith("worst band:")}}),
             "load_kinds": sorted({{c[2]["properties"].get("kind") for p, c in calls
                                  if c[1] == "operator" and c[2]["operator"] == "spectral_bench.load_result"}}),
             "backend_buttons": sorted(set(texts("SPECTRAL_BENCH_PT_benchmark", "operator")) - {{None}}),
@@ -211,6 +215,8 @@ def test_every_panel_draws_with_real_data(tmp_path):
     assert [t for t in out["judged_labels"] if "checked against itself: detects change, not error" in t] == [
         "judged by: no probe; reference by mitsuba llvm_ad_spectral, 4096 spp, 2026-11-22 "
         "(checked against itself: detects change, not error)"]
+    # a failing spectral region by its worst band, in the words of summary.md (batch/report/spectra.py)
+    assert out["worst_labels"] == ["worst band: macbeth cyan 480-490 nm: 3.1 % low, z -6.2"], out["worst_labels"]
     assert out["reference_labels"] and all(t.startswith("reference (extension): mitsuba llvm_ad_spectral 4096 spp")
                                            for t in out["reference_labels"])
     assert out["load_kinds"] == sorted(["render", "reference", "diff_abs", "diff_rel", "flip", "zscore",

@@ -31,10 +31,12 @@ import numpy as np
 
 from .. import exr, previews, records
 from ..verdict.status import ORDER
-from . import grouping, results
+from . import grouping, results, spectra
 
 STOKES_VIEWS = ["S0", "S1", "S2", "S3", "DoP", "AoP"]
 DATA_JS = "view.js"
+SPECTRAL_JS = "spectral_preview.js"  # beside spectral_preview.exr: its bands, for the band slider
+PLOTS_JS = "spectral_plots.js"  # beside a spectral job's render: its regions' plots (SVG), loaded when opened
 _UMASK = os.umask(0o022)
 os.umask(_UMASK)
 TEMPLATES = Path(__file__).resolve().parent / "templates"
@@ -151,9 +153,14 @@ def _write_data(path, w, h, layers):
                      + json.dumps([str(n) for n in names]).encode("ascii") + b', "data": "'
                      + _js_bytes(_pack(planes, bits)) + b'"}')
     parts.append(b"}});\n")
+    _write_atomically(path, b"".join(parts))
+
+
+def _write_atomically(path, data):
+    """``data`` (bytes) as the file ``path``, replaced at once (a page never loads half a file)."""
     fd, tmp = tempfile.mkstemp(suffix=".js", prefix=".tmp-", dir=path.parent)
     with os.fdopen(fd, "wb") as f:
-        f.write(b"".join(parts))
+        f.write(data)
     os.chmod(tmp, 0o666 & ~_UMASK)
     os.replace(tmp, path)
 
@@ -218,6 +225,62 @@ def _reference_data(ref_exr):
         return js
     except (OSError, ValueError, KeyError):
         return None
+
+
+def _spectral_data(preview):
+    """spectral_preview.js beside a job's spectral_preview.exr (written when missing or older):
+    one layer "bands", a plane per wavelength (the EXR's half floats, exactly), channels named by
+    their index; returns the wavelengths (nm) or None when the preview cannot be read."""
+    from .. import spectral_exr
+    js = preview.with_name(SPECTRAL_JS)
+    try:
+        img = spectral_exr.read(preview)
+        planes = img.stokes[0]
+        if not _fresh(js, (preview,)):
+            _write_data(js, planes.shape[1], planes.shape[0],
+                        {"bands": ([str(i) for i in range(planes.shape[2])], [planes[..., i] for i in range(planes.shape[2])], 10)})
+        return [float(v) for v in img.wavelengths_nm]
+    except (OSError, ValueError, KeyError):  # SpectralEXRError is a ValueError: the plots stay, the slider goes
+        return None
+
+
+def _spectra(out, run, folder):
+    """A spectral job's part of the page (issue 33): its band record's plots (batch/report/
+    spectra.py), each failing region's worst band, and the band slider's data (spectral_preview.js,
+    loaded when the section is opened) with one {nm, lo, hi} per plane. None without a record."""
+    rec = spectra.record(run)
+    if not rec:
+        return None
+    src, bands = "", []
+    url = _local_url(out, folder / rec["preview"]) if rec["preview"] and "/" not in rec["preview"] and "\\" not in rec["preview"] else None
+    wls = _spectral_data(out / Path(*folder.parts) / rec["preview"]) if url else None
+    if wls:
+        src = _local_url(out, folder / SPECTRAL_JS) or ""
+        by_centre = dict(zip(rec["centres"], rec["edges"]))
+        for nm in wls:
+            lo, hi = by_centre.get(nm, (None, None))
+            bands.append({"nm": nm, "label": spectra.band_text(lo, hi) if lo is not None else f"{nm:g} nm"})
+    failing = sum(r["pass"] is False for r in rec["regions"])
+    head = (f"{len(rec['centres'])} bands ({rec['model'] or 'model not recorded'}"
+            + (f", {rec['source']}" if rec["source"] else "") + f"), {len(rec['regions'])} probe regions, {failing} failing"
+            + (f"; a band fails where |z| > {rec['z_crit']:.3g} (p < {rec['threshold']:.3g}, alpha "
+               f"{_fmt(rec['alpha'])} Sidak over bands and regions)" if rec["z_crit"] else ""))
+    return {"head": head, "plots": _plots_data(out, folder, spectra.plots(rec)), "src": src, "bands": json.dumps(bands),
+            "worst": spectra.worst_lines(run)}
+
+
+def _plots_data(out, folder, plots):
+    """spectral_plots.js in the job's folder: spectralBench.markup(document.currentScript, "<svg
+    ..."), the regions' plots as templates/spectra_plots.html renders them (autoescaped), so that a
+    page of many jobs carries none of them until a section is opened. Its URL, or "" when it
+    cannot be written."""
+    path = out / Path(*folder.parts) / PLOTS_JS
+    markup = _env.get_template("spectra_plots.html").render(plots=plots)
+    try:
+        _write_atomically(path, b"spectralBench.markup(document.currentScript, " + json.dumps(markup).encode("ascii") + b");\n")
+    except OSError:
+        return ""
+    return _local_url(out, folder / PLOTS_JS) or ""
 
 
 def _num(x):
@@ -501,7 +564,8 @@ def _viewer(out, run, deviations=None):
             "tev": _tev(run, folder, ref if ref_url else None, out), "regions": json.dumps(regions),
             "marks": json.dumps(_prism_marks(run)), "prism": _prism_line(run), "baseline": _baseline(out, run),
             "numbers": [f"{_text(k)}: {_fmt(v)}" for k, v in _dict(run.get("metrics")).items()],
-            "reference_problems": _reference_problems(run), "conversions": _conversions(run), "why": _why(out, run)}
+            "reference_problems": _reference_problems(run), "conversions": _conversions(run), "why": _why(out, run),
+            "spectra": _spectra(out, run, folder)}
 
 
 def _why(out, run):

@@ -15,7 +15,8 @@ Every test case also has properties "status", "judged by" (the probes measured a
 reference; "checked against itself: detects change, not error" where a renderer's own reference was
 its only judge: batch/report/results.py) and, where the run has them, "baseline" (the --baseline
 verdict), "noise test" (batch/records.py noise_test_text) and "diagnosis" (the fitted error models'
-verdict, issue 34: a failure's message, its reason, carries it too), and its reason, noise test,
+verdict, issue 34: a failure's message, its reason, carries it too), "worst bands" (a spectral
+render's failing probe regions, each by its worst band, issue 33: batch/report/spectra.py), and its reason, noise test,
 judged by and diagnosis in <system-out>. Written with xml.etree (attribute and text escaping is the library's);
 characters XML 1.0 cannot carry (control characters, lone surrogates) are replaced first, since
 reasons quote files and renderers' output.
@@ -27,6 +28,7 @@ from xml.etree import ElementTree as ET
 
 from ..records import noise_test_text
 from .results import judged_by
+from .spectra import worst_lines
 
 # status -> (element under the test case or None for a pass, its message prefix)
 OUTCOME = {"failed": ("failure", ""), "skipped": ("skipped", "skipped: "), "unsupported": ("skipped", "unsupported: "),
@@ -72,6 +74,9 @@ def testcase(run):
     why = diagnosis.get("text") if isinstance(diagnosis, dict) else None
     if why:
         _property(props, "diagnosis", why)
+    worst = worst_lines(run)
+    if worst:
+        _property(props, "worst bands", "; ".join(worst))
     baseline = run.get("baseline")
     if isinstance(baseline, dict) and baseline.get("status"):
         _property(props, "baseline", baseline["status"])

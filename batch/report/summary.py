@@ -95,6 +95,19 @@ def conversions_table(runs):
                       "", "| scene | object | field | conversion or loss |", "|---|---|---|---|", *out]) + "\n"
 
 
+def spectra_table(runs):
+    """Issue 33: each spectral job's failing probe regions, each by its worst band ("macbeth cyan
+    480-490 nm: 3.1 % low, z -6.2": batch/report/spectra.py); empty when no region failed."""
+    from .spectra import worst_lines
+    rows = [f"| {_cell(r.get('scene'))} | {_cell(r.get('backend'))} | {_cell(line)} |" for r in runs for line in worst_lines(r)]
+    if not rows:
+        return ""
+    return "\n".join(["", "## Spectra: the worst band of each failing region", "",
+                      "A spectral render is also judged band by band on each probe region whose truth is a spectrum "
+                      "(Sidak over bands and regions); the report plots each region's spectrum.", "",
+                      "| scene | backend | worst band |", "|---|---|---|", *rows]) + "\n"
+
+
 def counts(runs):
     out = {}
     for r in runs:
@@ -221,7 +234,7 @@ def write(out_dir, runs, elapsed_s, sweeps=None, stability=None, studies=None):
             "the reference's; block test, Sidak-corrected) and the analytic probes (ground truth from no renderer). "
             "known: fails exactly as a recorded deviation (known_deviations.toml); unjudged: nothing could judge it. "
             "Images and diffs: `<scene>/results/<backend>/`; all numbers: `metrics.json`.\n\n"
-            + _against_baseline(runs) + table(runs) + "\n" + reference_problems_table(runs) + conversions_table(runs)
+            + _against_baseline(runs) + table(runs) + "\n" + spectra_table(runs) + reference_problems_table(runs) + conversions_table(runs)
             + rgb_comparison(runs) + sweeps_table(sweeps) + stability_table(stability) + studies_table(studies))
     Path(out_dir, "summary.md").write_text(text)
     return text

@@ -66,13 +66,17 @@ var spectralBench = (function () {
     });
   }
   var files = {};
-  function load(url) {
-    if (!files[url]) files[url] = new Promise(function (resolve, reject) {
+  function script(url, charset) {  // what the data file at url passes to spectralBench.data or .markup
+    return new Promise(function (resolve, reject) {
       var s = document.createElement('script');
-      s.charset = 'x-user-defined'; s.src = url; s.spectralBenchResolve = resolve;
+      if (charset) s.charset = charset;
+      s.src = url; s.spectralBenchResolve = resolve;
       s.onerror = function () { reject(new Error('cannot load ' + url)); };
       document.head.appendChild(s);
-    }).then(function (obj) {
+    });
+  }
+  function load(url) {
+    if (!files[url]) files[url] = script(url, 'x-user-defined').then(function (obj) {
       var n = obj.w * obj.h, names = Object.keys(obj.layers);
       return Promise.all(names.map(function (k) { return decodeLayer(obj.layers[k], n); })).then(function (ls) {
         var out = {w: obj.w, h: obj.h};
@@ -435,6 +439,60 @@ var spectralBench = (function () {
   };
   Viewer.prototype.flipAB = function () { this.show(this.view === 'render' ? 'reference' : 'render'); };
 
+
+  // ---- a spectral job's bands (issue 33): the preview at one band, and the regions' spectra ------------
+  // Nothing loads before the section is opened: the plots wait in a <template>, the band data
+  // (spectral_preview.js, one plane per band, html.py _spectral_data) in its script file.
+  function Spectra(box) {
+    this.box = box; this.ev = 0; this.band = 0;
+    this.bands = JSON.parse(box.dataset.bands || '[]');
+    this.canvas = box.querySelector('canvas.band-canvas');
+    this.status = box.querySelector('.load-status'); this.readout = box.querySelector('.band-readout');
+  }
+  Spectra.prototype.open = function () {
+    if (this.started) return;
+    this.started = true;
+    var self = this, slider = this.box.querySelector('input.band'), plots = this.box.querySelector('.plots'), got = [];
+    if (this.box.dataset.plots) got.push(script(this.box.dataset.plots).then(function (markup) { plots.innerHTML = markup; }));
+    if (!this.box.dataset.src) {
+      Promise.all(got).then(function () { self.box.dataset.ready = '1'; }, function (e) { plots.textContent = 'plots not shown: ' + e.message; self.box.dataset.ready = 'error'; });
+      return;
+    }
+    this.status.textContent = 'loading band data...';
+    got.push(load(this.box.dataset.src));
+    Promise.all(got).then(function (parts) {
+      var d = parts[parts.length - 1];
+      self.w = d.w; self.h = d.h; self.data = d.bands;
+      slider.max = String(self.bands.length - 1);
+      slider.value = String(self.band = Math.floor((self.bands.length - 1) / 2));
+      var k = Math.min(8, Math.max(1, 360 / Math.max(d.w, d.h)));  // shown at least 360 px on its longer side (up to 8x)
+      self.canvas.width = d.w; self.canvas.height = d.h;
+      self.canvas.style.width = Math.round(d.w * k) + 'px'; self.canvas.style.height = Math.round(d.h * k) + 'px';
+      self.status.textContent = ''; self.draw(); self.box.dataset.ready = '1';
+    }).catch(function (e) { self.status.textContent = 'band data not shown: ' + e.message; self.box.dataset.ready = 'error'; });
+    slider.addEventListener('input', function () { self.band = parseInt(slider.value, 10); self.draw(); });
+    var ev = this.box.querySelector('input.band-exposure');
+    ev.addEventListener('input', function () { self.ev = parseFloat(ev.value); self.box.querySelector('.band-ev').textContent = ev.value; self.draw(); });
+    this.canvas.addEventListener('mousemove', function (e) {
+      var r = self.canvas.getBoundingClientRect(), x = Math.floor((e.clientX - r.left - self.canvas.clientLeft) * self.w / self.canvas.clientWidth),
+        y = Math.floor((e.clientY - r.top - self.canvas.clientTop) * self.h / self.canvas.clientHeight);
+      if (!self.data || x < 0 || y < 0 || x >= self.w || y >= self.h) return;
+      self.readout.textContent = 'pixel x ' + x + ', y ' + y + ': ' + fmt(self.data[String(self.band)][y * self.w + x]) + ' at ' + self.bands[self.band].label;
+    });
+  };
+  Spectra.prototype.draw = function () {
+    var a = this.data[String(this.band)], ctx = this.canvas.getContext('2d'), img = ctx.createImageData(this.w, this.h), px = img.data, k = Math.pow(2, this.ev);
+    for (var i = 0; i < a.length; i++) {
+      var g = SRGB[Math.max(0, Math.min(4096, Math.round(a[i] * k * 4096)))] || 0;
+      px[4 * i] = px[4 * i + 1] = px[4 * i + 2] = g; px[4 * i + 3] = 255;
+    }
+    ctx.putImageData(img, 0, 0);
+    this.box.querySelector('.band-nm').textContent = this.bands[this.band].label;
+    this.box.dataset.band = String(this.band);
+  };
+  var spectraBoxes = {};
+  function spectra(id) { return spectraBoxes[id]; }
+
   var viewers = {}, active = null;
   function viewer(id) { return viewers[id]; }
   function init() {
@@ -448,10 +506,15 @@ var spectralBench = (function () {
       box.addEventListener('mouseenter', function () { active = v; });
       if (io) io.observe(box); else v.start();
     });
+    document.querySelectorAll('details.spectra').forEach(function (box) {
+      var sp = spectraBoxes[box.id] = new Spectra(box);
+      box.addEventListener('toggle', function () { if (box.open) sp.open(); });
+      if (box.open) sp.open();
+    });
     document.addEventListener('keydown', function (ev) {  // A/B flip of the viewer under the mouse
       if (!active || ev.target.tagName === 'INPUT' || ev.target.tagName === 'SELECT') return;
       if (ev.key === 'f' || ev.key === 'F') { active.flipAB(); ev.preventDefault(); }
     });
   }
-  return {data: data, init: init, viewer: viewer, load: load, HALF: HALF};
+  return {data: data, markup: data, init: init, viewer: viewer, spectra: spectra, load: load, HALF: HALF, SRGB: SRGB};
 })();
