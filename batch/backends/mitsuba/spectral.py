@@ -88,14 +88,26 @@ def cmf_xml(xml_text, where="scene.xml"):
 LAYER_SEP = "_"
 
 
+NEGATIVE = "n"  # suffix of the channel holding a response's negative part ("<observer>_Xn")
+
+
 def layer_channels(observers):
-    """[(name, wavelengths, response)] of the CMF film plus each observer's three CMFs."""
+    """[(name, wavelengths, response)] of the CMF film plus each observer's three CMFs. specfilm
+    takes non-negative responses only: a CMF with negative parts (a box-band film read through its
+    histospline, colorimetry.box_weights) is rendered as two channels, its positive part and its
+    negative part negated ("<observer>_Xn"), which layers_to_ir subtracts."""
+    import numpy as np
+
     from ....exporters import colorimetry
     out = []
     for obs in (colorimetry.GROUND_TRUTH, *observers):
-        wl, xb, yb, zb, _norm, _matrix = colorimetry.film(obs)  # non-negative responses (specfilm needs them)
+        wl, xb, yb, zb, _norm, _matrix = colorimetry.film(obs)
         names = CMF_CHANNELS if obs == colorimetry.GROUND_TRUTH else [f"{obs}{LAYER_SEP}{c}" for c in CMF_CHANNELS]
-        out += [(n, wl, c) for n, c in zip(names, (xb, yb, zb))]
+        for n, c in zip(names, (xb, yb, zb)):
+            c = np.asarray(c, dtype=np.float64)
+            out.append((n, wl, np.maximum(c, 0.0)))
+            if obs != colorimetry.GROUND_TRUTH and (c < 0).any():
+                out.append((n + NEGATIVE, wl, np.maximum(-c, 0.0)))
     return out
 
 
@@ -111,15 +123,20 @@ def layers_to_ir(names, img):
 
     from ....exporters import colorimetry
     names, img = list(names), np.asarray(img, dtype=np.float64)
+    index = {n: i for i, n in enumerate(names)}
     keep, layers = [], []
     for i, n in enumerate(names):
         obs, sep, c = n.rpartition(LAYER_SEP)
-        if sep and c == "X" and obs in colorimetry.OBSERVERS and names[i + 1:i + 3] == [f"{obs}_Y", f"{obs}_Z"]:
-            norm, matrix = colorimetry.film(obs)[4:]
-            delta = img[..., i:i + 3] / norm @ np.asarray(matrix).T - img[..., :3]
-            layers.append(([f"{obs}.{k}" for k in "RGB"], delta))
-        elif not (sep and c in "YZ" and obs in colorimetry.OBSERVERS):
+        if not (sep and obs in colorimetry.OBSERVERS):
             keep.append(i)
+            continue
+        if c != "X":
+            continue  # the observer's other channels, taken with its X
+        xyz = np.stack([img[..., index[f"{obs}{LAYER_SEP}{k}"]]
+                        - (img[..., index[f"{obs}{LAYER_SEP}{k}{NEGATIVE}"]] if f"{obs}{LAYER_SEP}{k}{NEGATIVE}" in index else 0.0)
+                        for k in CMF_CHANNELS], axis=-1)
+        norm, matrix = colorimetry.film(obs)[4:]
+        layers.append(([f"{obs}.{k}" for k in "RGB"], xyz / norm @ np.asarray(matrix).T - img[..., :3]))
     out_names = [names[i] for i in keep] + [n for ns, _ in layers for n in ns]
     return out_names, np.concatenate([img[..., keep]] + [d for _, d in layers], axis=-1)
 

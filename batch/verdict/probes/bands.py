@@ -7,7 +7,8 @@ Regions: the Lambertian patches of lambert.py (a chart's patches, lit plates): o
 rho(l) L(l) everywhere on the patch. Expected per band, from that spectrum and the renderer's
 band model (batch/spectral_exr.py BAND_MODELS): "box", its mean over the band; "hat", its
 average weighted by the band's hat function (1 at the band's wavelength, 0 at the neighbours');
-"point", its value at the band's wavelength; each on a 0.1 nm grid (trapezoid rule). Measured:
+"point", its value at the band's wavelength; each on a 0.1 nm grid (trapezoid rule). The end
+samples' hats are halves (the spectrum is zero beyond them, as batch/spectral_exr.py reads it). Measured:
 the mean of the band over the region's pixels, with the standard error of that mean from the
 pixels' spread (independent draws of the same radiance, as lambert.py judges R, G, B), Student's t
 with n - 1 degrees of freedom. A chart adds one test per band that pools every patch: the weighted
@@ -33,14 +34,13 @@ PREFIX = "bands "
 
 def band_edges(centres, model, width=None):
     """[(lo, hi)] the band of each channel covers: its box, or the support of its hat (the
-    neighbouring centres; half a spacing out at the ends); a point sample's is its hat's, for
+    neighbouring centres; the end samples' hats are halves); a point sample's is its hat's, for
     naming only."""
     c = np.asarray(centres, dtype=np.float64)
     if model == "box":
         return spectral_exr.box_edges(c, width)
-    spacing = np.diff(c)
-    lo = np.r_[c[0] - spacing[0], c[:-1]]
-    hi = np.r_[c[1:], c[-1] + spacing[-1]]
+    lo = np.r_[c[0], c[:-1]]  # the end samples' hats are halves: zero beyond them
+    hi = np.r_[c[1:], c[-1]]
     return np.stack([lo, hi], axis=-1)
 
 
@@ -52,12 +52,12 @@ def expected_bands(spectrum_fn, centres, model, width=None):
         return np.asarray(spectrum_fn(c), dtype=np.float64)
     out = np.empty(c.size)
     for k, (lo, hi) in enumerate(band_edges(c, model, width)):
-        x = np.arange(lo, hi + GRID_NM / 2, GRID_NM)
+        x = np.linspace(lo, hi, max(2, int(round((hi - lo) / GRID_NM)) + 1))  # ends exact (a hat's are its peak)
         v = np.asarray(spectrum_fn(x), dtype=np.float64)
         if model == "box":
             out[k] = np.trapz(v, x) / (hi - lo)
         else:
-            w = np.interp(x, c, np.eye(c.size)[k])
+            w = np.interp(x, c, np.eye(c.size)[k], left=0.0, right=0.0)  # zero beyond the end samples
             out[k] = np.trapz(v * w, x) / np.trapz(w, x)
     return out
 
@@ -121,12 +121,28 @@ def lambert_bands(m):
     return out
 
 
+def _failing_bands(stat, edges):
+    """Every band whose test fails, worst first: [{"band", "band_nm", "relative", "z"}]."""
+    m, e, s = (np.asarray(stat[k], dtype=np.float64) for k in ("measured", "expected", "se"))
+    z = (m - e) / np.maximum(s, 1e-300)
+    p = np.atleast_1d(stats.two_sided_p(z, stat.get("dof")))
+    bad = [int(k) for k in np.argsort(-np.abs(z)) if p[k] < stat["threshold"]]
+    return [{"band": k, "band_nm": [float(edges[k][0]), float(edges[k][1])],
+             "relative": float(m[k] / e[k] - 1.0) if e[k] else None, "z": float(z[k])} for k in bad]
+
+
 def _region_record(name, region, measured, expected, se, dof, tests, edges, **extra):
     stat = stats.compare_means(measured, expected, se, dof=dof, tests=tests)
     worst = _worst(stat, edges)
+    failing = _failing_bands(stat, edges)
+    text = describe(region, worst)
+    if len(failing) > 1:  # the other failing bands, nm and size only: "also 550-555 nm +1.9 %"
+        text += "; also " + ", ".join(
+            f"{b['band_nm'][0]:g}-{b['band_nm'][1]:g} nm" + ("" if b["relative"] is None else f" {b['relative'] * 100:+.1f} %")
+            for b in failing[1:4]) + (f" and {len(failing) - 4} more" if len(failing) > 4 else "")
     return _probe(name, float(np.asarray(expected)[worst["band"]]), float(np.asarray(measured)[worst["band"]]),
                   worst["relative"], "relative", stat["pass"], z=stat["z"], stat=stat,
-                  worst=dict(worst, text=describe(region, worst)), region=region, **extra)
+                  worst=dict(worst, text=text), failing_bands=failing, region=region, **extra)
 
 
 PROBES = [lambert_bands]
