@@ -94,16 +94,24 @@ def art_version(artist):
     return m.group(1) if m else "unknown"
 
 
+def read_pass(path):
+    """(names, image, bands) of one pass: stokes_to_rgb's channels and the S0 bands the band checks
+    judge (batch/spectral_exr.py pass_bands: ART's 10 nm boxes, their model recorded here)."""
+    try:
+        image = spectral_exr.read(path)
+        names, img = spectral_exr.to_rgb(image, bands="box", band_width_nm=ART_BANDS[1])
+    except spectral_exr.SpectralEXRError as exc:
+        raise BackendFailure(f"ART's spectral EXR: {exc}") from exc
+    return names, img, dict(spectral_exr.pass_bands(image, "box", ART_BANDS[1]), source="recorded")
+
+
 def stokes_to_rgb(path):
     """R, G, B and, for a polarised render, S0.R ... S3.B from ART's spectral EXR: the Fichet 2021
     layout (channels 'S<k>.<nm>,<frac>nm', the band centres) read and integrated with the CIE 1931
     CMFs by batch/spectral_exr.py (R, G, B alone when only S0 is there: an unpolarised render).
     ART's film holds each 10 nm band's box average (exporters/colorimetry.py ART_BANDS_NM): read
     with the "box" band model, each band weighted by the CMFs' integral over it."""
-    try:
-        return spectral_exr.to_rgb(spectral_exr.read(path), bands="box", band_width_nm=ART_BANDS[1])
-    except spectral_exr.SpectralEXRError as exc:
-        raise BackendFailure(f"ART's spectral EXR: {exc}") from exc
+    return read_pass(path)[:2]
 
 
 class ArtBackend:
@@ -156,6 +164,6 @@ class ArtBackend:
         wall = passes_mod.run_command(cmd, timeout, log, "artist", env=artist_env(self.artist), cwd=run_dir)
         if not (run_dir / "scene.exr").is_file():
             raise BackendFailure(f"artist wrote no scene.exr in {run_dir}")
-        names, img = stokes_to_rgb(run_dir / "scene.exr")  # always the spectral EXR (art_writer)
+        names, img, bands = read_pass(run_dir / "scene.exr")  # always the spectral EXR (art_writer)
         shutil.rmtree(run_dir, ignore_errors=True)
-        return {"names": names, "image": img.astype(np.float64), "time_s": wall}
+        return {"names": names, "image": img.astype(np.float64), "time_s": wall, "spectral": bands}

@@ -30,6 +30,7 @@ from .common import MIN_PIXELS, probe as _probe
 
 GRID_NM = 0.1  # the grid the expected band values are integrated on
 PREFIX = "bands "
+RANGE_NM = (360.0, 830.0)  # where the IR defines spectra (docs/scene-format.md): bands outside are not judged
 
 
 def band_edges(centres, model, width=None):
@@ -78,11 +79,30 @@ def describe(region, worst):
     return f"{region} {lo:g}-{hi:g} nm: {how}z {worst['z']:.1f}"
 
 
+def judged(sp):
+    """The bands that are judged: those inside RANGE_NM (ART's film starts at 320 nm), or None."""
+    centres, model, width = np.asarray(sp["wavelengths_nm"], dtype=np.float64), sp["bands"], sp.get("band_width_nm")
+    if model == "hat":  # a hat spans its neighbours: inside when its own wavelength is
+        inside = (centres >= RANGE_NM[0]) & (centres <= RANGE_NM[1])
+    else:
+        e = band_edges(centres, model, width)
+        inside = (e[:, 0] >= RANGE_NM[0] - 1e-9) & (e[:, 1] <= RANGE_NM[1] + 1e-9)
+    if not inside.any():
+        return None
+    out = dict(sp, wavelengths_nm=centres[inside], mean=np.asarray(sp["mean"])[..., inside])
+    if sp.get("stderr") is not None:
+        out["stderr"] = np.asarray(sp["stderr"])[..., inside]
+    return out
+
+
 def lambert_bands(m):
     """The Lambertian patches, band by band (module docstring); [] without a spectral render."""
     sp = m.spectral
     env = m.scene.get("environment")
     if sp is None or not env:
+        return []
+    sp = judged(sp)
+    if sp is None:
         return []
     centres, cube, model, width = sp["wavelengths_nm"], sp["mean"], sp["bands"], sp.get("band_width_nm")
     cam, objs = m.scene["camera"], m.scene["objects"]
@@ -151,6 +171,7 @@ PROBES = [lambert_bands]
 def record(entry_probes, sp):
     """The job's ``bands`` record (the report's spectra; README "Spectral images") from its band
     checks, or None without a spectral render."""
+    sp = None if sp is None else judged(sp)
     if sp is None:
         return None
     centres, model, width = sp["wavelengths_nm"], sp["bands"], sp.get("band_width_nm")
