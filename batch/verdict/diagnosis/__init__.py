@@ -13,9 +13,11 @@ The catalogue is data, one module per family (a registry like the probes'):
   without its k, the dielectric's IOR, emitter units (x pi);
 - noise.py: the standard error under- or over-reported.
 
-Not in the catalogue yet (issue 34 lists them): dispersion missing, thin film missing or its
-thickness, fluorescence dropped, per-steradian vs per-area beyond the factor pi, a too-small
-sample count.
+- materials.py also: fluorescence dropped (the lone fluorescent sphere's probe without the
+  re-radiated light), thin film missing and its thickness fitted (the Airy probe's tiles).
+
+Not in the catalogue yet (issue 34 lists them): dispersion missing, per-steradian vs per-area
+beyond the factor pi, a too-small sample count.
 
 Each model is a Model: its name, family, the parameters it fits, the evidence it uses
 ("reference": the render's blocks against the reference's, the noise test's own blocks and
@@ -60,7 +62,8 @@ CRITERION = "AIC (chi2 + 2 k)"
 # passing check is never diagnosed, and a known render pays only for what failed)
 EVIDENCE_CHECKS = {"reference": ("noise test",), "probe:ggx": ("ggx *", "beckmann *"),
                    "reference+ggx": ("noise test", "ggx *", "beckmann *"), "probe:lambert": ("lambert *",),
-                   "probe:fresnel": ("brewster *", "reflection *")}
+                   "probe:fresnel": ("brewster *", "reflection *"), "probe:lone": ("lone *",),
+                   "probe:airy": ("airy film *",)}
 
 
 @dataclass

@@ -4,7 +4,7 @@ import copy
 
 import numpy as np
 
-from . import Model, RegionEvidence, reference_model, region_fit
+from . import Fit, Model, RegionEvidence, least_squares, reference_model, region_fit
 
 FAMILY = "materials"
 
@@ -195,6 +195,96 @@ def _ior_fit(ev):
     return region_fit(region, predict, [[declared]], bounds=([1.0], [4.0]))
 
 
+def _fluorescence_dropped(ev):
+    """The lone fluorescent sphere's probe (rho L + integral P L) against rho L alone: the
+    renderer drops the re-radiated light (a fluorescent material rendered as its plain
+    reflectance). No free parameter."""
+    from .. import stats
+    from ..probes import fluorescence
+    rec = next((r for r in ev.entry.get("probes") or [] if r.get("stat") and r["name"].startswith("lone fluorescent")),
+               None)
+    env, objs = ev.scene.get("environment"), ev.scene["objects"]
+    if rec is None or not env or len(objs) != 1 or (objs[0].get("bsdf") or {}).get("fluorescence") is None:
+        return None
+    st = rec["stat"]
+    m, e, se = (np.asarray(st[k], dtype=np.float64) for k in ("measured", "expected", "se"))
+    plain = {k: v for k, v in objs[0]["bsdf"].items() if k != "fluorescence"}
+    e0 = fluorescence.expected_rgb(plain, env["radiance"])
+    chi2_none = float(np.sum(((m - e) / np.maximum(se, 1e-300)) ** 2))
+    chi2 = float(np.sum(((m - e0) / np.maximum(se, 1e-300)) ** 2))
+    ok = stats.compare_means(m, e0, se, dof=st.get("dof"))["pass"]
+    return Fit([], [], chi2, chi2_none, m.size, 0, ok)
+
+
+def _film_setup(ev):
+    """(scene, index of the filmed sphere, the render's R, G, B, the probe's tiles) or None."""
+    from ..probes import thin_film
+    if "R" not in ev.names[:3] or not ev.scene.get("environment"):
+        return None
+    films = [i for i, o in enumerate(ev.scene["objects"]) if thin_film.applies(o) and "material" not in o["bsdf"]]
+    if not films or not any(r["name"].startswith("airy film") and r.get("stat") for r in ev.entry.get("probes") or []):
+        return None
+    i = films[0]
+    rgb = np.asarray(ev.image[..., :3], dtype=np.float64)
+    h, w = rgb.shape[:2]
+    _, mask = thin_film.expected_image(ev.scene, i, w, h)
+    blocks = thin_film.tiles(mask)
+    return (ev.scene, i, rgb, blocks) if blocks else None
+
+
+def _film_stat(scene, i, rgb, blocks, thickness):
+    """The Airy probe's tile test with the film ``thickness`` nm thick (0: no film: the bare
+    conductor's Fresnel reflectance, Airy's limit)."""
+    from .. import stats
+    from ..probes import thin_film
+    sc = copy.deepcopy(scene)
+    sc["objects"][i]["bsdf"]["thin_film"]["thickness"] = float(thickness)
+    h, w = rgb.shape[:2]
+    expected, _ = thin_film.expected_image(sc, i, w, h)
+    return thin_film._tile_stat(rgb, expected, blocks, stats.ALPHA)
+
+
+def _chi2(stat):
+    m, e, s = (np.asarray(stat[k], dtype=np.float64) for k in ("measured", "expected", "se"))
+    return float(np.sum(((m - e) / np.maximum(s, 1e-300)) ** 2)), m.size
+
+
+def _film_missing(ev):
+    got = _film_setup(ev)
+    if got is None:
+        return None
+    scene, i, rgb, blocks = got
+    chi2_none, n = _chi2(_film_stat(scene, i, rgb, blocks, scene["objects"][i]["bsdf"]["thin_film"]["thickness"]))
+    bare = _film_stat(scene, i, rgb, blocks, 0.0)
+    return Fit([], [], _chi2(bare)[0], chi2_none, n, 0, bare["pass"])
+
+
+def _film_thickness(ev):
+    """The film's thickness fitted on the Airy probe's tiles: a coarse scan around the declared one
+    (a film's colour repeats with its thickness: local minima), then weighted least squares from
+    the best with the cluster-robust standard error (a tile's R, G and B one cluster: least_squares)."""
+    got = _film_setup(ev)
+    if got is None:
+        return None
+    scene, i, rgb, blocks = got
+    declared = float(scene["objects"][i]["bsdf"]["thin_film"]["thickness"])
+
+    def residual(x):
+        st = _film_stat(scene, i, rgb, blocks, float(x[0]))
+        m, e, s = (np.asarray(st[k], dtype=np.float64) for k in ("measured", "expected", "se"))
+        return (m - e) / np.maximum(s, 1e-300)
+    lo, hi = max(0.0, declared * 0.5), declared * 1.5 + 10.0
+    grid = np.linspace(lo, hi, 21)
+    start = grid[int(np.argmin([float(residual([d]) @ residual([d])) for d in grid]))]
+    found = least_squares(residual, [[start]], bounds=([lo], [hi]), var_ratio="residuals", channels=3)
+    if found is None:
+        return None
+    x, err, chi2 = found
+    r0 = residual([declared])
+    ok = _film_stat(scene, i, rgb, blocks, float(x[0]))["pass"]
+    return Fit([float(x[0])], [float(err[0])], chi2, float(r0 @ r0), r0.size, 1, ok)
+
+
 MODELS = [
     Model("GGX alpha", FAMILY, ("alpha", "indirect"), "reference+ggx",
           "the microfacet roughness is not the declared alpha (or alpha vs alpha squared conventions)",
@@ -206,6 +296,15 @@ MODELS = [
     Model("dielectric IOR", FAMILY, ("ior",), "probe:fresnel",
           "the dielectric's index of refraction is not the declared one (another IOR, or one of another medium)",
           _ior_fit, slow=True),
+    Model("fluorescence dropped", FAMILY, (), "probe:lone",
+          "the fluorescent material rendered without its re-radiation (rho L alone, the integral of P L dropped)",
+          _fluorescence_dropped),
+    Model("thin film missing", FAMILY, (), "probe:airy",
+          "the conductor rendered without its thin film (the bare interface's Fresnel reflectance)", _film_missing,
+          slow=True),
+    Model("thin film thickness", FAMILY, ("thickness nm",), "probe:airy",
+          "the film's thickness is not the declared one (another unit, or the film measured another way)",
+          _film_thickness, slow=True),
     Model("emitter radiance x pi", FAMILY, ("factor",), "reference",
           "emitter units: radiance where exitance was due, or the other way (a factor pi)",
           _emitter_units, deviation=lambda f: {"scale": float(np.pi if f.values[0] > 1 else 1 / np.pi), "scale_se": 0.0}),
