@@ -35,7 +35,7 @@ def test_the_committed_references_carry_layers_for_the_recorded_films():
             continue  # made through Mitsuba's film: polarised or light-traced (README, "Colour route")
         assert observer_layers.problem_of(ref) is None, meta.stem
         layers = observer_layers.load(ref)
-        assert set(layers) >= {"mitsuba3", "art46"}, (meta.stem, sorted(layers))
+        assert set(layers) >= {"mitsuba3"}, (meta.stem, sorted(layers))
         ratio = ref.provenance["observer_layers"]["mitsuba3"]["noise_ratio"]
         assert max(ratio) < 0.1, (meta.stem, ratio)  # the layer adds < 1 % to the variance judged
 
@@ -47,27 +47,25 @@ def test_mitsubas_film_fails_against_the_cmf_reference_and_meets_its_layer(mitsu
     assert zt.passed is False and zt.scale["pass"] is False
     assert all(s > 1 for s in zt.scale["s"]), zt.scale  # bright, as recorded
     assert zt.rejudge(1.0, 0.0, "mitsuba3") is True  # as Mitsuba's film sees the reference: within noise
-    assert zt.rejudge(1.0, 0.0, "art46") is False  # another film's layer does not fit either
     assert zt.rejudge(1.0, 0.0, "cie1964") is None  # no layer: cannot tell (the deviation does not apply)
 
 
 def test_a_layer_file_that_is_not_its_records_is_not_used(tmp_path):
     from spectral_bench.batch.verdict import observer_layers, references
     name = "macbeth_chart_D65"
-    for f in (f"{name}.exr", f"{name}.json", f"{name}.mitsuba3.exr", f"{name}.art46.exr"):
+    for f in (f"{name}.exr", f"{name}.json", f"{name}.mitsuba3.exr"):
         shutil.copy(ROOT / "references" / f, tmp_path / f)
     ref = references.load(name, tmp_path)
-    assert set(observer_layers.load(ref)) == {"mitsuba3", "art46"}
+    assert set(observer_layers.load(ref)) == {"mitsuba3"}
     with open(tmp_path / f"{name}.mitsuba3.exr", "r+b") as f:
         f.seek(-64, 2)
         f.write(b"\0" * 64)
     ref = references.load(name, tmp_path)
-    assert ref is not None  # the reference itself stays usable, and so does the other layer
+    assert ref is not None  # the reference itself stays usable
     assert set(observer_layers.problems(ref)) == {"mitsuba3"} and "sha256 differs" in observer_layers.problem_of(ref)
-    assert set(observer_layers.load(ref)) == {"art46"}
-    assert set(observer_layers.offsets(ref)) == {"cie1931", "art46"}  # its own observer at zero
-    (tmp_path / f"{name}.art46.exr").unlink()
-    assert "art46.exr is missing" in observer_layers.problem_of(references.load(name, tmp_path))
+    assert observer_layers.load(ref) == {} and set(observer_layers.offsets(ref)) == {"cie1931"}  # its own, at zero
+    (tmp_path / f"{name}.mitsuba3.exr").unlink()
+    assert "mitsuba3.exr is missing" in observer_layers.problem_of(references.load(name, tmp_path))
 
 
 def test_a_hostile_layer_record_names_no_file_outside_the_folder(tmp_path):
