@@ -328,7 +328,7 @@ def test_planted_illuminant_error_in_the_art_route_fails_every_judged_scene(art_
         planted = (out / name / "art" / "scene.arm").read_text()
         a, b = (np.array([float(x) for x in EMITTED.findall(t)]) for t in (plain, planted))
         assert len(a) == len(b) > 0 and np.allclose(b / a, PLANTED), (name, a, b)
-    assert runs["macbeth_chart_D65"]["probes"][-1]["name"] == "lambert chart luminance scale"
+    assert any(p["name"] == "lambert chart luminance scale" for p in runs["macbeth_chart_D65"]["probes"])
 
 
 @pytest.mark.slow
