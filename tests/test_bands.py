@@ -100,3 +100,36 @@ def test_a_metamer_fails_the_band_checks_naming_its_bands_and_passes_in_rgb(char
     folder = out / "macbeth_chart_D65" / "results" / "toy_spectral_metamer"
     assert (folder / "spectral_preview.exr").is_file() and not (folder / "spectral_bands.npz").exists()
     assert proc.returncode == 1
+
+
+def test_the_lone_fluorescent_sphere_is_judged_band_by_band(tmp_path):
+    """fluorescent_sphere_lone through Mitsuba's spectral film route (specfilm of 10 nm boxes with
+    the project's fluorescence plugins, batch/backends/mitsuba/spectral.py; two passes): the
+    sphere's bands meet rho L + integral P L through the box model, with the power to see a 10 %
+    error in a band; the same bands judged as if the sphere did not fluoresce fail, where P emits."""
+    import copy
+    from spectral_bench.batch import backends, spectral_exr
+    from spectral_bench.batch.backends.mitsuba import spectral as mitsuba_spectral
+    from spectral_bench.batch.verdict import probes, stats
+    from spectral_bench.batch.verdict.probes import bands
+    from spectral_bench.exporters import ir_json
+    from conftest import GOLDEN
+    scene = ir_json.load(GOLDEN / "fluorescent_sphere_lone.json")
+    xml = backends.get("mitsuba").export(scene, tmp_path / "export")
+    cubes = []
+    for k in range(2):
+        mitsuba_spectral.render(xml, tmp_path / f"pass{k}.exr", 128, seed=17 + 1000 * k)
+        img = spectral_exr.read(tmp_path / f"pass{k}.exr")
+        cubes.append(img.stokes[0])
+    sp = {"wavelengths_nm": img.wavelengths_nm, "mean": np.mean(cubes, axis=0), "bands": "box", "band_width_nm": None}
+
+    def judge(sc):
+        m = probes.Measurement(sc, ["R", "G", "B"], sp["mean"][..., :3], spectral=sp)
+        return bands.lone_sphere_bands(m)[0]
+    rec = judge(scene)
+    assert rec["pass"] is True, rec["worst"]
+    assert stats.detectable_scale(rec["stat"]) < 0.10, stats.detectable_scale(rec["stat"])
+    plain = copy.deepcopy(scene)
+    del plain["objects"][0]["bsdf"]["fluorescence"]
+    dropped = judge(plain)
+    assert dropped["pass"] is False and dropped["worst"]["relative"] > 0.1, dropped["worst"]  # the re-radiated light

@@ -4,7 +4,8 @@ whose truth is a spectrum, so that two band errors which cancel in R, G, B (a me
 and a failure says which wavelengths are wrong.
 
 Regions: the Lambertian patches of lambert.py (a chart's patches, lit plates): outgoing radiance
-rho(l) L(l) everywhere on the patch. Expected per band, from that spectrum and the renderer's
+rho(l) L(l) everywhere on the patch; and the lone (fluorescent) sphere of fluorescence.py,
+rho(l) L(l) + integral P(l_i, l) L(l_i) dl_i on every whole pixel of the sphere. Expected per band, from that spectrum and the renderer's
 band model (batch/spectral_exr.py BAND_MODELS): "box", its mean over the band; "hat", its
 average weighted by the band's hat function (1 at the band's wavelength, 0 at the neighbours');
 "point", its value at the band's wavelength; each on a 0.1 nm grid (trapezoid rule). The end
@@ -165,7 +166,34 @@ def _region_record(name, region, measured, expected, se, dof, tests, edges, **ex
                   worst=dict(worst, text=text), failing_bands=failing, region=region, **extra)
 
 
-PROBES = [lambert_bands]
+def lone_sphere_bands(m):
+    """The lone (fluorescent) Lambertian sphere of fluorescence.py, band by band: rho L + integral
+    P L through the band model, on the sphere's whole pixels (their spread gives the standard
+    error); [] without a spectral render or such a sphere."""
+    from . import fluorescence
+    sp = m.spectral
+    env, objs = m.scene.get("environment"), m.scene["objects"]
+    if sp is None or not fluorescence.applies(m.scene):
+        return []
+    sp = judged(sp)
+    if sp is None:
+        return []
+    centres, cube, model, width = sp["wavelengths_nm"], sp["mean"], sp["bands"], sp.get("band_width_nm")
+    h, w = cube.shape[:2]
+    mask = raycast.pixels_inside(m.scene["camera"], w, h, objs, 0)
+    if mask.sum() < MIN_PIXELS:
+        return []
+    obj = objs[0]
+    expected = expected_bands(lambda x: fluorescence.expected_radiance(obj["bsdf"], env["radiance"], x),
+                              centres, model, width)
+    px = cube[mask].astype(np.float64)
+    n = px.shape[0]
+    return [_region_record(f"{PREFIX}lone sphere {obj['name']}", obj["name"], px.mean(axis=0), expected,
+                           px.std(axis=0, ddof=1) / np.sqrt(n), n - 1, len(centres), band_edges(centres, model, width),
+                           pixels=n)]
+
+
+PROBES = [lambert_bands, lone_sphere_bands]
 
 
 def record(entry_probes, sp):

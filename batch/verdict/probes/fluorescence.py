@@ -36,18 +36,26 @@ def expected_rgb(bsdf, radiance, obs=colorimetry.GROUND_TRUTH):
     return colorimetry.xyz_to_srgb(colorimetry.xyz(expected_radiance(bsdf, radiance, wl), obs))
 
 
-def lone_sphere(m):
-    scene, image = m.scene, m.image
+def applies(scene):
+    """Whether ``scene`` is a lone Lambertian sphere under a uniform environment, seen from outside."""
     env, objs = scene.get("environment"), scene["objects"]
     if not env or len(objs) != 1:
-        return []
+        return False
     obj = objs[0]
     b = obj.get("bsdf") or {}
     if obj["shape"]["type"] != "sphere" or b.get("type") != "diffuse" or obj.get("emitter"):
-        return []
+        return False
     cam = np.asarray(scene["camera"]["to_world"], dtype=np.float64)[:3, 3]
-    if np.linalg.norm(cam - np.asarray(obj["shape"]["center"])) <= obj["shape"]["radius"]:
-        return []  # the camera is inside
+    return bool(np.linalg.norm(cam - np.asarray(obj["shape"]["center"])) > obj["shape"]["radius"])
+
+
+def lone_sphere(m):
+    scene, image = m.scene, m.image
+    if not applies(scene):
+        return []
+    env, objs = scene["environment"], scene["objects"]
+    obj = objs[0]
+    b = obj.get("bsdf") or {}
     kind = "fluorescent " if b.get("fluorescence") is not None else ""
     name = f"lone {kind}Lambertian sphere {obj['name']}: rho L + integral P L"
     expected = expected_rgb(b, env["radiance"])
