@@ -1,6 +1,6 @@
 """Material models of the diagnosis (issue 34) for what the probes judge by closed form: the lone
-fluorescent sphere rendered without its re-radiation, and the smooth filmed sphere rendered with
-another film thickness. Real renders (Mitsuba through the scene format's own colour, the CMF film,
+fluorescent sphere rendered without its re-radiation, the smooth filmed sphere rendered with
+another film thickness, and the prism's glass rendered with one IOR (no dispersion). Real renders (Mitsuba through the scene format's own colour, the CMF film,
 so that the film's colour route is not what the probes see), planted in the scene rendered and
 judged as the scene declared."""
 import copy
@@ -12,7 +12,7 @@ from conftest import GOLDEN
 PASSES = 4
 
 
-def _diagnosed(name, change, tmp_path, spp, size=None):
+def _diagnosed(name, change, tmp_path, spp, size=None, film="cmf"):
     from spectral_bench.batch import backends, exr
     from spectral_bench.batch.verdict import diagnosis, probes
     from spectral_bench.exporters import ir, ir_json
@@ -23,7 +23,7 @@ def _diagnosed(name, change, tmp_path, spp, size=None):
     rendered = copy.deepcopy(scene)
     change(rendered)
     rendered["needs"] = ir.derived_needs({k: v for k, v in rendered.items() if k != "needs"})
-    b = backends.get("mitsuba", film="cmf")
+    b = backends.get("mitsuba", film=film) if film else backends.get("mitsuba")
     path = b.export(rendered, tmp_path / "export")
     b.render(path, b.mode_for(rendered)[0], spp, tmp_path / "render.exr", passes=PASSES, seed=5)
     names, img, se = exr.read_image_and_stderr(tmp_path / "render.exr")
@@ -63,3 +63,26 @@ def test_film_thickness_fitted(tmp_path):
     assert abs(value - declared["nm"] * 1.05) <= 3 * se, (value, se, declared)
     assert abs(value - declared["nm"] * 1.05) < 0.005 * declared["nm"] * 0.05, (value, declared)
     assert not any(m["model"] == "thin film missing" and m["fully_explains"] for m in found["models"])
+
+
+def test_dispersion_missing_is_named(tmp_path):
+    """The prism's N-BK7 rendered as a plain dielectric of its n at the d line (587.6 nm): the fan
+    collapses to one spot; the positions probe fails (its power: the channels' centroids tens of
+    standard errors apart) and "dispersion missing" is ranked first, its IOR within two standard
+    errors of the one rendered."""
+    from spectral_bench.exporters import dispersion
+    planted = {}
+
+    def one_ior(sc):
+        glass = next(o for o in sc["objects"] if dispersion.is_dispersive((o.get("bsdf") or {}).get("int_ior")))
+        planted["n"] = float(dispersion.ior(glass["bsdf"]["int_ior"], [dispersion.FRAUNHOFER_NM["d"]])[0])
+        glass["bsdf"]["int_ior"] = planted["n"]
+    # light-traced: Mitsuba's own film (the CMF film loses the particle tracer's flux; the
+    # centroids the probe measures do not depend on the film's scale)
+    records, found = _diagnosed("dispersion_prism", one_ior, tmp_path, 32, size=(128, 64), film=None)
+    pos = next(r for r in records if r["name"].startswith("prism band positions"))
+    assert pos["pass"] is False and pos["error"] > 10, pos  # error: the largest |z| over the channels
+    best = found["models"][0]
+    assert best["model"] == "dispersion missing" and found["likely"] == "dispersion missing", found["models"][:3]
+    value, se = best["params"]["ior"]
+    assert abs(value - planted["n"]) <= 2 * se, (value, se, planted)

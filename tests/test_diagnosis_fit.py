@@ -151,6 +151,45 @@ def test_misreported_noise():
     within_two_se(top, "factor", 3.0)
 
 
+def one_pass_evidence(noise_scale, seed=0):
+    """A render of one pass judged, as the verdict judges its reference's own backend, on the noise
+    the reference predicts for the declared SPP (no stderr of its own), ``noise_scale`` times that
+    noise: a renderer that took SPP / noise_scale^2 samples."""
+    names, ref = reference()
+    rng = np.random.default_rng(seed)
+    ref_se = SE / 8
+    at = compare.ReferenceAt(ref + rng.normal(0, ref_se, ref.shape), np.full(ref.shape, ref_se ** 2),
+                             np.full(ref.shape, SE ** 2 * SPP), 7.0)
+    image = ref + rng.normal(0, SE * noise_scale, ref.shape)
+    zt = compare.z_test(image, at, SPP, alpha=0.01, block=4)
+    entry = {"scene": "synthetic", "backend": "test", "mode": "rgb", "passes": 1, "spp": SPP,
+             "test": {"pass": bool(zt.passed)}, "probes": []}
+    scene = {"camera": {}, "objects": [], "render": {"spp": SPP}}
+    return diagnosis.Evidence(entry, scene, names, image, None, 1, at, zt, (names, image, None)), zt
+
+
+def test_too_few_samples_names_the_effective_count():
+    """A quarter of the declared samples (noise twice the prediction): ranked first, the effective
+    spp within two standard errors of SPP / 4; "standard error misreported" does not apply (the
+    render reported no standard error)."""
+    ev, zt = one_pass_evidence(2.0)
+    assert zt.noise == "reference" and not zt.passed
+    found = diagnosis.diagnose(ev)
+    top = first(found)
+    assert top["model"] == "too few samples" and found["likely"] == top["model"], found["models"][:2]
+    within_two_se(top, "effective spp", SPP / 4)
+    assert "standard error misreported" not in [m["model"] for m in found["models"]]
+
+
+def test_too_few_samples_not_fitted_on_own_noise():
+    """With its own noise measured, a noisier render is judged on it: the sample-count model does
+    not apply, the misreported standard error does."""
+    names, ref = reference()
+    ev, zt = evidence(ref, ref, names, noise_scale=3.0)
+    found = diagnosis.diagnose(ev)
+    assert "too few samples" not in [m["model"] for m in found["models"]]
+
+
 def test_checkerboard_stain_explained_by_no_model():
     names, ref = reference()
     yy, xx = np.mgrid[0:H, 0:W]

@@ -16,8 +16,11 @@ The catalogue is data, one module per family (a registry like the probes'):
 - materials.py also: fluorescence dropped (the lone fluorescent sphere's probe without the
   re-radiated light), thin film missing and its thickness fitted (the Airy probe's tiles).
 
-Not in the catalogue yet (issue 34 lists them): dispersion missing, per-steradian vs per-area
-beyond the factor pi, a too-small sample count.
+- materials.py also: dispersion missing (the prism's band positions as one IOR puts them).
+- noise.py also: too few samples (a render of one pass noisier than its declared spp gives).
+
+Not in the catalogue (issue 34 lists it): per-steradian vs per-area beyond the factor pi (it is
+that factor: "emitter radiance x pi").
 
 Each model is a Model: its name, family, the parameters it fits, the evidence it uses
 ("reference": the render's blocks against the reference's, the noise test's own blocks and
@@ -63,7 +66,7 @@ CRITERION = "AIC (chi2 + 2 k)"
 EVIDENCE_CHECKS = {"reference": ("noise test",), "probe:ggx": ("ggx *", "beckmann *"),
                    "reference+ggx": ("noise test", "ggx *", "beckmann *"), "probe:lambert": ("lambert *",),
                    "probe:fresnel": ("brewster *", "reflection *"), "probe:lone": ("lone *",),
-                   "probe:airy": ("airy film *",)}
+                   "probe:airy": ("airy film *",), "probe:prism": ("prism *",)}
 
 
 @dataclass

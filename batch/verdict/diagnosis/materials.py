@@ -285,6 +285,98 @@ def _film_thickness(ev):
     return Fit([float(x[0])], [float(err[0])], chi2, float(r0 @ r0), r0.size, 1, ok)
 
 
+def _prism_setup(ev):
+    """(scene, index of the dispersive dielectric, the positions probe's record, the screen's
+    pixel coordinates along the fan) when the prism's band-position probe was computed, else None."""
+    from ....exporters import dispersion
+    from ..probes import prism
+    rec = next((r for r in ev.entry.get("probes") or [] if r["name"].startswith("prism band positions")
+                and r.get("origin_px") and r.get("measured") is not None), None)
+    if rec is None:
+        return None
+    glass = [i for i, o in enumerate(ev.scene["objects"])
+             if dispersion.is_dispersive((o.get("bsdf") or {}).get("int_ior"))]
+    if not glass:
+        return None
+    h, w = ev.image.shape[:2]
+    gt = prism.expected(ev.scene, w, h, step_nm=DISPERSION_STEP_NM)
+    if gt is None or "error" in gt:
+        return None
+    ys, xs = np.nonzero(gt["mask"])
+    s = (np.stack([xs + 0.5, ys + 0.5], axis=-1) - np.asarray(rec["origin_px"])) @ np.asarray(rec["fan_direction"])
+    return ev.scene, glass[0], rec, gt["mask"], s
+
+
+DISPERSION_STEP_NM = 5.0  # one IOR: every wavelength lands on the same spot, only the colour's weights are summed
+
+
+def _centroids(scene, glass, ior, mask, s, shape):
+    """Each channel's centroid along the fan (the positions probe's coordinate) of the expected
+    image with the dielectric's dispersion replaced by one IOR."""
+    from ..probes import prism
+    sc = copy.deepcopy(scene)
+    sc["objects"][glass]["bsdf"]["int_ior"] = float(ior)
+    gt = prism.expected(sc, shape[1], shape[0], step_nm=DISPERSION_STEP_NM)
+    if gt is None or "error" in gt:
+        return None
+    e = gt["image"][mask]
+    tot = e.sum(axis=0)
+    return np.where(np.abs(tot) > 0, (s[:, None] * e).sum(axis=0) / np.where(np.abs(tot) > 0, tot, 1.0), np.nan)
+
+
+def _dispersion_missing(ev):
+    """The prism's band positions as one IOR would put them (a dielectric rendered without its
+    dispersion: every wavelength refracted alike, one white spot): the IOR fitted to the three
+    channels' measured centroids along the fan (the positions probe's statistic, its standard
+    errors), a coarse scan over the glass's own n(360..830 nm) widened by 0.05, then a bounded
+    scalar search; its standard error from the centroid's slope in n (one parameter, three
+    independent channel centroids: 1 / sqrt(sum (ds/dn / se_c)^2)). Fully explains when the
+    centroids then pass the probe's test (Sidak over the channels, the record's degrees of freedom)."""
+    from scipy import optimize
+
+    from ....exporters import dispersion
+    from .. import stats
+    got = _prism_setup(ev)
+    if got is None:
+        return None
+    scene, glass, rec, mask, s = got
+    m = np.asarray(rec["measured"], dtype=np.float64)
+    se = np.asarray([np.nan if x is None else x for x in rec["standard_error_px"]], dtype=np.float64)
+    e0 = np.asarray(rec["expected"], dtype=np.float64)
+    use = np.isfinite(m) & np.isfinite(se) & (se > 0)
+    if use.sum() < 2:
+        return None
+    shape = ev.image.shape[:2]
+
+    def chi2(n):
+        c = _centroids(scene, glass, n, mask, s, shape)
+        if c is None or not np.all(np.isfinite(c[use])):
+            return np.inf
+        return float(np.sum(((m - c) / se)[use] ** 2))
+    n_wl = dispersion.ior(scene["objects"][glass]["bsdf"]["int_ior"], np.array([360.0, 830.0]))
+    lo, hi = float(n_wl.min()) - 0.05, float(n_wl.max()) + 0.05
+    grid = np.linspace(lo, hi, 21)
+    values = [chi2(n) for n in grid]
+    k = int(np.argmin(values))
+    if not np.isfinite(values[k]):
+        return None
+    a, b = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
+    r = optimize.minimize_scalar(chi2, bounds=(a, b), method="bounded", options={"xatol": 1e-6})
+    n_hat = float(r.x)
+    h = 1e-4
+    c_hi, c_lo = _centroids(scene, glass, n_hat + h, mask, s, shape), _centroids(scene, glass, n_hat - h, mask, s, shape)
+    slope = (c_hi - c_lo) / (2 * h)
+    info = float(np.sum((slope / se)[use] ** 2))
+    err = 1 / np.sqrt(info) if info > 0 else np.inf
+    c = _centroids(scene, glass, n_hat, mask, s, shape)
+    dof = rec.get("dof") or [None] * 3
+    dof = np.asarray([np.inf if d is None else d for d in dof], dtype=np.float64)[use]
+    ok = stats.compare_means(m[use], c[use], se[use], dof=dof)["pass"]
+    chi2_none = float(np.sum(((m - e0) / se)[use] ** 2))
+    return Fit([n_hat], [float(err)], float(r.fun), chi2_none, int(use.sum()), 1, bool(ok),
+               note="the centroids of R, G and B along the fan, one IOR for every wavelength")
+
+
 MODELS = [
     Model("GGX alpha", FAMILY, ("alpha", "indirect"), "reference+ggx",
           "the microfacet roughness is not the declared alpha (or alpha vs alpha squared conventions)",
@@ -296,6 +388,9 @@ MODELS = [
     Model("dielectric IOR", FAMILY, ("ior",), "probe:fresnel",
           "the dielectric's index of refraction is not the declared one (another IOR, or one of another medium)",
           _ior_fit, slow=True),
+    Model("dispersion missing", FAMILY, ("ior",), "probe:prism",
+          "the dielectric rendered with one IOR for every wavelength (no dispersion: the fan collapses to one spot)",
+          _dispersion_missing, slow=True),
     Model("fluorescence dropped", FAMILY, (), "probe:lone",
           "the fluorescent material rendered without its re-radiation (rho L alone, the integral of P L dropped)",
           _fluorescence_dropped),
