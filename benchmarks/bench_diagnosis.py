@@ -1,24 +1,35 @@
 #!/usr/bin/env python3
-"""How often the diagnosis (batch/verdict/diagnosis/) names a planted error first, at two sizes
-(one near the detection limit, one gross) over many seeds, and how often a correct render gets
-any diagnosis (must be never: a passing render is not diagnosed). Writes benchmarks/DIAGNOSIS.md.
+"""How often the diagnosis (batch/verdict/diagnosis/) names a planted error first, for every model
+of its catalogue at two sizes where the model has a size (one near the detection limit, one
+gross; a discrete error has one), over many seeds, and how often a correct render gets any
+diagnosis (must be never: a passing render is not diagnosed). Writes benchmarks/DIAGNOSIS.md.
 
-Each plant is a declared renderer (tests/plant_renderer.py, ``--plant MODEL=VALUE``) written to a
-temporary TOML; each seed one batch run at ``--scale`` and ``--spp`` (the run's own ``detectable``
-is recorded beside each row, so a size below the run's power shows as such, not as a miss).
+Each plant is a declared renderer (tests/plant_renderer.py, ``--plant MODEL=VALUE``, or the
+example renderer's spectral output integrated with another observer), each seed one batch run of
+that renderer on one scene at the scene's reduced settings below, through the whole verdict (the
+run's own ``detectable`` is recorded beside each row, so a size below the run's power shows as
+such, not as a miss). "too few samples" cannot be planted through a declared renderer (only a
+render of one pass of the reference's own backend is judged on the reference's predicted noise):
+its rows render Mitsuba in-process with one pass at a quarter (or half) of the declared samples and
+judge it with the verdict's own noise test and diagnosis (batch/verdict/compare.py z_test).
 
-    .venv/bin/python benchmarks/bench_diagnosis.py [--seeds 20] [--scale 0.25] [--only scale,flip]
+    .venv/bin/python benchmarks/bench_diagnosis.py [--seeds 20] [--workers 2] [--only scale,flip]
 
-Cost: (plants x 2 sizes + 1) x seeds batch runs of one job each; at --scale 0.25 and the spp below,
-about 10-30 s of CPU per run on one core.
+Runs go seed by seed over every cell (each cell has about as many seeds whenever it is stopped);
+each run's result is appended to --results (JSON lines) and a run already there is not repeated,
+so an interrupted benchmark continues where it stopped. The table is written from what is there.
 """
 import argparse
+import concurrent.futures as cf
 import json
+import math
 import os
+import platform
 import statistics
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -26,108 +37,291 @@ ROOT = Path(__file__).resolve().parents[1]
 RUN = ROOT / "batch" / "run.py"
 PLANTER = ROOT / "tests" / "plant_renderer.py"
 TOY = ROOT / "examples" / "your_renderer" / "toy_renderer.py"
+PASSES = 4
 
-# name: (scene, spp, extra renderer arguments or None for the observer plant, expected model,
-#        parameter, [(size label, plant value, planted parameter value)])
-PLANTS = {
-    "scale": ("ggx_copper_50", 256, [], "uniform scale", "scale",
-              [("near limit", "1.004", 1.004), ("gross", "1.03", 1.03)]),
-    "srgb": ("ggx_copper_50", 256, [], "sRGB transfer applied", None, [("gross", "applied", None)]),
-    "flip": ("ggx_copper_50", 256, [], "flipped vertically", None, [("gross", "y", None)]),
-    "alpha": ("ggx_copper_50", 256, [], "GGX alpha", "alpha", [("near limit", "0.202", 0.202), ("gross", "0.22", 0.22)]),
-    "emitter": ("ggx_copper_50", 256, [], "emitter radiance x pi", "factor", [("gross", "pi", 3.141592653589793)]),
-    "polariser": ("polarizing_plane_0", 256, ["--format", "stokes"], "polariser angle", "angle deg",
-                  [("gross", "other", 90.0)]),
-    "stokes_rotate": ("polarizing_spheres", 64, ["--format", "stokes_mono"], "Stokes frame rotated", "angle deg",
-                      [("near limit", "0.5", 0.5), ("gross", "90", 90.0)]),
-    "observer": ("macbeth_chart_D65", 64, None, "observer CIE 1964", None, [("gross", "cie1964", None)]),
-    "stain": ("ggx_copper_50", 256, [], None, None, [("near limit", "0.02", None), ("gross", "0.3", None)]),
+# scene: (scale, spp, renderer format, models declared)
+SCENES = {
+    "ggx_copper_50": (0.25, 256, "rgb", ["spectral"]),
+    "polarizing_plane_0": (0.25, 256, "stokes", ["spectral", "polarization"]),
+    "polarizing_spheres": (0.25, 64, "stokes_mono", ["spectral", "polarization"]),
+    "macbeth_chart_D65": (0.25, 64, "spectral", ["spectral"]),
+    "dispersion_prism": (0.5, 32, "rgb", ["spectral", "dispersion"]),
+    # the example renderer's 5 nm bands (the runner integrates them with the CMF, as the references
+    # are made): Mitsuba's own RGB film is 0.1 % bright, which these scenes' renders resolve
+    "iridescent_sphere_smooth": (0.25, 64, "spectral", ["spectral", "thin_film"]),
+    "fluorescent_sphere_lone": (0.5, 64, "spectral", ["spectral", "fluorescence"]),
 }
 
 
-def declaration(name, plant, value, extra):
-    if extra is None:  # the observer: the example renderer's bands integrated with it by the benchmark
+def corr_factor(a):
+    """The factor by which passes that share a fraction a of one render's noise under-report the
+    standard error of their mean: var of the mean a^2 s^2 + (1-a)^2 s^2 / P, their spread's
+    estimate (1-a)^2 s^2 / P."""
+    return math.sqrt(1 + a * a * PASSES / (1 - a) ** 2)
+
+
+def cells(extra):
+    """(plant key, scene, plant argument or observer, expected model or None (stain: no model), parameter name,
+    size label, planted parameter value)."""
+    c = "ggx_copper_50"
+    spaces = [("Rec.709 read as Rec.2020", "ITU-R BT.2020>sRGB"), ("Rec.2020 written as Rec.709", "sRGB>ITU-R BT.2020"),
+              ("Rec.709 read as ACEScg", "ACEScg>sRGB"), ("ACEScg written as Rec.709", "sRGB>ACEScg"),
+              ("XYZ written as RGB", "sRGB>XYZ"), ("RGB read as XYZ", "XYZ>sRGB")]
+    m = extra["mean"]
+    top = extra["top"]
+    out = [
+        ("scale", c, "scale=1.004", "uniform scale", "scale", "near limit", 1.004),
+        ("scale", c, "scale=1.03", "uniform scale", "scale", "gross", 1.03),
+        ("channel_scale", c, "channel_scale=1.006,1,0.994", "per-channel scale", "scale R", "near limit", 1.006),
+        ("channel_scale", c, "channel_scale=1.03,1,0.97", "per-channel scale", "scale R", "gross", 1.03),
+        ("offset", c, f"offset={0.005 * m:.6g}", "additive offset", "offset R", "near limit", float(f"{0.005 * m:.6g}")),
+        ("offset", c, f"offset={0.05 * m:.6g}", "additive offset", "offset R", "gross", float(f"{0.05 * m:.6g}")),
+        ("srgb", c, "srgb=applied", "sRGB transfer applied", None, "gross", None),
+        ("srgb", c, "srgb=missing", "sRGB transfer missing", None, "gross", None),
+        ("gamma", c, "gamma=1.003", "gamma", "gamma", "near limit", 1.003),
+        ("gamma", c, "gamma=1.8", "gamma", "gamma", "gross", 1.8),
+        *[("space", c, f"space={arg}", f"colour space: {label}", None, "gross", None) for label, arg in spaces],
+        ("bgr", c, "bgr=yes", "channel order BGR", None, "gross", None),
+        ("flip", c, "flip=y", "flipped vertically", None, "gross", None),
+        ("flip", c, "flip=x", "flipped horizontally", None, "gross", None),
+        ("transpose", c, "transpose=yes", "transposed", None, "gross", None),
+        ("shift", c, "shift=0.1,0", "shift", "dx px", "near limit", 0.1 * extra["shift_sign"]),
+        ("shift", c, "shift=1,0", "shift", "dx px", "gross", 1.0 * extra["shift_sign"]),
+        ("zoom", c, "zoom=1.002", "zoom", "zoom", "near limit", 1.002),
+        ("zoom", c, "zoom=1.05", "zoom", "zoom", "gross", 1.05),
+        ("clamp", c, f"clamp={0.8 * top:.6g}", "clamped highlights", "clamp", "near limit", float(f"{0.8 * top:.6g}")),
+        ("clamp", c, f"clamp={0.3 * top:.6g}", "clamped highlights", "clamp", "gross", float(f"{0.3 * top:.6g}")),
+        ("emitter", c, "emitter=pi", "emitter radiance x pi", None, "gross", None),
+        ("illuminant", c, f"scale={extra['illuminant'][1]:.9g}", "illuminant normalised", None,
+         f"gross ({extra['illuminant'][0]})", None),
+        ("stain", c, "stain=0.02", None, None, "near limit", None),
+        ("stain", c, "stain=0.3", None, None, "gross", None),
+        ("correlated", c, "correlated=0.3", "standard error misreported", "factor", "near limit", corr_factor(0.3)),
+        ("correlated", c, "correlated=0.5", "standard error misreported", "factor", "gross", corr_factor(0.5)),
+        ("alpha", c, "alpha=0.202", "GGX alpha", "alpha", "near limit", 0.202),
+        ("alpha", c, "alpha=0.22", "GGX alpha", "alpha", "gross", 0.22),
+        ("beckmann", c, "beckmann=yes", "Beckmann for GGX", None, "gross", None),
+        ("no_k", c, "no_k=yes", "conductor without k", None, "gross", None),
+        ("polariser", "polarizing_plane_0", "polariser=other", "polariser angle", "angle deg", "gross", 90.0),
+        ("ior", "polarizing_plane_0", "ior=1.53", "dielectric IOR", "ior", "near limit", 1.53),
+        ("ior", "polarizing_plane_0", "ior=1.6", "dielectric IOR", "ior", "gross", 1.6),
+        ("stokes_rotate", "polarizing_spheres", "stokes_rotate=0.5", "Stokes frame rotated", "angle deg", "near limit", 0.5),
+        ("stokes_rotate", "polarizing_spheres", "stokes_rotate=90", "Stokes frame rotated", "angle deg", "gross", 90.0),
+        ("s3", "polarizing_spheres", "s3=flip", "S3 sign", None, "gross", None),
+        ("depolarise", "polarizing_spheres", "depolarise=yes", "depolarised", None, "gross", None),
+        ("observer", "macbeth_chart_D65", "observer=cie1964", "observer CIE 1964", None, "gross", None),
+        ("wl_shift", "macbeth_chart_D65", "wl_shift=1", "wavelength shift", "shift nm", "near limit", 1.0),
+        ("wl_shift", "macbeth_chart_D65", "wl_shift=3", "wavelength shift", "shift nm", "gross", 3.0),
+        ("dispersion", "dispersion_prism", "dispersion=none", "dispersion missing", "ior", "gross", extra["n_d"]),
+        ("film", "iridescent_sphere_smooth", "film=0", "thin film missing", None, "gross", None),
+        ("film", "iridescent_sphere_smooth", "film=555", "thin film thickness", "thickness nm", "near limit", 555.0),
+        ("film", "iridescent_sphere_smooth", "film=577.5", "thin film thickness", "thickness nm", "gross", 577.5),
+        ("fluorescence", "fluorescent_sphere_lone", "fluorescence=dropped", "fluorescence dropped", None, "gross", None),
+    ]
+    return out
+
+
+def scene_facts():
+    """What the plant sizes are set from: the reference's mean and brightest value (ggx_copper_50,
+    at the bench's resolution), the illuminant's normalisation, N-BK7's n at the d line."""
+    sys.path.insert(0, str(ROOT))
+    import numpy as np
+    import pkg_bootstrap
+    pkg_bootstrap.package()
+    from spectral_bench.batch import exr
+    from spectral_bench.batch.verdict.diagnosis import spectral
+    from spectral_bench.exporters import dispersion, ir_json
+    names, img, _ = exr.read_image_and_stderr(ROOT / "references" / "ggx_copper_50.exr")
+    rgb = img[..., [names.index(c) for c in "RGB"]]
+    scene = ir_json.load(ROOT / "golden" / "ir" / "ggx_copper_50.json")
+    factors = spectral._illuminant_factors(spectral._main_illuminant(scene))
+    label, factor = next(iter(factors.items()))
+    prism = ir_json.load(ROOT / "golden" / "ir" / "dispersion_prism.json")
+    glass = next(o for o in prism["objects"] if dispersion.is_dispersive((o.get("bsdf") or {}).get("int_ior")))
+    n_d = float(dispersion.ior(glass["bsdf"]["int_ior"], [dispersion.FRAUNHOFER_NM["d"]])[0])
+    # the brightest 4 x 4 block (the bench's 0.25 scale averages 4 x 4 reference pixels)
+    h, w = rgb.shape[:2]
+    small = rgb[: h // 4 * 4, : w // 4 * 4].reshape(h // 4, 4, w // 4, 4, 3).mean(axis=(1, 3))
+    return {"mean": float(rgb[..., 0].mean()), "top": float(small.max()), "illuminant": (label, factor),
+            "n_d": n_d,
+            # measured: the principal point moved by +1 px in x moves the image by -1 px (fitted dx -0.995 +- 0.007)
+            "shift_sign": -1.0}
+
+
+def declaration(scene, plant):
+    scale, spp, fmt, models = SCENES[scene]
+    if plant and plant.startswith("observer="):  # the example renderer's bands integrated with another observer
         cmd = ["{python}", str(TOY), "{scene}", "--out", "{output}", "--spp", "{spp}", "--seed", "{seed}",
                "--format", "spectral"]
-        return {"command": cmd, "reads": "mitsuba", "writes": "spectral", "observer": value, "models": ["spectral"]}
-    cmd = ["{python}", str(PLANTER), "{scene}", "--out", "{output}", "--spp", "{spp}", "--seed", "{seed}", *extra]
+        return {"command": cmd, "reads": "mitsuba", "writes": "spectral", "observer": plant.split("=")[1],
+                "bands": "box", "models": models}
+    cmd = ["{python}", str(PLANTER), "{scene}", "--out", "{output}", "--spp", "{spp}", "--seed", "{seed}",
+           "--format", fmt]
     if plant:
-        cmd += ["--plant", f"{plant}={value}"]
-    models = ["spectral", "polarization"] if extra else ["spectral"]
-    return {"command": cmd, "reads": "mitsuba", "models": models}
+        cmd += ["--plant", plant]
+    out = {"command": cmd, "reads": "mitsuba", "models": models}
+    if fmt == "spectral":
+        out.update(writes="spectral", observer="cie1931", bands="box")
+    return out
 
 
 def toml(name, table):
-    def q(v):
-        return json.dumps(v)
     lines = [f"[renderers.{name}]"]
     for k, v in table.items():
-        lines.append(f"{k} = [{', '.join(q(x) for x in v)}]" if isinstance(v, list) else f"{k} = {q(v)}")
+        lines.append(f"{k} = [{', '.join(json.dumps(x) for x in v)}]" if isinstance(v, list) else f"{k} = {json.dumps(v)}")
     return "\n".join(lines) + "\n"
 
 
-def run_one(tmp, name, table, scene, spp, seed, scale):
-    path = tmp / f"{name}.toml"
-    path.write_text(toml(name, table))
-    out = Path(tempfile.mkdtemp(dir=tmp, prefix=f"{name}_{seed}_")) / "run"  # a fresh folder for every run
+def run_one(tmp, scene, plant, seed):
+    scale, spp, _, _ = SCENES[scene]
+    name = "plant"
+    folder = Path(tempfile.mkdtemp(dir=tmp, prefix="run_"))
+    (folder / "r.toml").write_text(toml(name, declaration(scene, plant)))
+    out = folder / "run"
     t = time.perf_counter()
-    subprocess.run([sys.executable, str(RUN), "--renderers", str(path), "-r", name, "-s", scene, "--scale", str(scale),
-                    "--spp", str(spp), "--seed", str(seed), "-o", str(out)], capture_output=True, text=True,
-                   timeout=3600, cwd=ROOT)
-    runs = json.loads((out / "metrics.json").read_text())["runs"]
-    return runs[0], time.perf_counter() - t
+    p = subprocess.run([sys.executable, str(RUN), "--renderers", str(folder / "r.toml"), "-r", name, "-s", scene,
+                        "--scale", str(scale), "--spp", str(spp), "--seed", str(1000 * seed), "--passes", str(PASSES),
+                        "--flip", "off", "-o", str(out)], capture_output=True, text=True, timeout=3600, cwd=ROOT)
+    wall = time.perf_counter() - t
+    try:
+        run = json.loads((out / "metrics.json").read_text())["runs"][0]
+    except (OSError, ValueError, IndexError, KeyError):
+        return {"error": (p.stderr or p.stdout)[-400:], "wall": wall}
+    diag = run.get("diagnosis") or {}
+    subprocess.run(["rm", "-rf", str(folder)])
+    return {"status": run["status"], "text": diag.get("text"), "likely": diag.get("likely"),
+            "top": (diag.get("models") or [None])[0], "diagnosed": "diagnosis" in run,
+            "detectable": (run.get("detectable") or {}).get("scale"), "wall": wall,
+            "diag_s": diag.get("time_s")}
+
+
+def too_few_samples(seed, fraction):
+    """A one-pass Mitsuba render of ggx_copper_50 at ``fraction`` of the declared spp, judged on the
+    noise the reference predicts for the declared spp (the verdict's noise test), diagnosed."""
+    sys.path.insert(0, str(ROOT))
+    import pkg_bootstrap
+    pkg_bootstrap.package()
+    from spectral_bench.batch import backends, exr
+    from spectral_bench.batch.verdict import compare, diagnosis, judge
+    from spectral_bench.exporters import ir_json
+    name = "ggx_copper_50"
+    scale, spp, _, _ = SCENES[name]
+    scene = ir_json.load(ROOT / "golden" / "ir" / f"{name}.json")
+    rendered = json.loads(json.dumps(scene))
+    rendered["render"]["width"] = round(scene["render"]["width"] * scale)
+    rendered["render"]["height"] = round(scene["render"]["height"] * scale)
+    with tempfile.TemporaryDirectory() as td:
+        b = backends.get("mitsuba", film="cmf")  # the reference's own film: only the sample count differs
+        path = b.export(rendered, Path(td) / "export")
+        mode = b.mode_for(rendered)[0]
+        b.render(path, mode, max(1, round(spp * fraction)), Path(td) / "r.exr", passes=1, seed=7919 * seed + 1)
+        names, img, se = exr.read_image_and_stderr(Path(td) / "r.exr")
+    ref = judge.load_reference(name, scene, None, shape=img.shape, names=names)
+    ref = ref[0] if isinstance(ref, tuple) else ref
+    at = compare.reference_at(ref.mean, ref.stderr, ref.spp, img.shape, ref.provenance.get("passes", 8))
+    zt = compare.z_test(img, at, spp, alpha=0.01, min_samples=compare.min_samples_for(name, compare.MIN_SAMPLES))
+    entry = {"scene": name, "backend": "mitsuba", "mode": mode, "passes": 1, "spp": spp,
+             "test": {"pass": bool(zt.passed)}, "probes": []}
+    ev = diagnosis.Evidence(entry, rendered, names, img, None, 1, at, zt, (names, img, None))
+    found = diagnosis.diagnose(ev) if not zt.passed else {}
+    return {"status": "ok" if zt.passed else "failed", "text": found.get("text"), "likely": found.get("likely"),
+            "top": (found.get("models") or [None])[0], "diagnosed": bool(found), "detectable": None, "wall": None}
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=20)
-    ap.add_argument("--scale", type=float, default=0.25)
+    ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--only", default="")
+    ap.add_argument("--results", default=str(Path(tempfile.gettempdir()) / "bench_diagnosis.jsonl"))
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "DIAGNOSIS.md"))
+    ap.add_argument("--table-only", action="store_true", help="write the table from --results and stop")
     args = ap.parse_args(argv)
     only = [p for p in args.only.split(",") if p]
-    rows = []
-    with tempfile.TemporaryDirectory() as td:
-        tmp = Path(td)
-        cases = [(p, *PLANTS[p]) for p in PLANTS if not only or p in only]
-        # the correct render, on every scene a plant uses
-        for scene, spp, extra in sorted({(c[1], c[2], tuple(c[3]) if c[3] is not None else ()) for c in cases}):
-            diagnosed = 0
+    facts = scene_facts()
+    table = [c for c in cells(facts) if not only or c[0] in only]
+    table += [("correct", s, None, None, None, "-", None) for s in sorted({c[1] for c in table})]
+    few = [("too_few", "ggx_copper_50", f"samples={f}", "too few samples", "effective spp", lab, SCENES["ggx_copper_50"][1] * f)
+           for lab, f in (("near limit", 0.7), ("gross", 0.25))] if not only or "too_few" in only else []
+    results = Path(args.results)
+    done = {}
+    if results.exists():
+        for line in results.read_text().splitlines():
+            r = json.loads(line)
+            done[(r["scene"], r["plant"], r["seed"])] = r
+    lock = threading.Lock()
+
+    def record(scene, plant, seed, res):
+        res.update(scene=scene, plant=plant, seed=seed)
+        with lock:
+            done[(scene, plant, seed)] = res
+            with results.open("a") as f:
+                f.write(json.dumps(res) + "\n")
+            print(f"{scene} {plant or 'correct'} seed {seed}: {res.get('status')}; {res.get('text') or res.get('error', '')}",
+                  flush=True)
+
+    if not args.table_only:
+        with tempfile.TemporaryDirectory() as td, cf.ThreadPoolExecutor(args.workers) as pool:
             for seed in range(args.seeds):
-                run, _ = run_one(tmp, "plant_none", declaration("plant_none", None, None, list(extra)), scene, spp,
-                                 seed, args.scale)
-                diagnosed += "diagnosis" in run
-            rows.append(("correct render", scene, "-", f"{diagnosed}/{args.seeds} diagnosed", "", "", ""))
-        for plant, scene, spp, extra, model, param, sizes in cases:
-            for label, value, planted in sizes:
-                first = within = failed = 0
-                dets, walls = [], []
-                for seed in range(args.seeds):
-                    run, wall = run_one(tmp, f"plant_{plant}", declaration(f"plant_{plant}", plant, value, extra),
-                                        scene, spp, seed, args.scale)
-                    walls.append(wall)
-                    dets.append((run.get("detectable") or {}).get("scale"))
-                    failed += run["status"] == "failed"
-                    diag = run.get("diagnosis") or {}
-                    top = (diag.get("models") or [None])[0]
-                    print(f"{plant}={value} seed {seed}: {run['status']}; {diag.get('text', 'no diagnosis')}", flush=True)
-                    if model is None:
-                        first += run["status"] == "failed" and diag.get("likely") is None
-                    elif top and top["model"] == model:
-                        first += 1
-                        if param is None or abs(top["params"][param][0] - planted) <= 2 * (top["params"][param][1] or 0):
-                            within += 1
-                det = statistics.median([d for d in dets if d is not None]) if any(dets) else None
-                rows.append((f"{plant}={value}", scene, label, f"{failed}/{args.seeds} failed",
-                             f"{first}/{args.seeds}" + (" no model" if model is None else " first"),
-                             f"{within}/{args.seeds}" if model and param else "",
-                             f"{det:.4f}" if det else ""))
+                futures = []
+                for key, scene, plant, *_ in table:
+                    if (scene, plant, seed) not in done:
+                        futures.append(pool.submit(lambda s=scene, p=plant, sd=seed: record(s, p, sd, run_one(Path(td), s, p, sd))))
+                for key, scene, plant, model, param, label, value in few:
+                    if (scene, plant, seed) not in done:
+                        frac = float(plant.split("=")[1])
+                        futures.append(pool.submit(lambda s=scene, p=plant, sd=seed, f=frac: record(s, p, sd, too_few_samples(sd, f))))
+                for f in futures:
+                    f.result()
+    write_table(args, table + few, done)
+
+
+def write_table(args, table, done):
+    rows = []
+    for key, scene, plant, model, param, label, planted in table:
+        got = [r for (s, p, _), r in sorted(done.items(), key=lambda kv: kv[0][2]) if s == scene and p == plant and "status" in r]
+        errors = sum(1 for (s, p, _), r in done.items() if s == scene and p == plant and "error" in r)
+        n = len(got)
+        if not n:
+            continue
+        dets = [r["detectable"] for r in got if r.get("detectable")]
+        det = f"{statistics.median(dets):.4f}" if dets else ""
+        failed = sum(r["status"] == "failed" for r in got)
+        if plant is None:
+            rows.append(("correct render", scene, "-", f"{failed}/{n} failed", f"{sum(r['diagnosed'] for r in got)}/{n} diagnosed",
+                         "", "", det))
+            continue
+        if model is None:
+            first = sum(r["status"] == "failed" and r["likely"] is None for r in got)
+            rows.append((plant, scene, label, f"{failed}/{n}", f"{first}/{n} no model explains it", "", "", det))
+            continue
+        tops = [r for r in got if r["top"] and r["top"]["model"] == model]
+        likely = sum(r["likely"] == model for r in got)
+        within, zs = 0, []
+        for r in tops:
+            if param is None:
+                continue
+            v, se = r["top"]["params"].get(param, [None, None])
+            if v is not None and se:
+                zs.append((v - planted) / se)
+                within += abs(v - planted) <= 2 * se
+        rms = f"{math.sqrt(sum(z * z for z in zs) / len(zs)):.2f}" if zs else ""
+        rows.append((plant, scene, label, f"{failed}/{n}", f"{len(tops)}/{n} first, {likely}/{n} likely",
+                     f"{within}/{len(tops)}" if param else "", rms, det))
     load = os.getloadavg()[0]
     text = ["# Diagnosis: planted errors named first (benchmarks/bench_diagnosis.py)", "",
-            f"{args.seeds} seeds, --scale {args.scale}; load average {load:.1f} on {os.cpu_count()} cores.", "",
-            "| plant | scene | size | failed | ranked first (stain: no model explains it) | within 2 se | median detectable |",
-            "|---|---|---|---|---|---|---|"]
-    text += ["| " + " | ".join(r) + " |" for r in rows]
+            f"Measured {time.strftime('%Y-%m-%d')} on {platform.processor() or platform.machine()}, "
+            f"{os.cpu_count()} cores (load average {load:.1f} when the table was written); "
+            f"{PASSES} passes per render; errors (runs with no record): "
+            f"{sum(1 for r in done.values() if 'error' in r)}.", "",
+            "Columns: the plant (tests/plant_renderer.py's --plant, or the observer the example renderer's bands "
+            "were integrated with), its size, how many renders failed, how many had the planted model ranked "
+            "first and how many were called \"likely: <model>\" (first and fully explaining), of those ranked first "
+            "how many had the parameter within two standard errors of the planted value, the rms of "
+            "(fitted - planted) / se (1 for standard errors that are right), the run's median `detectable` scale.", "",
+            "| plant | scene | size | failed | ranked first / likely (or no model) | within 2 se | rms z | detectable |",
+            "|---|---|---|---|---|---|---|---|"]
+    text += ["| " + " | ".join(str(x) for x in r) + " |" for r in rows]
     Path(args.out).write_text("\n".join(text) + "\n")
     print("\n".join(text))
 

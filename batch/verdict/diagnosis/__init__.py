@@ -46,7 +46,10 @@ block and scale tests, or the probe's Sidak-corrected tests).
 
 Parameters pay through AIC (Akaike 1974): AIC = -2 log L + 2 k, with -2 log L = chi2 for models of
 the mean (and N log s^2 + chi2 / s^2 for the noise model, which scales the variances). Ranking:
-models that fully explain first, fewest parameters first among them, then by chi-square removed
+models that fully explain first, the models of the mean before those of the variances among them
+(a zero-mean error, such as a sub-pixel shift's edges, is also "explained" by larger noise: the
+noise family is the last resort; measured on a 0.1 px shift, bench_diagnosis), fewest parameters
+next, then by chi-square removed
 less 2 k (the AIC difference against "no model" on the same evidence, ``delta_aic``). A failure
 whose best model does not fully explain it is reported as "no model explains it" (the best
 partial model is named beside it).
@@ -61,6 +64,7 @@ MAX_SHOWN = 5  # models kept in metrics.json, best first
 # view): written when a model on the reference evidence fully explains the failure
 CORRECTED = "diagnosis_model.exr"
 CRITERION = "AIC (chi2 + 2 k)"
+NOISE_FAMILY = "noise"  # models of the variances (noise.py): ranked after every model of the mean that fully explains
 # the checks each kind of evidence speaks to: a model is fitted only when one of them failed (a
 # passing check is never diagnosed, and a known render pays only for what failed)
 EVIDENCE_CHECKS = {"reference": ("noise test",), "probe:ggx": ("ggx *", "beckmann *"),
@@ -418,7 +422,10 @@ def diagnose(ev, models=None, quick=False):
 
     def key(mf):
         m, f = mf
-        return (not f.fully, f.k if f.fully else 0, f.aic - f.chi2_none)
+        # among models that fully explain, a model of the mean before one of the variances (the
+        # noise family: "the differences are noise" explains any error without a bias, so it is
+        # the last resort), then the fewest parameters
+        return (not f.fully, f.fully and m.family == NOISE_FAMILY, f.k if f.fully else 0, f.aic - f.chi2_none)
     useful.sort(key=key)
     ranked = [_record(m, f) for m, f in useful[:MAX_SHOWN]]
     best = useful[0] if useful else None

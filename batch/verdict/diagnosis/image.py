@@ -131,8 +131,22 @@ def _transpose(x, ev):
 
 
 def _shift(x, ev):
+    """The reference moved by (dx, dy) pixels (linear interpolation). What enters at the edge the
+    reference never saw: those strips (ceil(|d|) + 1 pixels wide) are taken as the render has them,
+    so they carry no evidence either way (a camera shifted by a pixel shows new content there)."""
     from scipy import ndimage
-    return ndimage.shift(ev.ref_mean, (x[1], x[0], 0.0), order=1, mode="nearest")
+    out = ndimage.shift(ev.ref_mean, (x[1], x[0], 0.0), order=1, mode="nearest")
+    render = ev.picked[1] if ev.picked else None
+    if render is None or np.shape(render) != out.shape:
+        return out
+    for axis, d in ((1, x[0]), (0, x[1])):
+        k = int(np.ceil(abs(d))) + 1 if abs(d) > 1e-6 else 0
+        if not k:
+            continue
+        edge = [slice(None)] * 3
+        edge[axis] = slice(0, k) if d > 0 else slice(-k, None)
+        out[tuple(edge)] = render[tuple(edge)]
+    return out
 
 
 def _zoom(x, ev):
