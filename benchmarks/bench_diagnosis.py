@@ -157,6 +157,8 @@ def declaration(scene, plant):
                 "bands": "box", "models": models}
     cmd = ["{python}", str(PLANTER), "{scene}", "--out", "{output}", "--spp", "{spp}", "--seed", "{seed}",
            "--format", fmt]
+    if fmt == "rgb" and scene != "dispersion_prism":  # the references' CMF film (not under the particle tracer)
+        cmd += ["--film", "cmf"]
     if plant:
         cmd += ["--plant", plant]
     out = {"command": cmd, "reads": "mitsuba", "models": models}

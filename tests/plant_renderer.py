@@ -274,7 +274,26 @@ def render(planted_xml, xml, args, plants, seed):
         return polarise(names, img, xml.parent, (lambda a: 90.0 - a) if other else (lambda a: a))
     if args.format == "spectral":
         return None, toy_renderer.render_bands(str(planted_xml), args.spp, seed)
+    if args.film == "cmf":
+        return list("RGB"), render_cmf(planted_xml, args.spp, seed)
     return list("RGB"), toy_renderer.render_rgb(str(planted_xml), args.spp, seed)
+
+
+def render_cmf(scene_xml, spp, seed):
+    """Linear sRGB through the benchmark's CMF film (the references' own: X, Y, Z against the 1 nm
+    CIE 1931 CMFs, batch/backends/mitsuba/spectral.py): a correct render then differs from the
+    reference by noise alone, where Mitsuba's RGB film is 0.1 % bright."""
+    import mitsuba as mi
+    from spectral_bench.batch.backends.mitsuba import spectral
+    text = spectral.cmf_xml(Path(scene_xml).read_text(), str(scene_xml))
+    tmp = Path(scene_xml).parent / f".cmf_{os.getpid()}.xml"
+    tmp.write_text(text)
+    try:
+        scene = mi.load_file(str(tmp))
+    finally:
+        tmp.unlink()
+    img = np.array(mi.render(scene, spp=spp, seed=seed), dtype=np.float64)
+    return spectral.cmf_to_srgb(img[..., :3])
 
 
 def main(argv=None):
@@ -284,6 +303,8 @@ def main(argv=None):
     ap.add_argument("--spp", type=int, default=16)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--format", choices=("rgb", "spectral", "stokes", "stokes_mono"), default="rgb")
+    ap.add_argument("--film", choices=("mitsuba", "cmf"), default="mitsuba",
+                    help="rgb format: Mitsuba's RGB film, or the CMF film the references are made with")
     ap.add_argument("--plant", type=parse_plant, action="append", default=[])
     ap.add_argument("--version", action="store_true")
     args = ap.parse_args(argv)
