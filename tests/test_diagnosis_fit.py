@@ -108,6 +108,20 @@ def test_srgb_applied_per_pass_beats_gamma():
     assert found["likely"] == "sRGB transfer applied", found["models"][:3]
 
 
+@pytest.mark.parametrize("level", [0.9, 0.6])
+def test_clamp_per_pass_fitted(level):
+    """Each pass cut at a ceiling that the blob's peak (1.5) crosses, with passes noisy enough to
+    straddle it (per-pass sd 0.016): the clamp is ranked first, its value within two standard
+    errors (the model's mean of a cut Gaussian; the plain min(m, c) left such a clamp unexplained)."""
+    names, ref = reference()
+    ev, zt = evidence(None, ref, names, per_pass=lambda p: np.minimum(p, level))
+    assert not zt.passed
+    found = diagnosis.diagnose(ev)
+    top = first(found)
+    assert top["model"] == "clamped highlights" and found["likely"] == top["model"], found["models"][:2]
+    within_two_se(top, "clamp", level)
+
+
 def test_subpixel_shift_fitted():
     from scipy import ndimage
     names, ref = reference()
