@@ -9,23 +9,6 @@ from . import NOISE_FAMILY, Fit, Model
 FAMILY = NOISE_FAMILY
 
 
-def _gaussian(z):
-    """Do the block z, divided by the fitted factor, look like one Gaussian (D'Agostino and Pearson's
-    K^2 test of skewness and kurtosis, scipy.stats.normaltest, at the noise test's alpha)? Noise
-    whose standard error is misreported by one factor does; an error that only some blocks carry
-    (an edge moved by a sub-pixel shift, a stain) gives heavy tails however the variance is scaled,
-    and must not be called noise."""
-    from scipy import stats as sps
-    z = np.asarray(z, dtype=np.float64).ravel()
-    z = z[np.isfinite(z)]
-    if z.size < 20:
-        return True
-    return bool(sps.normaltest(z).pvalue >= ALPHA)
-
-
-ALPHA = 0.01  # the noise test's default alpha (batch/verdict/compare.py)
-
-
 def _unbiased(ev):
     """No bias: the pooled scale test passes on the render's own variances."""
     return ev.ztest.scale is None or bool(ev.ztest.scale["pass"])
@@ -42,8 +25,7 @@ def _stderr_scale(ev):
     s2 = chi2_none / n
     se = float(np.sqrt(s2) / np.sqrt(2 * n))  # se of s from the chi-square's variance 2N
     # no bias: the pooled scale test passes on the render's own variances, and the block test on s^2 times them
-    ok = _unbiased(ev) and ev.passes_noise_test(ev.ref_mean, var_factor=s2) \
-        and _gaussian(ev.ztest.diff / np.sqrt(ev.ztest.var * s2))
+    ok = _unbiased(ev) and ev.passes_noise_test(ev.ref_mean, var_factor=s2)
     return Fit([float(np.sqrt(s2))], [se], float(n), chi2_none, n, 1, ok, minus2logl=float(n * np.log(s2) + n))
 
 
@@ -81,7 +63,7 @@ def _too_few_samples(ev):
     chi2 = float(np.sum(d2 / v))
     # the block and scale tests again on the variances the fit gives (the scale test on the
     # render's under-stated variance fails too: it is re-judged, not required)
-    ok = ev.passes_noise_test(ev.ref_mean, var=v.reshape(zt.var.shape)) and _gaussian(zt.diff.ravel() / np.sqrt(v))
+    ok = ev.passes_noise_test(ev.ref_mean, var=v.reshape(zt.var.shape))
     return Fit([spp / f], [spp * se_f / f ** 2], chi2, ev.chi2_none(), n, 1, ok,
                note=f"declared {spp:g} spp", minus2logl=m2logl(f) - m2logl(1.0) + ev.chi2_none())
 
