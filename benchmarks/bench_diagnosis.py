@@ -15,7 +15,8 @@ judge it with the verdict's own noise test and diagnosis (batch/verdict/compare.
 
     .venv/bin/python benchmarks/bench_diagnosis.py [--seeds 20] [--workers 2] [--only scale,flip]
 
-Runs go seed by seed over every cell (each cell has about as many seeds whenever it is stopped);
+Each worker process calls batch/run.py's main() for its runs (the runner's imports paid once per
+worker). Runs go seed by seed over every cell (each cell has about as many seeds whenever it is stopped);
 each run's result is appended to --results (JSON lines) and a run already there is not repeated,
 so an interrupted benchmark continues where it stopped. The table is written from what is there.
 """
@@ -26,7 +27,7 @@ import math
 import os
 import platform
 import statistics
-import subprocess
+import shutil
 import sys
 import tempfile
 import threading
@@ -178,6 +179,34 @@ def toml(name, table):
     return "\n".join(lines) + "\n"
 
 
+def _batch(argv):
+    """batch/run.py's main(argv) in this (worker) process: the runner's imports (colour-science,
+    scipy: seconds each) paid once per worker, not once per run; its output discarded."""
+    import contextlib
+    import io
+    import logging
+    os.chdir(ROOT)
+    sys.path.insert(0, str(ROOT))
+    import pkg_bootstrap
+    pkg_bootstrap.package()
+    from spectral_bench.batch import run
+    buf = io.StringIO()
+    logger = logging.getLogger("spectral_bench")
+    saved = list(logger.handlers)
+    with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(buf):
+        try:
+            run.main(["batch/run.py", *argv])
+        except SystemExit:
+            pass
+        except Exception as exc:  # noqa: BLE001 - recorded as the run's error
+            buf.write(f"{type(exc).__name__}: {exc}")
+    for handler in logger.handlers:
+        if handler not in saved:
+            handler.close()
+    logger.handlers[:] = saved
+    return buf.getvalue()
+
+
 def run_one(tmp, scene, plant, seed):
     scale, spp, _, _ = SCENES[scene]
     name = "plant"
@@ -185,16 +214,16 @@ def run_one(tmp, scene, plant, seed):
     (folder / "r.toml").write_text(toml(name, declaration(scene, plant)))
     out = folder / "run"
     t = time.perf_counter()
-    p = subprocess.run([sys.executable, str(RUN), "--renderers", str(folder / "r.toml"), "-r", name, "-s", scene,
-                        "--scale", str(scale), "--spp", str(spp), "--seed", str(1000 * seed), "--passes", str(PASSES),
-                        "--flip", "off", "-o", str(out)], capture_output=True, text=True, timeout=3600, cwd=ROOT)
+    argv = ["--renderers", str(folder / "r.toml"), "-r", name, "-s", scene, "--scale", str(scale), "--spp", str(spp),
+            "--seed", str(1000 * seed), "--passes", str(PASSES), "--flip", "off", "-o", str(out)]
+    message = _batch(argv)
     wall = time.perf_counter() - t
     try:
         run = json.loads((out / "metrics.json").read_text())["runs"][0]
     except (OSError, ValueError, IndexError, KeyError):
-        return {"error": (p.stderr or p.stdout)[-400:], "wall": wall}
+        return {"error": message[-400:], "wall": wall}
     diag = run.get("diagnosis") or {}
-    subprocess.run(["rm", "-rf", str(folder)])
+    shutil.rmtree(folder, ignore_errors=True)
     return {"status": run["status"], "text": diag.get("text"), "likely": diag.get("likely"),
             "top": (diag.get("models") or [None])[0], "diagnosed": "diagnosis" in run,
             "detectable": (run.get("detectable") or {}).get("scale"), "wall": wall,
@@ -267,18 +296,24 @@ def main(argv=None):
                   flush=True)
 
     if not args.table_only:
-        with tempfile.TemporaryDirectory() as td, cf.ThreadPoolExecutor(args.workers) as pool:
+        import multiprocessing
+        ctx = multiprocessing.get_context("spawn")
+        with tempfile.TemporaryDirectory() as td, cf.ProcessPoolExecutor(args.workers, mp_context=ctx,
+                                                                          max_tasks_per_child=40) as pool:
             for seed in range(args.seeds):
-                futures = []
+                futures = {}
                 for key, scene, plant, *_ in table:
                     if (scene, plant, seed) not in done:
-                        futures.append(pool.submit(lambda s=scene, p=plant, sd=seed: record(s, p, sd, run_one(Path(td), s, p, sd))))
+                        futures[pool.submit(run_one, Path(td), scene, plant, seed)] = (scene, plant, seed)
                 for key, scene, plant, model, param, label, value in few:
                     if (scene, plant, seed) not in done:
-                        frac = float(plant.split("=")[1])
-                        futures.append(pool.submit(lambda s=scene, p=plant, sd=seed, f=frac: record(s, p, sd, too_few_samples(sd, f))))
-                for f in futures:
-                    f.result()
+                        futures[pool.submit(too_few_samples, seed, float(plant.split("=")[1]))] = (scene, plant, seed)
+                for f in cf.as_completed(futures):
+                    try:
+                        res = f.result()
+                    except Exception as exc:  # noqa: BLE001 - one broken run is recorded, the rest go on
+                        res = {"error": f"{type(exc).__name__}: {exc}"[:400]}
+                    record(*futures[f], res)
     write_table(args, table + few, done)
 
 
