@@ -317,6 +317,9 @@ def main(argv=None):
     write_table(args, table + few, done)
 
 
+FINDINGS = "## Findings"
+
+
 def write_table(args, table, done):
     rows = []
     for key, scene, plant, model, param, label, planted in table:
@@ -363,7 +366,14 @@ def write_table(args, table, done):
             "| plant | scene | size | failed | ranked first / likely (or no model) | within 2 se | rms z | detectable |",
             "|---|---|---|---|---|---|---|---|"]
     text += ["| " + " | ".join(str(x) for x in r) + " |" for r in rows]
-    Path(args.out).write_text("\n".join(text) + "\n")
+    seeds = sorted({k[2] for k in done})
+    text += ["", f"Seeds run: {len(seeds)} (0 to {max(seeds) if seeds else '-'}); a row with fewer renders than that "
+             "lost runs to errors (counted above)."]
+    out = Path(args.out)
+    kept = ""
+    if out.exists() and FINDINGS in out.read_text():  # the findings, written by a person, survive a re-run
+        kept = out.read_text()[out.read_text().index(FINDINGS):]
+    out.write_text("\n".join(text) + "\n" + ("\n" + kept if kept else ""))
     print("\n".join(text))
 
 
