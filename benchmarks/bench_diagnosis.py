@@ -272,10 +272,15 @@ def main(argv=None):
     ap.add_argument("--seeds", type=int, default=20)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--only", default="")
-    ap.add_argument("--results", default=str(Path(tempfile.gettempdir()) / "bench_diagnosis.jsonl"))
+    ap.add_argument("--results", help="JSON lines of finished runs, read and appended (default: one file in the "
+                    "temporary folder per --out)")
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "DIAGNOSIS.md"))
     ap.add_argument("--table-only", action="store_true", help="write the table from --results and stop")
     args = ap.parse_args(argv)
+    if not args.results:
+        import hashlib
+        key = hashlib.sha256(str(Path(args.out).resolve()).encode()).hexdigest()[:12]
+        args.results = str(Path(tempfile.gettempdir()) / f"bench_diagnosis_{key}.jsonl")
     only = [p for p in args.only.split(",") if p]
     facts = scene_facts()
     table = [c for c in cells(facts) if not only or c[0] in only]

@@ -20,7 +20,8 @@ LIBRARIES = {"record.py"}  # imported by the scripts, not run
 NEEDS = {"crosscheck_fluorescence.py": "art"}  # a script that needs another renderer skips without it, naming why
 TABLE = r"(?m)^\|[-|: ]+\|\s*$"  # a Markdown table's separator row
 SMOKE = {  # script -> (arguments that make it run in seconds, what its output must contain: a regex)
-    "bench_diagnosis.py": (["--seeds", "1", "--only", "flip", "--out", "{tmp}/DIAGNOSIS.md"], TABLE),
+    "bench_diagnosis.py": (["--seeds", "1", "--only", "flip", "--workers", "1", "--out", "{tmp}/DIAGNOSIS.md",
+                            "--results", "{tmp}/runs.jsonl"], TABLE),
     "bench_dispersion.py": (["--size", "16", "--spp", "4", "--repeat", "1", "--calls", "1"], TABLE),
     "bench_engines.py": (["--smoke"], TABLE),
     "bench_export_render.py": (["--scale", "0.05", "--repeat", "1"], TABLE),
