@@ -10,10 +10,13 @@ that renderer on one scene at the scene's reduced settings below, through the wh
 run's own ``detectable`` is recorded beside each row, so a size below the run's power shows as
 such, not as a miss). "too few samples" cannot be planted through a declared renderer (only a
 render of one pass of the reference's own backend is judged on the reference's predicted noise):
-its rows render Mitsuba in-process with one pass at a quarter (or half) of the declared samples and
-judge it with the verdict's own noise test and diagnosis (batch/verdict/compare.py z_test).
+its rows render Mitsuba in-process with one pass at a quarter (or 70 %) of the declared samples
+and judge it with the verdict's own noise test and diagnosis (batch/verdict/compare.py z_test).
 
-    .venv/bin/python benchmarks/bench_diagnosis.py [--seeds 20] [--workers 2] [--only scale,flip]
+    .venv/bin/python benchmarks/bench_diagnosis.py [--seeds 20] [--workers 3] [--only scale,flip]
+
+Cost (2026-12-03, 2-core Xeon, three workers): 61 runs per seed, 1220 for 20 seeds in about 75
+minutes.
 
 Each worker process calls batch/run.py's main() for its runs (the runner's imports paid once per
 worker). Runs go seed by seed over every cell (each cell has about as many seeds whenever it is stopped);
