@@ -46,10 +46,12 @@ block and scale tests, or the probe's Sidak-corrected tests).
 
 Parameters pay through AIC (Akaike 1974): AIC = -2 log L + 2 k, with -2 log L = chi2 for models of
 the mean (and N log s^2 + chi2 / s^2 for the noise model, which scales the variances). Ranking:
-models that fully explain first, the models of the mean before those of the variances among them
-and among the rest (a zero-mean error, such as a sub-pixel shift's edges, is also "explained" by
-larger noise, and any gross error by a huge factor on the noise: the noise family is the last
-resort; measured on a 0.1 px shift and a 0.7 clamp, bench_diagnosis), fewest parameters next, then by chi-square removed
+models that fully explain first; in both groups the models of the mean that remove at least
+half of the excess chi-square, then the noise family, then the other models of the mean (a
+zero-mean error, such as a sub-pixel shift's edges, is also "explained" by larger noise, and any
+gross error by a huge factor on the noise; but a mean model that removes little is no better an
+answer: measured on a 0.1 px shift, a 0.7 clamp and too few samples, bench_diagnosis); fewest
+parameters next, then by chi-square removed
 less 2 k (the AIC difference against "no model" on the same evidence, ``delta_aic``). A failure
 whose best model does not fully explain it is reported as "no model explains it" (the best
 partial model is named beside it).
