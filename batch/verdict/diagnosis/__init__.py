@@ -66,8 +66,8 @@ MAX_SHOWN = 5  # models kept in metrics.json, best first
 # view): written when a model on the reference evidence fully explains the failure
 CORRECTED = "diagnosis_model.exr"
 CRITERION = "AIC (chi2 + 2 k)"
-NOISE_FAMILY = "noise"
-SUBSTANTIAL = 0.5  # share of the excess chi-square a model of the mean must remove to rank before the noise family  # models of the variances (noise.py): ranked after every model of the mean that fully explains
+NOISE_FAMILY = "noise"  # models of the variances (noise.py): ranked after the models of the mean that remove SUBSTANTIAL
+SUBSTANTIAL = 0.5  # share of the excess chi-square a model of the mean must remove to rank before the noise family
 # the checks each kind of evidence speaks to: a model is fitted only when one of them failed (a
 # passing check is never diagnosed, and a known render pays only for what failed)
 EVIDENCE_CHECKS = {"reference": ("noise test",), "probe:ggx": ("ggx *", "beckmann *"),

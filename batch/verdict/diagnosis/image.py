@@ -188,8 +188,8 @@ def _zoom_starts(ev):
 def _clamp(x, ev):
     """Each pass cut at c (the renderer clamps what it writes): the mean of the passes is then
     E[min(X, c)] for a pass X ~ N(m, s^2) = m - (m - c) Phi(u) - s phi(u), u = (m - c) / s (the
-    normal's partial expectation), s the pass's standard deviation from the render's own standard
-    error (``_pass_sd``); without it min(m, c). Near c a path tracer's passes straddle the cut,
+    normal's partial expectation), s the pass's standard deviation before the cut (``_pass_sd``);
+    without it min(m, c). Near c a path tracer's passes straddle the cut,
     and the plain min(m, c) misses by as much as the noise (measured: a 0.7 clamp on
     ggx_copper_50 was explained by no model)."""
     from scipy.special import ndtr
