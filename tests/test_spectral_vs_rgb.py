@@ -151,3 +151,65 @@ def test_only_rgb_renderers_are_the_rgb_side(tmp_path):
     jobs, rows = study.jobs([("red_sphere", ir_json.load(EXAMPLE))], made, {"illuminants": None}, tmp_path,
                             job.make, plan.for_run)
     assert sorted((j["backend"], j["extra"]["role"]) for j in jobs) == [("mitsuba", "rgb"), ("mitsuba", "spectral")]
+
+
+def _delta_lit(tmp_path, name, environment):
+    """red_sphere lit by a point light (D65, 20 W/sr-like) above the camera, with or without its
+    sky (``environment``: the sky's scale, None for none), written as an IR JSON scene."""
+    scene = json.loads(EXAMPLE.read_text())
+    scene.update(name=name, lights=[{"name": "bulb", "type": "point", "position": [0.0, -4.0, 2.0],
+                                     "intensity": {"type": "named", "name": "cie_d65", "scale": 20.0}}])
+    scene["render"].update(width=32, height=32)
+    if environment is None:
+        del scene["environment"]
+    else:
+        scene["environment"]["radiance"]["scale"] = environment
+    path = tmp_path / f"{name}.json"
+    path.write_text(json.dumps(scene))
+    return path
+
+
+def _spd_xyz(path):
+    from spectral_bench.exporters import colorimetry
+    wl, v = np.loadtxt(path, ndmin=2).T
+    return np.asarray(colorimetry.spectrum_xyz({"type": "sampled", "wavelengths": list(wl), "values": list(v)}))
+
+
+def test_illuminants_swap_point_lights_too(tmp_path, run_batch_here):
+    """--illuminants A on a scene lit only by a point light, and on one lit by a sky and a point
+    light: every light of the exported scene (the sky's radiance, the bulb's intensity) is A with
+    its own luminance, the point-lit row is a comparison (not "no light spectrum to swap"), and the
+    spectral render shifts to A's colour: with every light A, the lone red sphere's every lit pixel
+    has one chromaticity, the same in both scenes."""
+    from spectral_bench.batch import exr
+    from spectral_bench.exporters import colorimetry
+    a_xy = colorimetry.spectrum_xyz({"type": "named", "name": "cie_a"})
+    a_xy = a_xy[:2] / a_xy.sum()
+    renders = {}
+    for name, env in (("sky_and_bulb", 0.2), ("point_lit", None)):
+        out = tmp_path / name
+        proc = run_batch_here("--study", "spectral-vs-rgb", "-i", _delta_lit(tmp_path, name, env), "-r", "mitsuba",
+                              "--illuminants", "A", "--spp", "64", "-o", out)
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        rows = {r["light"]: r for r in metrics(out).entries("studies")}
+        assert set(rows) == {"own", "A"}, rows
+        assert rows["A"]["status"] in study_words() and "de00" in rows["A"], rows["A"]
+        folder = out / "studies" / "spectral_vs_rgb" / name
+        (own_dir,), (a_dir,) = (list((folder / light).glob("mitsuba-*_spectral")) for light in ("own", "A"))
+        spds = sorted(p.name for p in (a_dir / "export" / "spectra").glob("*.spd") if p.name != "ball_reflectance.spd")
+        assert spds == (["bulb_intensity.spd"] if env is None else ["bulb_intensity.spd", "environment_radiance.spd"])
+        for spd in spds:  # each light: A's chromaticity, its own luminance
+            new, old = _spd_xyz(a_dir / "export" / "spectra" / spd), _spd_xyz(own_dir / "export" / "spectra" / spd)
+            assert new[:2] / new.sum() == pytest.approx(a_xy, abs=2e-3), (name, spd)
+            assert new[1] == pytest.approx(old[1], rel=1e-3), (name, spd)
+        renders[name] = {light: exr.read_image_and_stderr(d / "render.exr")[1][..., :3] for light, d in
+                         (("own", own_dir), ("A", a_dir))}
+    lit = renders["point_lit"]["own"][..., 1] > 0.3 * renders["point_lit"]["own"][..., 1].max()  # well inside the silhouette
+    assert lit.sum() > 20
+
+    def x_of(img):  # the chromaticity x of the lit pixels' sum
+        xyz = colorimetry.srgb_to_xyz(img[lit].sum(axis=0))
+        return float(xyz[0] / xyz.sum())
+    point_own, point_a = x_of(renders["point_lit"]["own"]), x_of(renders["point_lit"]["A"])
+    assert point_a > point_own + 0.03, (point_own, point_a)  # A (2856 K) is far redder than D65
+    assert x_of(renders["sky_and_bulb"]["A"]) == pytest.approx(point_a, abs=0.004), (point_a, point_own)

@@ -63,16 +63,19 @@ def illuminant_spectrum(key):
 
 
 def lights(scene):
-    """[(holder dict, key)] of every light spectrum in ``scene``: the environment's radiance and
-    each emitter's spectrum."""
+    """[(holder dict, key)] of every light spectrum in ``scene``, every kind of light the IR has
+    (exporters/ir.py): the environment's radiance, each object's emitter (area ``radiance``,
+    collimated ``irradiance``) and each delta light of ``lights`` (point and spot ``intensity``,
+    directional ``irradiance``)."""
     out = []
     env = scene.get("environment")
     if isinstance(env, dict) and isinstance(env.get("radiance"), dict):
         out.append((env, "radiance"))
-    for obj in scene.get("objects", []):
-        em = obj.get("emitter")
-        if isinstance(em, dict):
-            out += [(em, k) for k in LIGHT_KEYS if isinstance(em.get(k), dict)]
+    holders = [obj.get("emitter") for obj in scene.get("objects") or [] if isinstance(obj, dict)]
+    holders += list(scene.get("lights") or [])
+    for holder in holders:
+        if isinstance(holder, dict):
+            out += [(holder, k) for k in LIGHT_KEYS if isinstance(holder.get(k), dict)]
     return out
 
 
@@ -95,7 +98,10 @@ def under(scene, key):
 
 
 def white_of(scene):
-    """XYZ (Y = 1) of the scene's light: the environment's, else the brightest emitter's."""
+    """XYZ (Y = 1) of the scene's light: the environment's, else the brightest (greatest Y) of its
+    emitters and delta lights (their units differ, radiance against intensity, but after a swap
+    every light has one chromaticity: the choice matters only among a scene's own lights); D65
+    when the scene has no light."""
     found = lights(scene)
     if not found:
         return np.asarray(colorimetry.spectrum_xyz({"type": "named", "name": "cie_d65"}), float) / 0.989
