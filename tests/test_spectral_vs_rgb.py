@@ -213,3 +213,30 @@ def test_illuminants_swap_point_lights_too(tmp_path, run_batch_here):
     point_own, point_a = x_of(renders["point_lit"]["own"]), x_of(renders["point_lit"]["A"])
     assert point_a > point_own + 0.03, (point_own, point_a)  # A (2856 K) is far redder than D65
     assert x_of(renders["sky_and_bulb"]["A"]) == pytest.approx(point_a, abs=0.004), (point_a, point_own)
+
+
+def test_a_nan_pixel_is_counted_and_said_never_a_verdict(tmp_path, run_batch_here):
+    """One NaN pixel in the RGB render of a finished study (planted in its real EXR, the run then
+    finished again with --resume, which compares the kept renders): the row is failed, saying how
+    many pixels of which render are not finite, with no dE00 and no verdict ("dE00 p95 nan")."""
+    import OpenEXR
+    out = tmp_path / "out"
+    proc = run_batch_here("--study", "spectral-vs-rgb", "-i", EXAMPLE, "-r", "mitsuba", "--spp", "16", "-o", out)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    (row,) = metrics(out).entries("studies")
+    assert row["status"] in study_words()
+    exr_path, = (out / "studies" / "spectral_vs_rgb" / "red_sphere" / "own").glob("mitsuba-*_rgb/render.exr")
+    with OpenEXR.File(str(exr_path), separate_channels=True) as f:
+        header, channels = dict(f.header()), {n: np.array(c.pixels) for n, c in f.channels().items()}
+    channels["R"][32, 32] = np.nan
+    OpenEXR.File(header, channels).write(str(exr_path))
+    proc = run_batch_here("--resume", out)
+    assert proc.returncode == 1, proc.stderr[-3000:]  # a failed row: the run is not clean
+    (row,) = metrics(out).entries("studies")
+    assert row["status"] == "failed" and "de00" not in row and "verdict" not in row, row
+    assert row["non_finite"]["rgb"] == {"pixels": 1, "nan": 1, "inf": 0, "of": 64 * 64}, row
+    assert row["non_finite"]["spectral"]["pixels"] == 0
+    assert "1 of 4096 pixels of the RGB render are not finite (NaN in 1, Inf in 0)" in row["reason"], row
+    summary = (out / "summary.md").read_text()
+    assert "p95 nan" not in summary and "| nan " not in summary, summary
+    assert "1 of 4096 pixels of the RGB render are not finite" in summary

@@ -20,7 +20,9 @@ CIEDE2000 difference; ``--visible-de00``); "differs below visibility" when beyon
 it; "too noisy to tell" when the difference reaches it but is not established beyond noise, or
 noise alone could reach it (render more samples); "no visible difference" otherwise. A render that fails is ``failed``, and a route that cannot
 render the scene (an RGB variant for a polarised, fluorescent, dispersive or thin-film scene) is
-``unsupported``, as everywhere else.
+``unsupported``, as everywhere else. A pair with a pixel that is not finite (NaN or Inf) in either
+render gets no verdict: it is ``failed``, its reason saying how many pixels of which render (a NaN
+has no colour; folded into percentiles it would read as "dE00 p95 nan").
 """
 import copy
 from pathlib import Path
@@ -187,14 +189,33 @@ def map_block(spp, passes):
     return max(1, int(np.ceil(np.sqrt(MAP_SAMPLES / max(spp, 1)))))
 
 
+def non_finite(mean, se):
+    """{pixels, nan, inf, of}: how many pixels of a (mean, standard error) render have a
+    non-finite value in any channel of either, how many of those a NaN and an Inf, of how many."""
+    mean = np.asarray(mean, float)
+    both = mean if se is None else np.concatenate([mean, np.asarray(se, float)], axis=-1)
+    nan, inf = np.isnan(both).any(axis=-1), np.isinf(both).any(axis=-1)
+    return {"pixels": int((nan | inf).sum()), "nan": int(nan.sum()), "inf": int(inf.sum()), "of": int(nan.size)}
+
+
 def compare(scene, spectral, rgb, spp, passes=PASSES, visible=VISIBLE_DE00):
     """The comparison of one pair: ``spectral`` and ``rgb`` are (mean, stderr) linear sRGB images
     of the same size, ``spp`` samples per pixel each. Returns (row fields, dE00 map at full
     resolution). Beyond noise: the noise test's blocks (batch/verdict/compare.py); how much and
-    where: blocks of ``map_block`` pixels."""
+    where: blocks of ``map_block`` pixels. A pixel that is not finite (NaN or Inf, in its mean or
+    standard error, in either render) is counted and said, never compared: the row is ``failed``
+    with ``non_finite`` (per render: pixels, nan, inf, of) and no map (None)."""
     from ..verdict import compare as cmp
     s_mean, s_se = (np.asarray(x, float)[..., :3] for x in spectral)
     r_mean, r_se = (np.asarray(x, float)[..., :3] for x in rgb)
+    bad = {"spectral": non_finite(s_mean, s_se), "rgb": non_finite(r_mean, r_se)}
+    if any(b["pixels"] for b in bad.values()):  # a NaN or Inf has no colour: no verdict, the pixels said
+        said = "; ".join(f"{b['pixels']} of {b['of']} pixels of the {role} render are not finite "
+                         f"(NaN in {b['nan']}, Inf in {b['inf']})" for role, b in zip(("spectral", "RGB"), bad.values())
+                         if b["pixels"])
+        return {"status": "failed", "non_finite": bad,
+                "reason": f"no verdict: {said}; a non-finite pixel has no colour to compare (render again, "
+                          "or find what makes the renderer write NaN or Inf)"}, None
     ref = cmp.reference_at(s_mean, s_se, spp, s_mean.shape, ref_passes=passes)
     test = cmp.z_test(r_mean, ref, spp, own_var_of_mean=r_se ** 2, own_passes=passes, alpha=ALPHA, scale_test=False)
     b = map_block(spp, passes)
@@ -252,6 +273,9 @@ def finish(results, out, visible=VISIBLE_DE00):
                 rows.append(row)
                 continue
             row.update(fields)
+            if dmap is None:  # no verdict (non-finite pixels): nothing to show beside the reason
+                rows.append(row)
+                continue
             folder = out / FOLDER / name / light
             row["images"] = write_images(folder, job["backend"], s_img, r_img, dmap, fields, out)
             row["time_s"] = {"spectral": spectral[1].get("time_s"), "rgb": record.get("time_s")}
