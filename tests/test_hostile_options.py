@@ -98,6 +98,35 @@ def test_a_bad_known_file_is_named(tmp_path, run_batch_here):
         assert proc.returncode == 2 and str(path) in proc.stderr and "Traceback" not in proc.stderr, proc.stderr[-2000:]
 
 
+KNOWN_ENTRY = {"id": '"dim"', "backend": '"mitsuba"', "checks": '["noise test"]', "evidence": '"measured"',
+               "explanation": '"explained"', "date": '"2026-12-04"', "scale": "0.99", "scale_se": "0.001"}
+
+
+@pytest.mark.parametrize("field, value", [
+    ("scale", "nan"), ("scale", "0"), ("scale", "-1.0"), ("scale", "inf"), ("scale", "true"), ("scale", '"1.0"'),
+    ("scale_se", "-0.01"), ("scale_se", "nan"), ("scale_se", "1.5"), ("observer", '"nosuch"'),
+    ("checks", '"noise test"'), ("checks", "[]"), ("scenes", "[1]"), ("backend", '""'),
+])
+def test_a_known_deviation_with_an_implausible_parameter_is_named(tmp_path, run_batch_here, field, value):
+    """--known FILE whose one entry has a parameter no renderer's deviation can have (a factor that
+    is not finite or not positive, an uncertainty not below it, a pattern that is not a list of
+    strings): exit 2 naming the file, the entry and the field, before anything runs."""
+    entry = dict(KNOWN_ENTRY, **{field: value})
+    path = tmp_path / "known.toml"
+    path.write_text("[[deviation]]\n" + "".join(f"{k} = {v}\n" for k, v in entry.items()))  # TOML values as written
+    proc = run_batch_here("-i", GOOD, "--export-only", "--format", "json", "--known", path, "-o", tmp_path / "o")
+    assert proc.returncode == 2, (path.read_text(), proc.stderr[-2000:])
+    assert f"{path}: deviation 'dim', field {field}:" in proc.stderr and "Traceback" not in proc.stderr, proc.stderr[-2000:]
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_plausible_known_deviation_is_taken(tmp_path, run_batch_here):
+    path = tmp_path / "known.toml"
+    path.write_text("[[deviation]]\n" + "".join(f"{k} = {v}\n" for k, v in KNOWN_ENTRY.items()))
+    proc = run_batch_here("-i", GOOD, "--export-only", "--format", "json", "--known", path, "-o", tmp_path / "o")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+
+
 def test_an_output_folder_that_cannot_be_written_is_named(tmp_path, run_batch_here):
     """In this process, as the test above."""
     blocker = tmp_path / "a_file"

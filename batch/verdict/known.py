@@ -20,7 +20,9 @@ check is re-judged under the model:
 
 so a deviation that grows, shrinks or changes form is a failure, not a known one.
 """
+import datetime
 import fnmatch
+import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -70,21 +72,68 @@ def load(path=None):
     except tomllib.TOMLDecodeError as exc:
         raise KnownDeviationsError(f"{path}: {exc}") from exc
     out = []
-    for k, entry in enumerate(data.get("deviation", [])):
+    entries = data.get("deviation", [])
+    if not isinstance(entries, list):
+        raise KnownDeviationsError(f"{path}: deviation must be an array of tables ([[deviation]]), not {entries!r}")
+    for k, entry in enumerate(entries):
+        if not isinstance(entry, dict):
+            raise KnownDeviationsError(f"{path}: deviation #{k + 1} must be a table ([[deviation]]), not {entry!r}")
         missing = [f for f in REQUIRED if f not in entry]
         if missing:
-            raise KnownDeviationsError(f"{path}: deviation {entry.get('id', k)} lacks {', '.join(missing)}")
+            raise KnownDeviationsError(f"{path}: deviation {_label(entry.get('id'), k)} lacks {', '.join(missing)}")
         unknown = set(entry) - set(Deviation.__dataclass_fields__)
         if unknown:
-            raise KnownDeviationsError(f"{path}: deviation {entry['id']} has unknown fields {sorted(unknown)}")
-        dev = Deviation(**entry)
-        if dev.observer is not None:
-            from ...exporters import colorimetry
-            if dev.observer not in colorimetry.OBSERVERS:
-                raise KnownDeviationsError(f"{path}: deviation {dev.id}: unknown observer {dev.observer!r} "
-                                           f"(known: {', '.join(colorimetry.OBSERVERS)})")
-        out.append(dev)
+            raise KnownDeviationsError(f"{path}: deviation {_label(entry['id'], k)} has unknown fields {sorted(unknown)}")
+        problem = _problem(entry)
+        if problem:
+            field_name, why = problem
+            raise KnownDeviationsError(f"{path}: deviation {_label(entry.get('id'), k)}, field {field_name}: {why}")
+        out.append(Deviation(**entry))
     return out
+
+
+def _label(dev_id, k):
+    """How an entry is named in a message: its id (shown as written), else its place in the file."""
+    return repr(dev_id) if isinstance(dev_id, str) and dev_id.strip() else f"#{k + 1} (no usable id)"
+
+
+def _number(value):
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _problem(entry):
+    """(field, why) of the first field of a deviation entry that is not as the model needs it, or
+    None. The model's parameters are a factor on the expected value and its uncertainty: ``scale``
+    finite and > 0 (0 or a negative factor is no renderer's light, NaN compares false with
+    everything), ``scale_se`` finite, >= 0 and below ``scale`` (an uncertainty as large as the
+    factor admits a black render: the model would explain anything); ``observer`` one of
+    exporters/colorimetry.py's; the texts non-empty strings; the patterns lists of strings (a bare
+    string would be matched character by character)."""
+    for name in ("id", "backend", "evidence", "explanation"):
+        if not isinstance(entry[name], str) or not entry[name].strip():
+            return name, f"must be a non-empty string, not {entry[name]!r}"
+    if not isinstance(entry["date"], (str, datetime.date)) or not str(entry["date"]).strip():
+        return "date", f"must be a date (\"2026-11-22\"), not {entry['date']!r}"
+    for name in ("checks", "scenes", "modes", "versions", "films"):
+        if name in entry:
+            value = entry[name]
+            if not isinstance(value, list) or not value or not all(isinstance(p, str) for p in value):
+                return name, f"must be a non-empty list of patterns (strings), not {value!r}"
+    scale = entry.get("scale", 1.0)
+    if not _number(scale) or not math.isfinite(scale) or scale <= 0:
+        return "scale", f"must be a finite number > 0 (the renderer's value over the expected one), not {scale!r}"
+    scale_se = entry.get("scale_se", 0.0)
+    if not _number(scale_se) or not math.isfinite(scale_se) or scale_se < 0:
+        return "scale_se", f"must be a finite number >= 0 (the uncertainty of scale), not {scale_se!r}"
+    if scale_se >= scale:
+        return "scale_se", (f"{scale_se!r} is not below scale {scale!r}: a factor uncertain by as much as itself "
+                            "admits a black render, and would explain any deviation")
+    observer = entry.get("observer")
+    if observer is not None:
+        from ...exporters import colorimetry
+        if not isinstance(observer, str) or observer not in colorimetry.OBSERVERS:
+            return "observer", f"unknown observer {observer!r} (known: {', '.join(colorimetry.OBSERVERS)})"
+    return None
 
 
 def applicable(deviations, entry):
