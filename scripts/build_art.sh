@@ -22,13 +22,21 @@ REPO=$(cd "$(dirname "$0")/.." && pwd)
 say() { echo "build_art: $*" >&2; }
 die() { local code=$1; shift; say "error: $*"; exit "$code"; }
 
-[ $# -ge 1 ] && [ $# -le 2 ] || die 2 "usage: scripts/build_art.sh SRC [PREFIX]  (SRC: ART's source tarball or folder)"
+USAGE="usage: scripts/build_art.sh SRC [PREFIX]  (SRC: ART's source tarball or folder)"
+[ $# -ge 1 ] && [ $# -le 2 ] || die 2 "$USAGE"
 SRC=$1
 PREFIX=${2:-$REPO/.art}
+# names are data: a path beginning with '-' that exists is a path (every command below gets it after
+# --); one that does not exist is an option this script does not take (a usage error, exit 2)
+for arg in "$SRC" "${2:-}"; do
+  case $arg in
+    -*) [ -e "$arg" ] || die 2 "'$arg' is not an option of this script, and no such file ($USAGE; a file whose name begins with '-': ./$arg)";;
+  esac
+done
 [ -e "$SRC" ] || die 2 "ART source '$SRC' does not exist (give the path of ART's source tarball or folder; this script never downloads it)"
-SRC=$(cd "$(dirname "$SRC")" && pwd -P)/$(basename "$SRC")
-mkdir -p "$PREFIX" || die 2 "cannot create PREFIX '$PREFIX'"
-PREFIX=$(cd "$PREFIX" && pwd -P)
+SRC=$(cd -- "$(dirname -- "$SRC")" && pwd -P)/$(basename -- "$SRC")
+mkdir -p -- "$PREFIX" || die 2 "cannot create PREFIX '$PREFIX'"
+PREFIX=$(cd -- "$PREFIX" && pwd -P)
 
 # ---- the source: a folder is used in place; a tarball is unpacked once into PREFIX/.build/src
 is_art_tree() {  # $1: a folder; true when it is ART's source top level
@@ -50,14 +58,16 @@ if [ -d "$SRC" ]; then
   TOP=$(art_top "$SRC") || die 2 "'$SRC' is not ART's source: no CMakeLists.txt with project(ART) beside Source/ and ART_Resources/"
   STAMP="dir:$TOP"
 else
-  SUM=$(sha256sum "$SRC" | cut -d' ' -f1) || die 2 "cannot read '$SRC'"
+  SUM=$(sha256sum -- "$SRC" | cut -d' ' -f1) || die 2 "cannot read '$SRC'"
   STAMP="tar:$SUM"
   if [ "$(cat "$BUILD/source.stamp" 2>/dev/null)" = "$STAMP" ] && TOP=$(art_top "$BUILD/src"); then
     say "source already unpacked ($BUILD/src)"
   else
     rm -rf "$BUILD/src.new" && mkdir -p "$BUILD/src.new"
-    tar -xf "$SRC" -C "$BUILD/src.new" 2>"$BUILD/tar.log" \
-      || die 2 "'$SRC' is not a readable tarball ($(head -c 300 "$BUILD/tar.log" | tr '\n' ' '))"
+    # the tarball is anyone's: as root, tar would keep its owners (any uid) and its modes (setuid
+    # bits); the files are ours, with the umask's permissions
+    tar --no-same-owner --no-same-permissions -xf "$SRC" -C "$BUILD/src.new" 2>"$BUILD/tar.log" \
+      || { rm -rf "$BUILD/src.new"; die 2 "'$SRC' is not a readable tarball ($(head -c 300 "$BUILD/tar.log" | tr '\n' ' '))"; }
     art_top "$BUILD/src.new" >/dev/null || { rm -rf "$BUILD/src.new"; die 2 "'$SRC' does not hold ART's source: no CMakeLists.txt with project(ART) beside Source/ and ART_Resources/"; }
     # a new source: start the build from scratch so nothing of an older tree survives
     rm -rf "$BUILD/src" "$BUILD/cmake" "$BUILD/source.stamp"

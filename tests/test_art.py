@@ -10,6 +10,7 @@ reduced settings (a quarter of the resolution, 32 spp, 2 passes: ART costs about
 time) and one run with a planted error (every illuminant of the .arm 1.03 times too bright, the
 writer's test hook); each judged run asserts its own power (``detectable``) below that 3 %."""
 import copy
+import io
 import json
 import os
 import re
@@ -166,6 +167,71 @@ def test_build_art_refuses_a_missing_or_wrong_source_naming_it(tmp_path):
         assert words in proc.stderr and str(src.name) in proc.stderr, (src, proc.stderr)
         assert not (tmp_path / "prefix" / "bin").exists()
     assert _build_art().returncode == 2 and "usage" in _build_art().stderr
+
+
+def _not_art_tarball(path):
+    with tarfile.open(path, "w:gz") as t:
+        info = tarfile.TarInfo("other/CMakeLists.txt")
+        data = b"project (NOTART)\n"
+        info.size = len(data)
+        t.addfile(info, io.BytesIO(data))
+    return path
+
+
+def test_build_art_a_name_beginning_with_a_dash_is_data_and_a_failed_unpack_leaves_nothing(tmp_path):
+    """SRC beginning with '-': a file of that name is a source like any (here not ART's: exit 2
+    naming it), a name that is no file is an option the script does not take (exit 2, usage), and
+    so is such a PREFIX; a tarball tar cannot read leaves no half-unpacked PREFIX/.build/src.new."""
+    _not_art_tarball(tmp_path / "-other.tar.gz")
+    prefix = tmp_path / "prefix"
+    proc = subprocess.run(["bash", str(BUILD_ART), "-other.tar.gz", prefix], capture_output=True, text=True,
+                          timeout=120, cwd=tmp_path)
+    assert proc.returncode == 2 and "does not hold ART's source" in proc.stderr and "-other.tar.gz" in proc.stderr, proc.stderr
+    for args, named in ((["--help"], "--help"), (["-x", prefix], "-x"), ([tmp_path / "-other.tar.gz", "--prefix"], "--prefix")):
+        proc = _build_art(*args)
+        assert proc.returncode == 2 and "usage" in proc.stderr and f"'{named}' is not an option" in proc.stderr, (args, proc.stderr)
+    assert not (tmp_path / "--prefix").exists()
+    whole = (tmp_path / "-other.tar.gz").read_bytes()
+    (tmp_path / "cut.tar.gz").write_bytes(whole[: len(whole) // 2])
+    proc = _build_art(tmp_path / "cut.tar.gz", prefix)
+    assert proc.returncode == 2 and "not a readable tarball" in proc.stderr, proc.stderr
+    assert not (prefix / ".build" / "src.new").exists(), sorted(p.name for p in (prefix / ".build").iterdir())
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="only root's tar keeps a tarball's owners and setuid bits")
+def test_build_art_unpacks_a_tarball_as_its_own_files_not_the_tarballs_owners(tmp_path):
+    """As root, a source tarball whose files belong to uid 12345 with setuid and setgid bits
+    unpacks as root's files without them. The script then stops where a machine without dpkg and
+    cmake stops it (exit 3, naming cmake), leaving the unpacked source to look at: PATH holds only
+    the tools it needs up to there."""
+    src = tmp_path / "ART-src.tar"
+    with tarfile.open(src, "w") as t:
+        def add(name, data=None, mode=0o644):
+            info = tarfile.TarInfo(name)
+            info.uid = info.gid = 12345
+            info.uname = info.gname = "stranger"
+            if data is None:
+                info.type, info.mode = tarfile.DIRTYPE, 0o755
+                t.addfile(info)
+            else:
+                info.mode, info.size = mode, len(data)
+                t.addfile(info, io.BytesIO(data))
+        for folder in ("ART-src", "ART-src/Source", "ART-src/ART_Resources"):
+            add(folder)
+        add("ART-src/CMakeLists.txt", b"project (ART)\n")
+        add("ART-src/Source/tool", b"#!/bin/sh\n", mode=0o6755)
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    for tool in ("dirname", "basename", "mkdir", "sha256sum", "cut", "cat", "rm", "tar", "head", "tr", "grep", "mv"):
+        (bin_dir / tool).symlink_to(shutil.which(tool))
+    proc = subprocess.run([shutil.which("bash"), str(BUILD_ART), src, tmp_path / "prefix"], capture_output=True,
+                          text=True, timeout=120, env={"PATH": str(bin_dir)})
+    assert proc.returncode == 3 and "'cmake' is missing" in proc.stderr, proc.stderr
+    unpacked = tmp_path / "prefix" / ".build" / "src" / "ART-src"
+    for path in (unpacked, unpacked / "Source", unpacked / "Source" / "tool", unpacked / "CMakeLists.txt"):
+        st = path.lstat()
+        assert (st.st_uid, st.st_gid) == (0, 0), (path, st.st_uid, st.st_gid)
+        assert not st.st_mode & 0o7000, (path, oct(st.st_mode))
 
 
 @pytest.mark.skipif(not (art_backend.built_art() and art_backend.ENV_FILE.is_file()),
