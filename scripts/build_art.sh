@@ -15,6 +15,10 @@
 # ART_RESOURCE_PATH, ART_LIBRARY_PATH, LC_NUMERIC=C, ART_VIEWER=true). A second run over a
 # finished build of the same source only checks it (seconds).
 #
+# SRC and PREFIX are paths, whatever their names: one beginning with '-' that exists is a path; one
+# that does not is taken for an option, which this script has none of (exit 2). A tarball unpacks as
+# the user's files (never its owners or setuid bits, as root too); a failed unpack leaves nothing.
+#
 # Exit codes: 0 built (or already built); 2 usage or source error (missing, not ART, corrupt);
 # 3 packages missing and not root (or apt-get failed); 4 configure/build/install failed.
 set -euo pipefail
