@@ -9,6 +9,7 @@ import html as html_text
 import json
 import re
 import zlib
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -174,3 +175,39 @@ def test_hostile_band_record_is_text_and_links_nothing_outside(run, tmp_path):
         assert "&lt;img src=x onerror=alert(1)&gt;" in plots and "&lt;img src=x onerror=alert(1)&gt;" in page
         assert plots.count("<svg class='spectrum") == len(PATCHES) - 1  # the region with no measured list is left out
         assert ("spectral_preview.js' data-plots" in page) == linked and "passwd" not in page, preview
+
+
+def test_a_regenerated_report_rewrites_the_data_files_its_page_loads(run, tmp_path):
+    """The run folder copied with its times (a report made again elsewhere, later): its view.js and
+    spectral_preview.js are newer than their EXRs, but one holds a foreign script and the render
+    EXR was replaced (given an older time) since the other was written. Writing the report again
+    writes both from the EXRs as they are: a data file is a script the page runs."""
+    import os
+    import shutil
+    from spectral_bench.batch import exr
+    from spectral_bench.batch.report import html
+    out = tmp_path / "copy"
+    shutil.copytree(run[0], out)  # copy2: the times travel with the files
+    job = out / Path(*run[1].relative_to(run[0]).parts)
+    (job / "spectral_preview.js").write_text('alert("not from this run");\n')
+    names, img, se = exr.read_image_and_stderr(job / "render.exr")
+    exr.write(job / "render.exr", img[..., :3] * 2.0 + 0.25)
+    old = (job / "view.js").stat().st_mtime - 3600
+    os.utime(job / "render.exr", (old, old))
+    assert (job / "view.js").stat().st_mtime > (job / "render.exr").stat().st_mtime
+    assert (job / "spectral_preview.js").stat().st_mtime > (job / "spectral_preview.exr").stat().st_mtime
+    html.write(out)
+    assert b"not from this run" not in (job / "spectral_preview.js").read_bytes()
+    cube = spectral_exr_cube(job / "spectral_preview.exr")
+    w, h, layers = _decode_data_js(job / "spectral_preview.js")
+    for i in range(cube.shape[2]):
+        np.testing.assert_array_equal(layers["bands"][str(i)], cube[..., i])
+    w, h, layers = _decode_data_js(job / "view.js")
+    now = exr.read_rgb(job / "render.exr")
+    for k, c in enumerate("RGB"):
+        np.testing.assert_allclose(layers["render"][c], now[..., k], rtol=1e-3, atol=1e-6)
+
+
+def spectral_exr_cube(path):
+    from spectral_bench.batch import spectral_exr
+    return spectral_exr.read(path).stokes[0].astype(np.float32)

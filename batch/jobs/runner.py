@@ -348,9 +348,8 @@ class Run:
     def page_data(self, entry):
         """The report's data files of a finished render (its view.js, the scene's reference_WxH.js),
         written now, while the next jobs render, instead of all after the last one: report.html's
-        writer at the end finds them fresh (batch/report/html.py ``_job_data`` and
-        ``_reference_data``: written when missing or older than their EXRs), so the page is the
-        same. A failure here is left to that writer."""
+        writer at the end keeps them (batch/report/html.py ``_fresh``: a data file this process wrote
+        from EXRs that have not changed since), so the page is the same. A failure here is left to that writer."""
         try:
             report._viewer(self.out, entry)
         except Exception:  # noqa: BLE001 - only a head start for the report

@@ -8,7 +8,8 @@ moved or zipped.
 
 The viewer's floats travel as script files beside the images (``view.js`` in a render's folder,
 ``reference_WxH.js`` beside the scene's shared reference), written here from the EXRs when the
-page is made (and kept while newer than them): half floats (11 significant bits; the standard
+page is made (always: one is kept only where this process wrote it from the EXRs as they still are,
+``_fresh``; a data file is a script the page runs, and a run folder is anyone's): half floats (11 significant bits; the standard
 error rounded to 5), deflated, as bytes in a string the page loads with charset x-user-defined
 (``_js_bytes``), so that the page works from file:// where fetch() does not.
 
@@ -165,12 +166,40 @@ def _write_atomically(path, data):
     os.replace(tmp, path)
 
 
+# The data files this process wrote: {path: (its sources' stat, its own)}. A data file is a script the
+# page runs, so one is kept only where this very process wrote it from the sources as they still are
+# (the runner writes them while later jobs render, batch/jobs/runner.py page_data, and the page at the
+# end keeps them); any other, however new (from another run folder, copied with its times, edited,
+# or older sources given newer times), is written again from its EXRs.
+_WRITTEN = {}
+
+
+def _stat_key(path):
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    return st.st_ino, st.st_dev, st.st_size, st.st_mtime_ns, st.st_ctime_ns
+
+
+def _sources_key(sources):
+    return tuple((str(s), _stat_key(s)) for s in sources)
+
+
 def _fresh(target, sources):
-    return target.is_file() and all(target.stat().st_mtime >= s.stat().st_mtime for s in sources if s.is_file())
+    """Whether ``target`` is as this process wrote it from ``sources`` as they are now."""
+    kept = _WRITTEN.get(os.path.abspath(target))
+    return kept is not None and kept == (_sources_key(sources), _stat_key(target))
+
+
+def _wrote(target, sources, sources_key):
+    """Remember ``target`` as written from ``sources`` (``sources_key``: their stat before reading)."""
+    if _sources_key(sources) == sources_key:  # not replaced while being read
+        _WRITTEN[os.path.abspath(target)] = (sources_key, _stat_key(target))
 
 
 def _job_data(folder):
-    """view.js of a render's folder (written when missing or older than its EXRs): the render's
+    """view.js of a render's folder (written unless this process wrote it from its EXRs as they are): the render's
     channels, the z map with the standard error it divides by (block_stderr.exr; a run from before
     it: the render's per-pixel standard error), the FLIP map and the probes' images
     (``_probe_layers``). Returns the channel names, or None when there is no readable render."""
@@ -178,9 +207,11 @@ def _job_data(folder):
     block_se = folder / previews.BLOCK_STDERR
     if not render.is_file():
         return None
+    sources = (render, z, flip, block_se, folder / previews.PROBE_RESIDUAL)
     try:
+        before = _sources_key(sources)
         names, img, se = exr.read_image_and_stderr(render)
-        if _fresh(js, (render, z, flip, block_se, folder / previews.PROBE_RESIDUAL)):
+        if _fresh(js, sources):
             return names
         layers = {"render": (names, [img[..., i] for i in range(len(names))], 10)}
         layers.update(_probe_layers(folder))  # overlays (issue 21 item 4): the GGX probe's residual map
@@ -195,6 +226,7 @@ def _job_data(folder):
         if flip.is_file():
             layers["flip"] = (["Y"], [exr.read_rgb(flip)[..., 0]], 10)
         _write_data(js, img.shape[1], img.shape[0], layers)
+        _wrote(js, sources, before)
         return names
     except (OSError, ValueError, KeyError):
         return None
@@ -216,29 +248,35 @@ def _probe_layers(folder):
 
 
 def _reference_data(ref_exr):
-    """reference_WxH.js beside the scene's shared reference (written when missing or older)."""
+    """reference_WxH.js beside the scene's shared reference (written unless this process wrote it
+    from the reference as it is)."""
     js = ref_exr.with_suffix(".js")
     try:
         if not _fresh(js, (ref_exr,)):
+            before = _sources_key((ref_exr,))
             ref = exr.read_rgb(ref_exr)
             _write_data(js, ref.shape[1], ref.shape[0], {"reference": (["R", "G", "B"], [ref[..., i] for i in range(3)], 10)})
+            _wrote(js, (ref_exr,), before)
         return js
     except (OSError, ValueError, KeyError):
         return None
 
 
 def _spectral_data(preview):
-    """spectral_preview.js beside a job's spectral_preview.exr (written when missing or older):
+    """spectral_preview.js beside a job's spectral_preview.exr (written unless this process wrote it
+    from the preview as it is):
     one layer "bands", a plane per wavelength (the EXR's half floats, exactly), channels named by
     their index; returns the wavelengths (nm) or None when the preview cannot be read."""
     from .. import spectral_exr
     js = preview.with_name(SPECTRAL_JS)
     try:
+        before = _sources_key((preview,))
         img = spectral_exr.read(preview)
         planes = img.stokes[0]
         if not _fresh(js, (preview,)):
             _write_data(js, planes.shape[1], planes.shape[0],
                         {"bands": ([str(i) for i in range(planes.shape[2])], [planes[..., i] for i in range(planes.shape[2])], 10)})
+            _wrote(js, (preview,), before)
         return [float(v) for v in img.wavelengths_nm]
     except (OSError, ValueError, KeyError):  # SpectralEXRError is a ValueError: the plots stay, the slider goes
         return None
