@@ -240,3 +240,34 @@ def test_a_nan_pixel_is_counted_and_said_never_a_verdict(tmp_path, run_batch_her
     summary = (out / "summary.md").read_text()
     assert "p95 nan" not in summary and "| nan " not in summary, summary
     assert "1 of 4096 pixels of the RGB render are not finite" in summary
+
+
+def test_every_kind_of_light_of_the_ir_is_swapped_and_whitens_the_comparison():
+    """Every emitter kind of the IR (exporters/ir.py): the sky's radiance, an area emitter's
+    radiance, a collimated emitter's irradiance, a point's and a spot's intensity, a directional
+    light's irradiance: under("A") gives each A's chromaticity at its own luminance, and the white
+    of a scene lit by delta lights alone is theirs, not D65's."""
+    from spectral_bench.exporters import colorimetry, ir_json
+    from spectral_bench.batch.studies import spectral_vs_rgb as study
+    scene = ir_json.load(EXAMPLE)
+    panel = {"type": "rectangle", "to_world": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 3], [0, 0, 0, 1]]}
+    scene["objects"] += [
+        {"name": "panel", "shape": panel, "bsdf": None, "emitter": {"type": "area", "radiance": {"type": "constant", "value": 2.0}}},
+        {"name": "beam", "shape": panel, "bsdf": None,
+         "emitter": {"type": "collimated", "irradiance": {"type": "named", "name": "cie_d50", "scale": 3.0}}}]
+    scene["lights"] = [
+        {"name": "bulb", "type": "point", "position": [0.0, -4.0, 2.0], "intensity": {"type": "named", "name": "cie_fl11", "scale": 5.0}},
+        {"name": "cone", "type": "spot", "to_world": [[1, 0, 0, 0], [0, -1, 0, 0], [0, 0, -1, 2], [0, 0, 0, 1]],
+         "intensity": {"type": "named", "name": "cie_d65", "scale": 7.0}, "cutoff_angle": 30.0, "beam_width": 20.0},
+        {"name": "sun", "type": "directional", "direction": [0.0, 0.5, -0.866], "irradiance": {"type": "constant", "value": 3.0}}]
+    before = [colorimetry.spectrum_xyz(h[k]) for h, k in study.lights(scene)]
+    assert len(before) == 6
+    a = colorimetry.spectrum_xyz({"type": "named", "name": "cie_a"})
+    after = [colorimetry.spectrum_xyz(h[k]) for h, k in study.lights(study.under(scene, "A"))]
+    for old, new in zip(before, after):
+        assert new[1] == pytest.approx(old[1], rel=1e-9)
+        assert new[:2] / new.sum() == pytest.approx(a[:2] / a.sum(), abs=1e-9)
+    bulb_only = {k: v for k, v in scene.items() if k not in ("environment", "lights")}
+    bulb_only.update(objects=scene["objects"][:1], lights=scene["lights"][:1])
+    fl11 = colorimetry.spectrum_xyz(scene["lights"][0]["intensity"])
+    assert study.white_of(bulb_only) == pytest.approx(fl11 / fl11[1], rel=1e-9)
