@@ -21,7 +21,7 @@ from .backends import BACKENDS, DEFAULT, GROUPS, command, expand, known_names
 
 DEVICES = ("cpu", "gpu", "auto")  # --device (batch/backends/mitsuba/cuda.py)
 FORMATS = ("mitsuba", "art", "json", "cycles", "luxcore")
-# Bounds of the options (documented in --help and the README's option table)
+# Bounds of the options (documented in --help and docs/running.md's option table)
 MAX_SPP = validate.render_limit("spp")[1]  # samples per pixel: the scene IR's own bound
 MAX_SCALE = 4.0            # resolution scale
 MAX_PASSES = 256
@@ -337,7 +337,7 @@ def parser():
                     help="settings file (TOML or JSON; repeatable, later files win)")
     ap.add_argument("--renderers", action="append", type=T["renderers"], metavar="FILE",
                     help="declare renderers that run as a command ([renderers.NAME] tables in a TOML file; repeatable; "
-                         "README: Add your renderer); select them with -r NAME")
+                         "docs/backends.md: Add your renderer); select them with -r NAME")
     ap.add_argument("--variant", type=T["variant"], help="force a Mitsuba variant (default: cheapest that models the scene)")
     ap.add_argument("--device", type=T["device"], metavar="cpu|gpu|auto",
                     help="where Mitsuba renders: gpu picks its cuda_ad_* variants (an error where CUDA does not render), "
