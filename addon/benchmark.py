@@ -65,7 +65,10 @@ class RunSettings(bpy.types.PropertyGroup):
                                      "can be judged against it")
     passes: IntProperty(name="Passes", default=2, min=1, max=64,
                         description="Independent passes per render: two or more give the render's own noise")
-    use_flip: BoolProperty(name="HDR-FLIP", default=True, description="Compute HDR-FLIP against the reference")
+    use_flip: BoolProperty(name="HDR-FLIP", default=True,
+                           description="Compute HDR-FLIP against the reference where a verdict is not ok (the run's "
+                                       "default, --flip auto: an ok render differs from its reference by noise); "
+                                       "off: never (--no-flip)")
     output_parent: StringProperty(name="Outputs Folder", subtype="DIR_PATH", default="",
                                   description="Where outputs-YYYYmmdd-HHMMSS folders go (default: next to the "
                                               ".blend, or the extension's user folder)")

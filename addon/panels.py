@@ -308,7 +308,7 @@ class SPECTRAL_BENCH_PT_benchmark_results(_Base, bpy.types.Panel):
             m = run.get("metrics") or {}
             if m.get("rmse") is not None:
                 box.label(text="RMSE {rmse:.3g}  relMSE {relmse:.3g}  MAPE {mape:.3g}".format(**m)
-                          + (f"  FLIP {m['flip']:.3g}" if m.get("flip") is not None else ""))
+                          + (f"  FLIP {records.flip_text(run)}" if records.flip_text(run) else ""))
             t = run.get("test")
             if isinstance(t, dict):
                 box.label(text=f"noise test: {records.noise_test_text(t)}"[:200],

@@ -1,6 +1,6 @@
 """The extension's preferences (Edit > Preferences > Add-ons > Spectral Render Benchmark), saved
 with Blender's own preferences: where references come from, and the renderers files that declare
-the user's own renderers (README, "Add your renderer"; batch/backends/command.py reads them).
+the user's own renderers (docs/backends.md, "Add your renderer"; batch/backends/command.py reads them).
 
 References ship inside the extension (references/ beside scenes.blend). A folder of the user's
 own (a checkout's references/, a re-rendered set, references for the user's own scenes) can be
@@ -29,7 +29,7 @@ class RenderersFile(bpy.types.PropertyGroup):
     """One renderers file: a TOML file of [renderers.NAME] tables, passed to a run as --renderers."""
     path: StringProperty(name="Renderers File", subtype="FILE_PATH", default="",
                          description="A TOML file declaring renderers that run as a command "
-                                     "([renderers.NAME] tables; README, Add your renderer)")
+                                     "([renderers.NAME] tables; docs/backends.md, Add your renderer)")
 
 
 class SpectralBenchPreferences(bpy.types.AddonPreferences):

@@ -21,7 +21,7 @@ from .backends import BACKENDS, DEFAULT, GROUPS, command, expand, known_names
 
 DEVICES = ("cpu", "gpu", "auto")  # --device (batch/backends/mitsuba/cuda.py)
 FORMATS = ("mitsuba", "art", "json", "cycles", "luxcore")
-# Bounds of the options (documented in --help and the README's option table)
+# Bounds of the options (documented in --help and docs/running.md's option table)
 MAX_SPP = validate.render_limit("spp")[1]  # samples per pixel: the scene IR's own bound
 MAX_SCALE = 4.0            # resolution scale
 MAX_PASSES = 256
@@ -32,7 +32,7 @@ DEFAULT_CLUSTER_TIMEOUT = 60.0
 DEFAULTS = {
     "input": None, "case": None, "scene": None, "renderer": None, "exec": None, "spp": None, "scale": 1.0,
     "out": None, "export_only": False, "format": None, "log": None, "visualize": False, "settings": None,
-    "variant": None, "device": "auto", "alpha": 0.01, "block": None, "min_samples": 65536, "timeout": 1800, "passes": 2, "seed": 0, "flip": True,
+    "variant": None, "device": "auto", "alpha": 0.01, "block": None, "min_samples": 65536, "timeout": 1800, "passes": 2, "seed": 0, "flip": "auto",
     "detect": None, "max_passes": 16,
     "references": None, "known": None, "list": False, "art_ggx": False, "sweep": False, "ladder": None, "sweep_modes": None, "stability": False,
     "approximate": False, "renderers": None, "cluster": None, "cluster_timeout": DEFAULT_CLUSTER_TIMEOUT, "dashboard": None, "resume": None,
@@ -337,7 +337,7 @@ def parser():
                     help="settings file (TOML or JSON; repeatable, later files win)")
     ap.add_argument("--renderers", action="append", type=T["renderers"], metavar="FILE",
                     help="declare renderers that run as a command ([renderers.NAME] tables in a TOML file; repeatable; "
-                         "README: Add your renderer); select them with -r NAME")
+                         "docs/backends.md: Add your renderer); select them with -r NAME")
     ap.add_argument("--variant", type=T["variant"], help="force a Mitsuba variant (default: cheapest that models the scene)")
     ap.add_argument("--device", type=T["device"], metavar="cpu|gpu|auto",
                     help="where Mitsuba renders: gpu picks its cuda_ad_* variants (an error where CUDA does not render), "
@@ -359,8 +359,8 @@ def parser():
     ap.add_argument("--seed", type=T["seed"], help=f"first sampler seed, 0 to {MAX_SEED} (default 0)")
     ap.add_argument("--no-flip", dest="flip", action="store_false", help="skip HDR-FLIP (as --flip off)")
     ap.add_argument("--flip", dest="flip", type=T["flip"], metavar="on|off|auto",
-                    help="HDR-FLIP against the reference: on (default) for every judged render, off, or auto: only "
-                         "for renders whose verdict is not ok (failed, known, fixed), where the error map is looked at")
+                    help="HDR-FLIP against the reference: auto (default): only for renders whose verdict is not ok "
+                         "(failed, known, fixed, unjudged), where the error map is looked at; on: for every judged render; off")
     ap.add_argument("--references", action="append", type=T["references"], metavar="DIR",
                     help="reference folder (repeatable: for each scene the first folder holding a usable "
                          "reference wins; default: references/)")

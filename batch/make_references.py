@@ -12,7 +12,7 @@ holds the scene's lock (references/.work/<scene>.lock) from planning to writing;
 another maker is skipped and named (exit status 1).
 
 Any one backend renders it: ``-r NAME`` (default mitsuba) is a built-in backend or a renderer
-declared with ``--renderers FILE`` (README, "Add your renderer"); ``-e [NAME=]PATH``, ``--variant``
+declared with ``--renderers FILE`` (docs/backends.md, "Add your renderer"); ``-e [NAME=]PATH``, ``--variant``
 and ``--device cpu|gpu|auto`` (Mitsuba) and ``--art-ggx`` (ART) mean what they mean to the runner and go through the runner's
 own option types and declaration loading (batch/cli.py); a bad value is a usage error (exit 2)
 naming the option. Each reference is rendered at the scene's resolution (times ``--scale F``, as

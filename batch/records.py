@@ -439,6 +439,26 @@ def noise_test_text(test):
     return f"{word}: {reason}" if reason else word
 
 
+def flip_text(run):
+    """HDR-FLIP of a run entry as one short text: its mean ("0.0123"), "not computed (verdict ok;
+    --flip on computes it)" or "not computed (--flip off)" where the run chose not to compute it
+    (``flip_not_computed``), "not computed: why" where it failed (``flip_error``), or "" where there
+    was nothing to compare with. Never a blank or a 0 for a render FLIP skipped (issue 45); the
+    summary, the report, JUnit and the panel all show this text."""
+    if not isinstance(run, dict):
+        return ""
+    flip = (run.get("metrics") or {}).get("flip") if isinstance(run.get("metrics"), dict) else None
+    if _number(flip):
+        return f"{flip:.4g}"
+    why = run.get("flip_not_computed")
+    if isinstance(why, str) and why:
+        return f"not computed ({' '.join(why.split())})"
+    err = run.get("flip_error")
+    if isinstance(err, str) and err:
+        return "not computed: " + " ".join(err.split()).removeprefix("FLIP not computed: ")
+    return ""
+
+
 def inside_parts(folder, rel):
     """The parts of ``rel`` (a path from a metrics.json: anyone's text) if it is a relative path to
     a file that exists inside ``folder`` (no absolute path, no drive, no '.' or '..', no link out);

@@ -27,7 +27,7 @@ claims (start-up, imports, idle threads) is the rest of the run's CPU.
 
 The tiny suite is issue 23's ``--scale 0.125 --spp 4``: the 620x420 charts, which 0.125 divides
 into no integer fraction, render at 0.1 (62x42), the nearest scale their references judge
-(README "Running"; the run's log says so).
+(docs/verdict.md, "Any resolution judged"; the run's log says so).
 
 Prints Markdown tables; --write records them in benchmarks/ENGINES.md. Run it on a quiet machine
 (``uptime`` load is printed with the result).

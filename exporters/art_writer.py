@@ -29,7 +29,7 @@ Sellmeier) and constants; and its outside medium is vacuum. Named conductors are
 IR's own eta/k tables (Mitsuba's data, exporters/data), not ART's material presets, so both
 renderers render the same metal.
 
-Test hook (tests/test_art.py, README "Developing"): ``SPECTRAL_BENCH_TEST_ART_ILLUMINANT_SCALE=F``
+Test hook (tests/test_art.py, docs/developing.md): ``SPECTRAL_BENCH_TEST_ART_ILLUMINANT_SCALE=F``
 in the environment multiplies every emitter's and the environment's brightness by F (a planted
 error of the ART route, which the ART render tests must detect), and the .arm says so in a
 comment. Unset, nothing changes.

@@ -1,7 +1,7 @@
 """The IR's ideal linear polariser in front of the lens, applied to a render's Stokes channels.
 
 Mitsuba 3 has no camera-side filter; a polariser sheet in the scene is a surface whose axis turns
-for oblique rays (README, "Findings"). The Mitsuba writer therefore renders the Stokes vector and
+for oblique rays (docs/findings.md, "Findings"). The Mitsuba writer therefore renders the Stokes vector and
 writes the filter beside scene.xml (POSTPROCESS); the worker applies it to every pass before
 the passes are averaged, so the per-pixel noise is the filtered image's own. The ideal polariser
 with its axis at theta (IR frame: counter-clockwise from image right, S1 > 0 horizontal) has the

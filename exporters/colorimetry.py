@@ -27,7 +27,7 @@ ART_BANDS_NM = (320.0, 10.0, 46)
 
 # Mitsuba 3.9.1's XYZ -> linear sRGB matrix (include/mitsuba/core/spectrum.h, xyz_to_srgb): six
 # digits, not the IEC 61966-2-1 matrix derived from the primaries; for a D65 white it gives
-# R, G, B +0.6e-5, -8.6e-5, +24.6e-5 relative (measured on renders: README, "Findings")
+# R, G, B +0.6e-5, -8.6e-5, +24.6e-5 relative (measured on renders: docs/findings.md, "Findings")
 MITSUBA_XYZ_TO_SRGB = np.array([[3.240479, -1.537150, -0.498535],
                                 [-0.969256, 1.875991, 0.041556],
                                 [0.055648, -0.204043, 1.057311]])

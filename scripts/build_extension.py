@@ -25,7 +25,7 @@ Blender 4.2's own image reader predates). So the extension ships the references 
 extension's preferences ("Folder, Then Extension").
 
 The zip must stay within the extensions platform's upload limit (200 MB assumed: the limit is not
-published in the documentation searched; see README, "In Blender") with margin: the build fails above
+published in the documentation searched; see docs/blender.md, "Install") with margin: the build fails above
 ``--max-mb`` (default 170) and prints what takes the room. The documented build (wheels, default
 references) records its measured size in README.md, between ``<!-- extension-size -->`` and
 ``<!-- /extension-size -->``, one line per platform (``--no-readme``: leave README.md alone).

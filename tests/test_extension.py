@@ -370,7 +370,7 @@ def test_platform_zip_with_wheels_fits_the_platform_and_runs_on_its_wheels_alone
     assert all(path.startswith(str(site)) for path in json.loads(where.stdout.strip().splitlines()[-1]).values())
     run = subprocess.run(python + [os.path.join(out["ext_dir"], "batch", "run.py"), "-i",
                                    str(ROOT / "golden" / "ir" / "ggx_copper_50.json"), "-r", "mitsuba", "--scale",
-                                   "0.125", "--passes", "2", "-o", str(tmp_path / "o")],
+                                   "0.125", "--passes", "2", "--flip", "on", "-o", str(tmp_path / "o")],
                          capture_output=True, text=True, env=env, timeout=600)
     (entry,) = metrics(tmp_path / "o")["runs"]  # through the reader: paths absolute
     assert entry["status"] == "ok" and entry["test"]["pass"], run.stderr[-3000:]

@@ -278,7 +278,7 @@ def test_prestarted_mitsuba_workers_serve_the_jobs_that_come_later(golden, tmp_p
 # -- --flip on|off|auto (issue 31, decision 2: FLIP keeps its meaning, lazy for runs that ask) ------
 def test_flip_option_values_from_the_command_line_and_a_settings_file(tmp_path):
     from spectral_bench.batch import cli
-    assert cli.parse([])["flip"] is True  # the default is unchanged
+    assert cli.parse([])["flip"] == "auto"  # issue 45: FLIP where a verdict is not ok, by default
     assert cli.parse(["--flip", "auto"])["flip"] == "auto"
     assert cli.parse(["--flip", "off"])["flip"] is False and cli.parse(["--no-flip"])["flip"] is False
     assert cli.parse(["--flip", "on"])["flip"] is True
@@ -305,12 +305,18 @@ def test_flip_auto_judges_only_the_renders_that_are_not_ok(tmp_path):
     from conftest import metrics, run_batch
     from spectral_bench.batch import exr
     out = tmp_path / "out"
-    proc = run_batch("-r", "mitsuba", "-s", "macbeth_chart_D65", "-s", "polarizing_plane_0", "--spp", "16", "--flip", "auto",
-                     "-o", out)
+    proc = run_batch("-r", "mitsuba", "-s", "macbeth_chart_D65", "-s", "polarizing_plane_0", "--spp", "16",
+                     "--junit", tmp_path / "j.xml", "-o", out)  # --flip auto: the default (issue 45)
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
     runs = {r["scene"]: r for r in metrics(out)["runs"]}
     ok, known = runs["polarizing_plane_0"], runs["macbeth_chart_D65"]
     assert ok["status"] == "ok" and ok["metrics"]["flip"] is None, ok
+    # never a blank or a 0 where FLIP stands: the record says why, and so do the summary, the report and JUnit
+    assert ok["flip_not_computed"] == "verdict ok; --flip on computes it" and "flip_not_computed" not in known
+    said = "not computed (verdict ok; --flip on computes it)"
+    row = next(l for l in (out / "summary.md").read_text().splitlines() if "| polarizing_plane_0 |" in l)
+    assert said in row and f"{known['metrics']['flip']:.4g}" in (out / "summary.md").read_text()
+    assert said in (out / "report.html").read_text() and f'value="{said}"' in (tmp_path / "j.xml").read_text()
     assert not (out / "polarizing_plane_0" / "results" / "mitsuba" / "flip.exr").exists()
     assert known["status"] == "known" and isinstance(known["metrics"]["flip"], float), known
     folder = out / "macbeth_chart_D65" / "results"

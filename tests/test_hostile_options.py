@@ -332,7 +332,7 @@ def _certificates(folder):
 
 @pytest.mark.slow
 def test_a_tls_scheduler_is_used_through_dasks_own_settings(tmp_path):
-    """The README's TLS recipe: a scheduler that requires TLS, workers with the preload, and
+    """The TLS recipe of docs/running.md: a scheduler that requires TLS, workers with the preload, and
     batch/run.py pointed at tls://... with Dask's settings in environment variables: the job runs,
     and without them the run is refused (exit 2), not left waiting."""
     from distributed import LocalCluster

@@ -32,7 +32,7 @@ def test_the_committed_references_carry_layers_for_the_recorded_films():
     for meta in sorted((ROOT / "references").glob("*.json")):
         ref = references.load(meta.stem)
         if not ref.provenance["colour"]["film"].startswith("specfilm"):
-            continue  # made through Mitsuba's film: polarised or light-traced (README, "Colour route")
+            continue  # made through Mitsuba's film: polarised or light-traced (docs/backends.md, "Colour route")
         assert observer_layers.problem_of(ref) is None, meta.stem
         layers = observer_layers.load(ref)
         assert set(layers) >= {"mitsuba3"}, (meta.stem, sorted(layers))

@@ -1,4 +1,4 @@
-"""A new scenario (thesis 3.4.3): a scene written by hand as the README's "Add your own scene"
+"""A new scenario (thesis 3.4.3): a scene written by hand as docs/scenes.md's "Add your own scene"
 shows (examples/scenes/), listed, given a reference and judged; and every output says what judged
 a render, so a scene no probe fits, judged against a reference its own renderer made, reads as a
 regression check ("checked against itself: detects change, not error"), never as a plain ok."""
@@ -39,7 +39,7 @@ def test_list_shows_load_errors_and_exits_2(tmp_path, run_batch_here):
 
 @pytest.fixture(scope="module")
 def judged(tmp_path_factory):
-    """References for both example scenes made as the README says (at 256 spp instead of the
+    """References for both example scenes made as docs/scenes.md says (at 256 spp instead of the
     default, into a folder of their own), then one run judging both with them."""
     tmp = tmp_path_factory.mktemp("own")
     refs, out = tmp / "refs", tmp / "out"

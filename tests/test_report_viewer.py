@@ -1,7 +1,7 @@
 """report.html's float viewer (issue 21) in real headless Chromium, from file://: the values it
 decodes and shows under the cursor are the EXRs' (as half floats), exposure acts on the floats
 (a highlight above 1 is not clipped at -3 EV), the Stokes scene has S0..S3, DoP and AoP views
-whose angle is the EXR's in the README's frame, the ColorChecker's patches are outlined where the
+whose angle is the EXR's in the scenes' Stokes frame (docs/scenes.md), the ColorChecker's patches are outlined where the
 probe measured them with their dE00, the GGX probe's residual map is the probe's (its blocks' z)
 and its readout the EXRs', the prism's marks stand at the columns its positions record gives, a
 --baseline run shows its comparison with links to the z-map, and a screenshot of every view is

@@ -1,5 +1,5 @@
 """Declared renderers: any renderer that runs as a command, plugged in by a TOML declaration
-instead of code (README, "Add your renderer"; examples/ holds a worked one).
+instead of code (docs/backends.md, "Add your renderer"; examples/ holds a worked one).
 
     [renderers.ring]
     command = ["ring", "{scene}", "-o", "{output}", "--spp", "{spp}", "--seed", "{seed}"]
@@ -37,7 +37,7 @@ WRITES = ("rgb", "spectral")
 BAND_MODELS = ("hat", "point", "box")  # batch/spectral_exr.py BAND_MODELS (no import at load: the extension lists declarations)
 NEEDS = ("spectral", "polarization", "thin_film", "dispersion", "fluorescence")
 OBSERVERS = ("cie1931", "cie1964")
-# placeholder -> what it becomes (README, "Add your renderer")
+# placeholder -> what it becomes (docs/backends.md, "Add your renderer")
 PLACEHOLDERS = {
     "scene": "the exported scene file the renderer reads (absolute path)",
     "scene_dir": "the folder of the exported scene (meshes, spectra beside it)",

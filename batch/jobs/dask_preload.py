@@ -4,7 +4,7 @@ your own cluster are started with it:
 
     dask worker tcp://SCHEDULER:8786 --nthreads 1 --preload /path/to/repo/batch/jobs/dask_preload.py
 
-(the same checkout and Python environment as the client's: README, "Running on a cluster")."""
+(the same checkout and Python environment as the client's: docs/running.md, "Running on a cluster")."""
 import sys
 from pathlib import Path
 

@@ -15,7 +15,7 @@
   for the run (``Security.temporary()``: a connection without a certificate of its CA is refused, so
   other users of the machine cannot run code in the workers), without a dashboard unless
   ``--dashboard`` asks for one (its HTTP page is not behind TLS). A worker needs the same repository checkout and Python
-  environment, and this project importable: workers load batch/jobs/dask_preload.py (README,
+  environment, and this project importable: workers load batch/jobs/dask_preload.py (docs/running.md,
   "Running on a cluster"). A Dask scheduler runs whatever its clients send (pickled functions):
   a scheduler that is not on this machine and not reached over tls:// is warned about. A
   scheduler that cannot be reached, or that no worker joins, within ``--cluster-timeout`` seconds
@@ -203,7 +203,7 @@ class DaskEngine:
             if plaintext_remote(address):
                 log.warning("warning: the Dask scheduler at %s runs whatever code it receives (pickles) and this "
                             "connection is not encrypted: on a shared network use tls:// with Dask's TLS settings "
-                            "(README, \"Running on a cluster\")", address)
+                            "(docs/running.md, \"Running on a cluster\")", address)
             try:
                 self.client = Client(address, timeout=timeout)
             except Exception as exc:  # noqa: BLE001 - unreachable, refused, TLS not configured: named, exit 2

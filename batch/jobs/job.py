@@ -178,7 +178,7 @@ def warm(job_list):
     from ..verdict import flip_isolated, judge as _verdicts  # noqa: F401 - imported to be ready
     from ...exporters import colorimetry
     colorimetry.srgb_to_xyz([1.0, 1.0, 1.0])
-    if any(j["kind"] == "render" and j["verdict"].get("flip", True) is True for j in job_list):  # auto: when asked
+    if any(j["kind"] == "render" and j["verdict"].get("flip", "auto") is True for j in job_list):  # auto: when asked
         flip_isolated.prestart()
 
 

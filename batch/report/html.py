@@ -117,7 +117,7 @@ def _summary_rows(runs, anchors, listed=None):
                      "backend": _text(r.get("backend")), "mode": _text(results.mode_text(r)), "status": _text(r.get("status")),
                      "spp": _text(r.get("spp") or ""), "time": _fmt(r.get("time_s"), "{:.2f}"),
                      "rmse": _fmt(m.get("rmse")), "relmse": _fmt(m.get("relmse")), "mape": _fmt(m.get("mape")),
-                     "flip": _fmt(m.get("flip")), "probes": probes or ("none" if r.get("status") in results.JUDGED else ""),
+                     "flip": _text(records.flip_text(r)), "probes": probes or ("none" if r.get("status") in results.JUDGED else ""),
                      "reason": _text(r.get("reason")), "self_check": results.checked_against_itself(r),
                      "reference_problems": _reference_problems(r)})
     return rows
@@ -601,7 +601,8 @@ def _viewer(out, run, deviations=None):
             "judged_by": _text(results.judged_by(run)), "self_check": results.checked_against_itself(run),
             "tev": _tev(run, folder, ref if ref_url else None, out), "regions": json.dumps(regions),
             "marks": json.dumps(_prism_marks(run)), "prism": _prism_line(run), "baseline": _baseline(out, run),
-            "numbers": [f"{_text(k)}: {_fmt(v)}" for k, v in _dict(run.get("metrics")).items()],
+            "numbers": [f"{_text(k)}: {_text(records.flip_text(run)) if k == 'flip' else _fmt(v)}"
+                        for k, v in _dict(run.get("metrics")).items()],
             "reference_problems": _reference_problems(run), "conversions": _conversions(run), "why": _why(out, run),
             "spectra": _spectra(out, run, folder)}
 

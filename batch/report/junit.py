@@ -26,7 +26,7 @@ import socket
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
-from ..records import noise_test_text
+from ..records import flip_text, noise_test_text
 from .results import judged_by
 from .spectra import worst_lines
 
@@ -70,6 +70,8 @@ def testcase(run):
     test = noise_test_text(run.get("test"))
     if test:
         _property(props, "noise test", test)
+    if flip_text(run):
+        _property(props, "FLIP", flip_text(run))
     diagnosis = run.get("diagnosis")
     why = diagnosis.get("text") if isinstance(diagnosis, dict) else None
     if why:

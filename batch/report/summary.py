@@ -2,7 +2,7 @@
 from pathlib import Path
 
 from ..markdown import cell as _cell
-from ..records import noise_test_text
+from ..records import flip_text, noise_test_text
 from ..verdict.status import rank
 from .results import JUDGED, SELF_CHECK, checked_against_itself, judged_without_reference, mode_text, probes_measured
 
@@ -30,7 +30,7 @@ def table(runs):
                  f"{r['status']} (checked against itself)" if checked_against_itself(r) else r["status"])
         rows.append(f"| {_cell(shown)} | {_cell(r['scene'])} | {_cell(r['backend'])} | {_cell(mode_text(r))} | {_num(r.get('spp'), '{}')} "
                     f"| {res} | {_num(r.get('time_s'), '{:.2f}')} | {_num(m.get('rmse'))} | {_num(m.get('relmse'))} "
-                    f"| {_num(m.get('mape'))} | {_num(m.get('flip'))} | {test} | {probes_cell(r)} | {reason[:300]} |")
+                    f"| {_num(m.get('mape'))} | {_cell(flip_text(r))} | {test} | {probes_cell(r)} | {reason[:300]} |")
     if any(checked_against_itself(r) for r in runs):
         rows += ["", f"*checked against itself*: judged only against a reference made by the same renderer, no probe "
                      f"({SELF_CHECK.split(': ', 1)[1]}). Ground truth for these scenes needs a probe or another renderer's reference."]

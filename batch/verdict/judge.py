@@ -39,6 +39,11 @@ def load_reference(name, scene, directories, shape=None, names=None):
 
 
 PROBES_ALONE = "judged by probes alone"
+# Why a judged render has no FLIP (metrics.json ``flip_not_computed``; batch/records.flip_text says it).
+# Issue 45: an ok render differs from its reference by noise, and a perceptual map of noise tells
+# nothing the z-score map does not, so --flip auto (the default) computes FLIP where a verdict is not ok.
+FLIP_OK = "verdict ok; --flip on computes it"
+FLIP_OFF = "--flip off"
 
 
 def render_verdict(entry, scene, rendered, image, res_dir, settings, deviations):
@@ -46,7 +51,7 @@ def render_verdict(entry, scene, rendered, image, res_dir, settings, deviations)
     ``scene`` as authored, for its reference) in place in ``entry``; writes the verdict's images
     into ``res_dir``. ``settings``: alpha, min_samples, block, flip (True, False or "auto": FLIP only
     for a verdict that is not ok), references."""
-    if settings.get("flip", True) is True:
+    if settings.get("flip", "auto") is True:
         flip_isolated.prestart()  # the FLIP child starts (once) while this verdict reads and tests
     names, test_all, stderr = exr.read_image_and_stderr(image)
     entry["channels"] = names
@@ -88,6 +93,8 @@ def render_verdict(entry, scene, rendered, image, res_dir, settings, deviations)
     worst = [p["worst"]["text"] for p in entry["probes"] if p["name"].startswith(band_probes.PREFIX) and p["pass"] is False]
     if worst and entry["status"] == "failed":  # where the spectrum is wrong, in the reason the terminal shows
         entry["reason"] += "; worst bands: " + "; ".join(worst[:4]) + (f" and {len(worst) - 4} more" if len(worst) > 4 else "")
+    if auto and entry["status"] == "ok":  # --flip auto: an ok render differs from its reference by noise
+        entry["flip_not_computed"] = FLIP_OK
     if auto and entry["status"] != "ok":  # --flip auto: the error map where the verdict is not ok
         finishers = []
         for start in auto:
@@ -259,11 +266,13 @@ def noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings, la
     shared = previews.shared_reference(res_dir, mean, np.sqrt(at.var_of_mean[..., :3]))
     entry["reference"]["image"] = str(PurePosixPath(entry["image"]).parent.parent / shared.name) \
         if isinstance(entry.get("image"), str) else None
-    flip = settings.get("flip", True)
+    flip = settings.get("flip", "auto")
     if flip is True:
         _start_flip(entry, mean, test, res_dir, later)
     elif flip == "auto" and auto is not None:
         auto.append(lambda finishers: _start_flip(entry, mean, test, res_dir, finishers))
+    elif flip is False:
+        entry["flip_not_computed"] = FLIP_OFF
     return zt
 
 

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""A stand-alone "your renderer" for the benchmark's declared-renderer contract (README, "Add your
+"""A stand-alone "your renderer" for the benchmark's declared-renderer contract (docs/backends.md, "Add your
 renderer"). It imports nothing from the benchmark: it reads the scene the benchmark exported for it
 (here the Mitsuba 3 XML: ``reads = "mitsuba"``), renders one pass with the seed and samples it is
 given, and writes the EXR the benchmark reads back:

@@ -11,7 +11,7 @@
 
    Formulas: sRGB transfer function IEC 61966-2-1; Stokes degree of polarisation
    sqrt(S1^2 + S2^2 + S3^2) / S0 and angle 0.5 atan2(S2, S1) (Goldstein, Polarized Light, 3rd ed.,
-   ch. 4), in the README's frame (0 horizontal, counter-clockwise as seen from the camera). */
+   ch. 4), in the scenes' Stokes frame (docs/scenes.md; 0 horizontal, counter-clockwise as seen from the camera). */
 var spectralBench = (function () {
   'use strict';
   var HALF = new Float32Array(65536);

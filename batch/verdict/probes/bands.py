@@ -197,7 +197,7 @@ PROBES = [lambert_bands, lone_sphere_bands]
 
 
 def record(entry_probes, sp):
-    """The job's ``bands`` record (the report's spectra; README "Spectral images") from its band
+    """The job's ``bands`` record (the report's spectra; docs/backends.md, "Spectral images") from its band
     checks, or None without a spectral render."""
     sp = None if sp is None else judged(sp)
     if sp is None:
