@@ -50,6 +50,17 @@ is rendered and judged and before it is saved; the save itself is the same atomi
 files stay current until it). A search never reads history (only <folder>/<scene>.exr/.json are
 candidates, and a folder holding ``replaced.json`` is refused even when named with --references);
 the extension build leaves history/ out. To restore an old reference, move its two files back.
+
+Observer layers (``--film cmf --layers OBSERVER``, batch/verdict/observer_layers.py) go to
+``<out>/layers/<scene>/<observer>.exr``, a folder no scene name reaches (a scene name may hold
+dots: the old place, ``<scene>.<observer>.exr`` beside the reference, is the reference of a scene
+named ``<scene>.<observer>``). ``--migrate-layers`` moves the layers of a folder still in that old
+layout (only files whose sha256 is their record's; the bytes unchanged, the records' ``file``
+pointed at the new place) and renders nothing. A reference whose files would replace another
+scene's (that old-layout layer, or a record of another scene where a file system ignores case) is
+refused before anything renders, naming both scenes (exit status 1). ``--layers-only`` renders the
+layers at the reference's own size: a ``--scale`` that gives another size is a usage error naming
+the scene and both sizes (exit status 2).
 """
 import argparse
 import contextlib

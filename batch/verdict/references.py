@@ -25,6 +25,12 @@ its record and image move to <references>/history/<scene>/<UTC time>-<backend>/ 
 ``replaced.json`` record (who replaced it, why: the verdict of the new against the old on both
 noises, the command). A search never reads history: it looks only at <folder>/<scene>.exr and
 .json, and a folder holding a ``replaced.json`` is refused as a candidate even when named directly.
+
+A write never replaces another scene's file (``refuse_collision``, issue 40): where
+``<scene>.exr|.json`` is an observer layer of scene S kept in the old layout (``S.<observer>.exr``,
+S's record naming it) or a record of another scene (a file system that ignores case), ``save`` and
+``replace`` raise ``Collision`` naming both. Observer layers themselves live in
+``<folder>/layers/<scene>/`` (batch/verdict/observer_layers.py), where no scene's reference is.
 """
 import copy
 import hashlib
