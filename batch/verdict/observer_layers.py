@@ -101,9 +101,9 @@ def check(ref):
     what a layer file or record holds: an unusable layer leaves the reference usable. A key that
     is not an observer's name never names a file."""
     rec = ref.provenance.get(RECORD_KEY)
-    meta_path = Path(ref.path).with_suffix(".json")
-    if rec is None:
+    if rec is None or ref.path is None:  # no layers, or a reference not in a folder (being made)
         return {}, {}
+    meta_path = Path(ref.path).with_suffix(".json")
     if not isinstance(rec, dict):
         return {}, {"*": (meta_path, f"record field {RECORD_KEY} is not an object")}
     from .references import sha256_of  # references imports this module lazily; no cycle at import time
@@ -116,29 +116,34 @@ def check(ref):
             continue
         try:
             path, old = path_for(ref.path, obs), old_path_for(ref.path, obs)
+            shown = relative(_scene_of(ref.path), obs)
+        except (TypeError, ValueError) as exc:  # a reference whose file is not named by a scene name
+            bad[obs] = (meta_path, f"no layer file can be named for this reference: {exc}")
+            continue
+        try:
             if not path.is_file():
                 if old.is_file() and sha256_of(old) == item["sha256"]:
                     bad[obs] = (old, f"{old.name} is the layer in the old layout, beside the reference (where a "
                                      f"scene named {old.stem} would keep its reference): not read there; "
                                      f"{_migrate_hint(old.parent)}")
                 else:
-                    bad[obs] = (path, f"{path.name} is missing")
+                    bad[obs] = (path, f"{shown} is missing")
                 continue
             if sha256_of(path) != item["sha256"]:
-                bad[obs] = (path, f"{path.name} is not the file its record describes (sha256 differs)")
+                bad[obs] = (path, f"{shown} is not the file its record describes (sha256 differs)")
                 continue
             names, mean, stderr = exr.read_image_and_stderr(path, expect=[w, h])
         except Exception as exc:  # noqa: BLE001 - any unreadable or wrong-sized layer is a problem of that layer
-            bad[obs] = (path, f"{path.name} cannot be used: {type(exc).__name__}: {exc}")
+            bad[obs] = (path, f"{shown} cannot be used: {type(exc).__name__}: {exc}")
             continue
         if stderr is None or names[:3] != list(CHANNELS):
-            bad[obs] = (path, f"{path.name} is not a layer (channels {names[:6]}, no stderr.R/G/B)"
-                        if stderr is None else f"{path.name} is not a layer (channels {names[:6]}, not R, G, B first)")
+            bad[obs] = (path, f"{shown} is not a layer (channels {names[:6]}, no stderr.R/G/B)"
+                        if stderr is None else f"{shown} is not a layer (channels {names[:6]}, not R, G, B first)")
             continue
         mean, stderr = mean[..., :3].astype(np.float64), stderr[..., :3].astype(np.float64)
         if mean.shape[:2] != (h, w) or not (np.isfinite(mean).all() and np.isfinite(stderr).all() and (stderr >= 0).all()):
-            bad[obs] = (path, f"{path.name} is not usable: {mean.shape[1]}x{mean.shape[0]} for a {w}x{h} reference"
-                        if mean.shape[:2] != (h, w) else f"{path.name} holds non-finite or negative values")
+            bad[obs] = (path, f"{shown} is not usable: {mean.shape[1]}x{mean.shape[0]} for a {w}x{h} reference"
+                        if mean.shape[:2] != (h, w) else f"{shown} holds non-finite or negative values")
             continue
         layers[obs] = (mean, stderr)
     return layers, bad
