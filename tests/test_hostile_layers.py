@@ -124,6 +124,26 @@ def test_an_old_layout_is_named_refused_as_another_scenes_file_and_migrated(made
 
 
 @pytest.mark.slow
+def test_a_reference_of_a_name_differing_in_case_is_not_replaced(made, tmp_path):
+    """Where a file system ignores case, tiny.json is TINY's record: a reference of scene tiny would
+    replace scene TINY's. Refused, naming both, before anything renders (shown here on a record that
+    says so: on this file system the two names are two files)."""
+    scenes, refs, _before, _second = made
+    folder = tmp_path / "refs"
+    folder.mkdir()
+    for f in ("tiny.exr", "tiny.json"):
+        shutil.copy(refs / f, folder / f)
+    meta = json.loads((folder / "tiny.json").read_text())
+    (folder / "tiny.json").write_text(json.dumps(dict(meta, scene="TINY"), indent=1, sort_keys=True) + "\n")
+    before = {f: (folder / f).read_bytes() for f in ("tiny.exr", "tiny.json")}
+    proc = maker("-i", scenes / "tiny.json", "--out", folder, "--replace", *SMALL)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    assert "tiny: refusing to write its reference" in proc.stdout and "record of scene 'TINY'" in proc.stdout
+    assert {f: (folder / f).read_bytes() for f in before} == before and not (folder / "history").exists()
+    assert not (folder / ".work" / "tiny").exists()  # nothing rendered
+
+
+@pytest.mark.slow
 def test_layers_only_at_another_scale_is_a_usage_error_naming_scene_and_sizes(made, tmp_path):
     scenes, refs, _before, _second = made
     folder = tmp_path / "refs"

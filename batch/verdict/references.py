@@ -282,17 +282,18 @@ class Collision(ValueError):
 
 def owner_elsewhere(directory, scene_name):
     """None, or what makes ``<directory>/<scene>.exr|.json`` another scene's file: a record there
-    whose ``scene`` is another name (a file system that ignores case), or an observer layer of
+    whose ``scene`` differs from it in case only (a file system that ignores case; a record of any
+    other name is a reference renamed by hand, replaced as it is), or an observer layer of
     scene S kept in the old layout (``S.<observer>.exr``, S's record naming that file) under the
     name of the reference of a scene called ``S.<observer>``."""
     from . import observer_layers
     directory = Path(directory)
     meta_path, exr_path = directory / f"{scene_name}.json", directory / f"{scene_name}.exr"
-    if meta_path.is_file():
+    if meta_path.is_file():  # a record of a name that differs in case only: the same file where case is ignored
         meta, _bad = read_record(meta_path)
         other = (meta or {}).get("scene")
-        if isinstance(other, str) and other != scene_name:
-            return f"{meta_path} is the record of scene {other!r}"
+        if isinstance(other, str) and other != scene_name and other.lower() == scene_name.lower():
+            return f"{meta_path} is the record of scene {other!r} (a file system that ignores case)"
     stem, _, obs = scene_name.rpartition(".")
     if stem and exr_path.is_file() and observer_layers.NAME.fullmatch(obs) and (directory / f"{stem}.json").is_file():
         meta, _bad = read_record(directory / f"{stem}.json")
