@@ -283,7 +283,7 @@ def migrate_layers(out, scenes):
     or 1 where a layer file could not be moved (named with why)."""
     from spectral_bench.batch.verdict import observer_layers, references
     from spectral_bench.exporters import names
-    left_any = False
+    left_any, moved_any = False, False
     for meta_path in sorted(Path(out).glob("*.json")):
         name = meta_path.stem
         if (scenes and name not in scenes) or names.scene_problem(name) is not None or references.is_history(out):
@@ -291,9 +291,12 @@ def migrate_layers(out, scenes):
         moved, left = observer_layers.migrate(out, name)
         for old, new in moved:
             print(f"{name}: {old} -> {new}", flush=True)
+            moved_any = True
         for path, why in left:
             print(f"{name}: {path}: {why}", flush=True)
             left_any = True
+    if not moved_any and not left_any:
+        print(f"{out}: no observer layer in the old layout; nothing moved", flush=True)
     return 1 if left_any else 0
 
 
