@@ -8,7 +8,7 @@
 References change only on request: a scene whose reference (its .exr or .json) is already in the
 output folder is left alone and named, with what is wrong with it if anything (stale, broken), unless
 ``--replace`` asks to render it again. Two makers never write one scene's reference at once: each
-holds the scene's lock (references/.work/<scene>.lock) from planning to writing; a scene locked by
+holds the scene's lock (references/.work/.locks/<scene>.lock) from planning to writing; a scene locked by
 another maker is skipped and named (exit status 1).
 
 Any one backend renders it: ``-r NAME`` (default mitsuba) is a built-in backend or a renderer
@@ -50,6 +50,17 @@ is rendered and judged and before it is saved; the save itself is the same atomi
 files stay current until it). A search never reads history (only <folder>/<scene>.exr/.json are
 candidates, and a folder holding ``replaced.json`` is refused even when named with --references);
 the extension build leaves history/ out. To restore an old reference, move its two files back.
+
+Observer layers (``--film cmf --layers OBSERVER``, batch/verdict/observer_layers.py) go to
+``<out>/layers/<scene>/<observer>.exr``, a folder no scene name reaches (a scene name may hold
+dots: the old place, ``<scene>.<observer>.exr`` beside the reference, is the reference of a scene
+named ``<scene>.<observer>``). ``--migrate-layers`` moves the layers of a folder still in that old
+layout (only files whose sha256 is their record's; the bytes unchanged, the records' ``file``
+pointed at the new place) and renders nothing. A reference whose files would replace another
+scene's (that old-layout layer, or a record of another scene where a file system ignores case) is
+refused before anything renders, naming both scenes (exit status 1). ``--layers-only`` renders the
+layers at the reference's own size: a ``--scale`` that gives another size is a usage error naming
+the scene and both sizes (exit status 2).
 """
 import argparse
 import contextlib
@@ -162,11 +173,15 @@ def parser():
     others = [o for o in colorimetry.OBSERVERS if o != colorimetry.GROUND_TRUTH]
     ap.add_argument("--layers", action="append", choices=others, metavar="OBSERVER",
                     help="with --film cmf: also render, from the same paths, the difference each of these observers' "
-                         f"films would see ({', '.join(others)}; repeatable), kept beside the reference as "
-                         "<scene>.<observer>.exr (batch/verdict/observer_layers.py)")
+                         f"films would see ({', '.join(others)}; repeatable), kept in the output folder as "
+                         "layers/<scene>/<observer>.exr (batch/verdict/observer_layers.py)")
     ap.add_argument("--layers-only", action="store_true",
                     help="with --layers: add the layers to current CMF-film references without rendering their images "
                          "again (the layers' own --spp and --passes; the image is not touched)")
+    ap.add_argument("--migrate-layers", action="store_true",
+                    help="move the observer layers of the references in --out (or of -s scenes) from the old layout "
+                         "<scene>.<observer>.exr, beside the reference, to layers/<scene>/<observer>.exr, the bytes "
+                         "unchanged and their records pointed there; renders nothing")
     ap.add_argument("--device", type=T["device"], default="auto", metavar="cpu|gpu|auto",
                     help="-r mitsuba: render on the GPU (cuda_ad_* variants; an error where CUDA does not render), the "
                          "CPU, or the GPU where a CUDA probe renders (default auto)")
@@ -262,10 +277,35 @@ def chosen_backend(args):
     return runner.make_backend(name, opts), name
 
 
+def migrate_layers(out, scenes):
+    """--migrate-layers: every reference record in ``out`` (or those of ``scenes``) has its
+    old-layout observer layers moved (batch/verdict/observer_layers.py ``migrate``). Exit status 0,
+    or 1 where a layer file could not be moved (named with why)."""
+    from spectral_bench.batch.verdict import observer_layers, references
+    from spectral_bench.exporters import names
+    left_any, moved_any = False, False
+    for meta_path in sorted(Path(out).glob("*.json")):
+        name = meta_path.stem
+        if (scenes and name not in scenes) or names.scene_problem(name) is not None or references.is_history(out):
+            continue
+        moved, left = observer_layers.migrate(out, name)
+        for old, new in moved:
+            print(f"{name}: {old} -> {new}", flush=True)
+            moved_any = True
+        for path, why in left:
+            print(f"{name}: {path}: {why}", flush=True)
+            left_any = True
+    if not moved_any and not left_any:
+        print(f"{out}: no observer layer in the old layout; nothing moved", flush=True)
+    return 1 if left_any else 0
+
+
 def main(argv=None):
     pkg_bootstrap.package()
     args = parser().parse_args(argv)
     from spectral_bench.batch import scene_sources
+    if args.migrate_layers:
+        return migrate_layers(Path(args.out), args.scene)
     try:
         backend, _name = chosen_backend(args)
     except Usage as exc:
@@ -285,7 +325,11 @@ def main(argv=None):
         print(backend.llvm_message(), flush=True)
     out = Path(args.out)
     with contextlib.ExitStack() as held:  # the scenes' locks, released however this ends
-        return _make(args, argv, out, held, backend)
+        try:
+            return _make(args, argv, out, held, backend)
+        except Usage as exc:  # found while planning (a --scale the reference is not at): nothing rendered
+            print(f"batch/make_references.py: error: {exc}", file=sys.stderr, flush=True)
+            return 2
 
 
 def existing_state(out, name, scene):
@@ -394,13 +438,26 @@ def _make(args, argv, out, held, backend):
                 print(f"{name}: no layers added: {why}", flush=True)
                 failed.append(name)
                 continue
+            r = scene["render"]
+            w, h = planning.scaled_size(r["width"], r["height"], args.scale)
+            H, W = found.ref.mean.shape[:2]
+            if (h, w) != (H, W):  # a layer is the reference's difference pixel by pixel: its size
+                raise Usage(f"--scale {args.scale:g}: scene {name}'s reference {found.ref.path} is {W}x{H} (recorded "
+                            f"--scale {found.ref.provenance.get('scale', 'not recorded')}), its layers would be "
+                            f"{w}x{h}: --layers-only renders them at the reference's size: give its --scale")
+        elif (owner := references.owner_elsewhere(out, name)) is not None:  # before anything renders
+            print(f"{name}: refusing to write its reference into {out}: {owner}; nothing rendered, nothing replaced",
+                  flush=True)
+            failed.append(name)
+            continue
         # checked under the lock: a reference another maker has just written counts as existing
         elif not args.replace and any(p.exists() for p in (out / f"{name}.exr", out / f"{name}.json")):
             print(f"{name}: {existing_state(out, name, scene)}; left as it is (--replace renders it again)",
                   flush=True)
             continue
         spp = scene["render"]["spp"] * args.factor if args.factor else args.spp
-        work = out / ".work" / (f"{name}.layers" if args.layers_only else name)
+        # a layers-only run's passes: .work/.layers/<scene>, where no scene's own passes (.work/<scene>) can be
+        work = out / ".work" / ".layers" / name if args.layers_only else out / ".work" / name
         todo, per_pass = pass_jobs(name, rendered, backend, mode, spp, args.passes, args.seed, work)
         plans.append((name, scene, mode, per_pass, work, todo))
         if len(todo) < args.passes:
@@ -428,6 +485,9 @@ def _make(args, argv, out, held, backend):
         name = plan[0]
         try:
             _write_reference(plan)
+        except references.Collision as exc:  # another scene's file where this reference would go
+            failed.append(name)
+            print(f"{name}: {exc}; the passes are kept in {plan[4]}", flush=True)
         except OSError as exc:  # a full disk, a folder that cannot be written: the old reference is untouched
             failed.append(name)
             where = f"{exc.filename}: " if exc.filename else ""

@@ -80,6 +80,10 @@ DEFAULT_REFERENCES = [
 # the observer layers the extension carries: Mitsuba's film (the renderer Blender users run here);
 # ART's (art46, 10 MB more) are in the all-references zip
 EXTENSION_LAYERS = ("mitsuba3",)
+# where a reference's observer layers are (batch/verdict/observer_layers.py FOLDER and NAME: this
+# script runs without the package): <references>/layers/<scene>/<observer>.exr
+LAYER_FOLDER = "layers"
+LAYER_NAME = re.compile(r"[a-z][a-z0-9]{0,31}")
 WHEEL_CACHE = ROOT / "build" / "wheels"
 README = ROOT / "README.md"
 README_BLOCK = re.compile(r"(<!-- extension-size -->\n)(.*?)(<!-- /extension-size -->)", re.S)
@@ -99,9 +103,9 @@ def select_references(stage, which):
     """Keep the references named by ``which`` ("default", "all", "none" or "a,b,c") in the staged
     copy; returns (shipped, all) scene names."""
     folder = stage / "references"
-    # a reference is <scene>.exr + <scene>.json, with its observer layers <scene>.<observer>.exr
-    # (batch/verdict/observer_layers.py) if it has them: files go with the scene before the first dot
-    every = sorted(p.stem for p in folder.glob("*.exr") if "." not in p.stem) if folder.is_dir() else []
+    # a reference is <scene>.exr + <scene>.json (a scene name may hold dots), with its observer layers
+    # in layers/<scene>/<observer>.exr (batch/verdict/observer_layers.py) if it has them
+    every = sorted(p.stem for p in folder.glob("*.exr")) if folder.is_dir() else []
     if which == "all" or not folder.is_dir():
         return every, every
     keep = (set() if which == "none" else set(DEFAULT_REFERENCES) if which == "default"
@@ -110,8 +114,12 @@ def select_references(stage, which):
     if unknown:
         raise SystemExit(f"--references: no reference for {sorted(unknown)} in {ROOT / 'references'}")
     for path in folder.iterdir():
-        if path.name.split(".", 1)[0] not in keep:
+        if path.is_file() and path.suffix in (".exr", ".json") and path.stem not in keep:
             path.unlink()
+    layers = folder / LAYER_FOLDER
+    for path in sorted(layers.iterdir()) if layers.is_dir() else []:
+        if path.name not in keep:
+            shutil.rmtree(path)
     drop_layers(folder, EXTENSION_LAYERS)
     return sorted(keep), every
 
@@ -127,7 +135,8 @@ def drop_layers(folder, keep):
             continue
         for obs in [o for o in layers if o not in keep]:
             del layers[obs]
-            (folder / f"{meta_path.stem}.{obs}.exr").unlink(missing_ok=True)
+            if LAYER_NAME.fullmatch(str(obs)):  # a record's key names a file only when it is an observer's name
+                (folder / LAYER_FOLDER / meta_path.stem / f"{obs}.exr").unlink(missing_ok=True)
         meta_path.write_text(json.dumps(meta, indent=1, sort_keys=True) + "\n")
 
 
@@ -168,11 +177,14 @@ def write_references_zip(out, version, names):
     folder = ROOT / "references"
     with zipfile.ZipFile(tmp, "w") as z:
         for name in names:
-            files = [folder / f"{name}.json", folder / f"{name}.exr", *sorted(folder.glob(f"{name}.*.exr"))]
+            layers = folder / LAYER_FOLDER / name
+            files = [folder / f"{name}.json", folder / f"{name}.exr",
+                     *(sorted(layers.glob("*.exr")) if layers.is_dir() else [])]
             for source in files:
                 if source.is_file():
                     how = zipfile.ZIP_DEFLATED if source.suffix == ".json" else zipfile.ZIP_STORED
-                    z.write(source, f"spectral_bench_references/{source.name}", compress_type=how)
+                    z.write(source, f"spectral_bench_references/{source.relative_to(folder).as_posix()}",
+                            compress_type=how)
     tmp.replace(path)
     return path
 

@@ -20,6 +20,7 @@ import shutil
 import subprocess
 import sys
 import textwrap
+import zipfile
 
 import pytest
 
@@ -147,6 +148,33 @@ def test_default_references_exist_and_every_case_keeps_one(golden):
     assert {golden[n]["case"] for n in build.DEFAULT_REFERENCES} == {scene["case"] for scene in golden.values()}
 
 
+def test_staged_references_keep_dotted_scene_names_and_only_their_own_layers(tmp_path):
+    """The extension's copy of references/ (issue 40): a scene name may hold dots, so a scene's files
+    are <scene>.exr, <scene>.json and layers/<scene>/, never "everything before the first dot";
+    the layers of scenes left out go, and only EXTENSION_LAYERS' stay (files and record entries).
+    The real references, linked into a staged folder, with a copy of one named with dots."""
+    build = _build_script()
+    folder = tmp_path / "stage" / "references"
+    link_images = lambda src, dst: os.link(src, dst) if src.endswith(".exr") else shutil.copy2(src, dst)  # noqa: E731
+    shutil.copytree(ROOT / "references", folder, copy_function=link_images, ignore=shutil.ignore_patterns(".work", "history"))
+    dotted = "ggx_copper_50.mitsuba3"  # a scene named like the old layer file of ggx_copper_50
+    shutil.copy(folder / "ggx_copper_50.exr", folder / f"{dotted}.exr")
+    meta = json.loads((folder / "ggx_copper_50.json").read_text())
+    (folder / f"{dotted}.json").write_text(json.dumps(dict(meta, scene=dotted, observer_layers={})))
+    shipped, every = build.select_references(tmp_path / "stage", f"ggx_copper_50,{dotted}")
+    assert shipped == sorted(["ggx_copper_50", dotted]) and dotted in every and "ggx_copper_50" in every
+    assert sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*") if p.is_file()) == sorted(
+        ["ggx_copper_50.exr", "ggx_copper_50.json", f"{dotted}.exr", f"{dotted}.json",
+         *[f"layers/ggx_copper_50/{o}.exr" for o in build.EXTENSION_LAYERS]])
+    kept = json.loads((folder / "ggx_copper_50.json").read_text())["observer_layers"]
+    assert set(kept) == set(build.EXTENSION_LAYERS)
+    assert all((folder / item["file"]).is_file() for item in kept.values())
+    zipped = zipfile.ZipFile(build.write_references_zip(tmp_path, "0", ["ggx_copper_50"])).namelist()
+    assert sorted(zipped) == sorted(f"spectral_bench_references/{n}" for n in
+                                    ["ggx_copper_50.json", "ggx_copper_50.exr",
+                                     *[f"layers/ggx_copper_50/{o}" for o in os.listdir(ROOT / "references" / "layers" / "ggx_copper_50")]])
+
+
 @pytest.mark.slow
 def test_the_documented_build_fits_with_margin_records_its_size_and_ships_every_reference_beside(platform_build):
     """The README's command: a zip within SIZE_TARGET_MB (margin under the platform's limit), its
@@ -163,16 +191,18 @@ def test_the_documented_build_fits_with_margin_records_its_size_and_ships_every_
     assert abs(committed["linux-x64"] - size_mb) <= 1.0, (committed, size_mb)
     names = zipfile.ZipFile(zip_path).namelist()
     shipped = [n[len("references/"):-4] for n in names if n.startswith("references/") and n.endswith(".exr")]
-    assert sorted(n for n in shipped if "." not in n) == sorted(build.DEFAULT_REFERENCES)
-    # the observer layers of EXTENSION_LAYERS only, each beside its reference and listed in its record
-    layers = sorted(n for n in shipped if "." in n)
-    assert layers and {n.split(".")[1] for n in layers} == set(build.EXTENSION_LAYERS)
+    assert sorted(n for n in shipped if "/" not in n) == sorted(build.DEFAULT_REFERENCES)
+    # the observer layers of EXTENSION_LAYERS only, each in layers/<scene>/ and listed in its record
+    layers = sorted(n for n in shipped if "/" in n)
+    assert layers and {n.split("/")[2] for n in layers} == set(build.EXTENSION_LAYERS)
     with zipfile.ZipFile(zip_path) as z:
         for n in layers:
-            scene, obs = n.split(".")
+            _folder, scene, obs = n.split("/")
             assert set(json.loads(z.read(f"references/{scene}.json"))["observer_layers"]) == {obs}, n
     (refs,) = (platform_build / "dist").glob("spectral_bench_references-*.zip")
-    every = sorted(p.name for p in (ROOT / "references").iterdir() if p.suffix in (".exr", ".json"))
+    folder = ROOT / "references"
+    every = sorted([p.name for p in folder.iterdir() if p.suffix in (".exr", ".json")]
+                   + [p.relative_to(folder).as_posix() for p in (folder / "layers").glob("*/*.exr")])
     assert sorted(n.split("/", 1)[1] for n in zipfile.ZipFile(refs).namelist()) == every
 
 

@@ -26,9 +26,13 @@ SHAPE, NAMES = (32, 32, 3), ["R", "G", "B"]
 
 
 def _copy(name, folder):
+    """A committed reference, whole: its image, its record and its observer layers (an unusable
+    layer is a reference problem of its own, issue 40)."""
     folder.mkdir(parents=True, exist_ok=True)
     for suffix in (".exr", ".json"):
         shutil.copy(ROOT / "references" / f"{name}{suffix}", folder)
+    if (ROOT / "references" / "layers" / name).is_dir():
+        shutil.copytree(ROOT / "references" / "layers" / name, folder / "layers" / name)
     return folder / f"{name}.exr", folder / f"{name}.json"
 
 

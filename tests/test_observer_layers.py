@@ -53,18 +53,19 @@ def test_mitsubas_film_fails_against_the_cmf_reference_and_meets_its_layer(mitsu
 def test_a_layer_file_that_is_not_its_records_is_not_used(tmp_path):
     from spectral_bench.batch.verdict import observer_layers, references
     name = "macbeth_chart_D65"
-    for f in (f"{name}.exr", f"{name}.json", f"{name}.mitsuba3.exr"):
+    for f in (f"{name}.exr", f"{name}.json", f"layers/{name}/mitsuba3.exr"):
+        (tmp_path / f).parent.mkdir(parents=True, exist_ok=True)
         shutil.copy(ROOT / "references" / f, tmp_path / f)
     ref = references.load(name, tmp_path)
     assert set(observer_layers.load(ref)) == {"mitsuba3"}
-    with open(tmp_path / f"{name}.mitsuba3.exr", "r+b") as f:
+    with open(tmp_path / "layers" / name / "mitsuba3.exr", "r+b") as f:
         f.seek(-64, 2)
         f.write(b"\0" * 64)
     ref = references.load(name, tmp_path)
     assert ref is not None  # the reference itself stays usable
     assert set(observer_layers.problems(ref)) == {"mitsuba3"} and "sha256 differs" in observer_layers.problem_of(ref)
     assert observer_layers.load(ref) == {} and set(observer_layers.offsets(ref)) == {"cie1931"}  # its own, at zero
-    (tmp_path / f"{name}.mitsuba3.exr").unlink()
+    (tmp_path / "layers" / name / "mitsuba3.exr").unlink()
     assert "mitsuba3.exr is missing" in observer_layers.problem_of(references.load(name, tmp_path))
 
 
@@ -107,4 +108,5 @@ def test_every_layer_record_names_how_it_was_made():
     for meta in sorted((ROOT / "references").glob("*.json")):
         for obs, rec in (json.loads(meta.read_text()).get("observer_layers") or {}).items():
             assert {"spp", "passes", "seed", "film", "noise_ratio", "sha256", "file", "command"} <= set(rec), (meta.stem, obs)
-            assert rec["file"] == f"{meta.stem}.{obs}.exr"
+            assert rec["file"] == f"layers/{meta.stem}/{obs}.exr"  # where no scene name reaches (issue 40)
+            assert (ROOT / "references" / rec["file"]).is_file()

@@ -70,7 +70,8 @@ def reference_problems_table(runs):
     out = ["", "## Reference problems", ""]
     if order:
         out += ["A reference listed here was passed over for the next folder (or, with none left, the render "
-                "was judged without one).", "", "| file | problem | jobs |", "|---|---|---|"]
+                "was judged without one); an observer layer listed here was not used, its reference was.", "",
+                "| file | problem | jobs |", "|---|---|---|"]
         out += [f"| {_cell(f)} | {_cell(p)} | {_cell(', '.join(rows[(f, p)]))} |" for f, p in order]
     if without:
         out += ["", "Judged without a reference (no usable one): "

@@ -210,13 +210,14 @@ def noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings, la
     ``held``: a dict that receives what was compared (the reference at this resolution ``at``;
     ``picked``: the shared channel names, the render and its standard error on them), for the
     diagnosis."""
-    layers = observer_layers.load(ref)
+    layers, bad_layers = observer_layers.check(ref)
     entry["reference"] = {"path": str(ref.path), "spp": ref.spp, "backend": ref.provenance.get("backend"),
                           "mode": ref.provenance.get("mode"), "versions": ref.provenance.get("versions"),
                           "date": ref.provenance.get("date"), "observer": observer_layers.own_observer(ref.provenance),
                           "observer_layers": sorted(layers)}
-    if (why := observer_layers.problem_of(ref)) is not None:
-        entry["reference"]["observer_layers_problem"] = why
+    if bad_layers:  # an unusable layer: a reference problem of its file; the reference itself is used
+        entry["reference"]["observer_layers_problem"] = "; ".join(why for _f, why in bad_layers.values())
+        entry.setdefault("reference_problems", []).extend(observer_layers.reference_problems(ref, bad_layers))
     # judged on the channels both have (a renderer may add Stokes channels the reference lacks)
     shared = [n for n in ref.names if n in names]
     if shared[:3] != ["R", "G", "B"]:
@@ -322,13 +323,17 @@ def sweep_point(job, record):
     ref, unusable, problems = find_reference(job["scene_name"], scene, job["verdict"].get("references"),
                                              shape=img.shape, names=names)
     point = {"spp": record["spp"], "time_s": record["time_s"], "wall_s": record["wall_s"]}
-    if problems:
-        point["reference_problems"] = problems
     if unusable:
+        if problems:
+            point["reference_problems"] = problems
         point["reason"] = unusable
         return point
+    layers, bad_layers = observer_layers.check(ref)
+    problems = list(problems) + observer_layers.reference_problems(ref, bad_layers)
+    if problems:
+        point["reference_problems"] = problems
     at = compare.reference_at(ref.mean, ref.stderr, ref.spp, img.shape, ref.provenance.get("passes", 8),
-                              observer_layers.offsets(ref, img.shape[-1]))
+                              observer_layers.offsets(ref, img.shape[-1], layers))
     point.update(compare.metrics(img[..., :3], at.mean[..., :3]))
     point["predicted_rmse"] = float(np.sqrt(np.mean(at.sigma2[..., :3]) / record["spp"] + np.mean(at.var_of_mean[..., :3])))
     point["noise_floor_rmse"] = float(np.sqrt(np.mean(at.var_of_mean[..., :3])))

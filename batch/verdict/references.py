@@ -25,6 +25,12 @@ its record and image move to <references>/history/<scene>/<UTC time>-<backend>/ 
 ``replaced.json`` record (who replaced it, why: the verdict of the new against the old on both
 noises, the command). A search never reads history: it looks only at <folder>/<scene>.exr and
 .json, and a folder holding a ``replaced.json`` is refused as a candidate even when named directly.
+
+A write never replaces another scene's file (``refuse_collision``, issue 40): where
+``<scene>.exr|.json`` is an observer layer of scene S kept in the old layout (``S.<observer>.exr``,
+S's record naming it) or a record of another scene (a file system that ignores case), ``save`` and
+``replace`` raise ``Collision`` naming both. Observer layers themselves live in
+``<folder>/layers/<scene>/`` (batch/verdict/observer_layers.py), where no scene's reference is.
 """
 import copy
 import hashlib
@@ -176,7 +182,9 @@ def examine(folder, scene_name, fp=None, shape=None, names=None):
             "this folder keeps a replaced reference (history of batch/make_references.py --replace), "
             "never a current one"))
     if not has_meta:
-        return None, problem(exr_path, f"no record {meta_path.name} beside it: not a complete reference")
+        owner = owner_elsewhere(folder, scene_name)
+        return None, problem(exr_path, f"no record {meta_path.name} beside it: not a complete reference"
+                             + (f" ({owner})" if owner else ""))
     if not has_exr:
         return None, problem(meta_path, f"no image {exr_path.name} beside it: not a complete reference")
     meta, bad = read_record(meta_path)
@@ -268,6 +276,44 @@ def check_usable(ref, scene, shape=None, names=None):
     return f"reference {ref.path.name}: {why}" if why else None
 
 
+class Collision(ValueError):
+    """A write that would replace a file of another scene (issue 40): refused, naming both."""
+
+
+def owner_elsewhere(directory, scene_name):
+    """None, or what makes ``<directory>/<scene>.exr|.json`` another scene's file: a record there
+    whose ``scene`` differs from it in case only (a file system that ignores case; a record of any
+    other name is a reference renamed by hand, replaced as it is), or an observer layer of
+    scene S kept in the old layout (``S.<observer>.exr``, S's record naming that file) under the
+    name of the reference of a scene called ``S.<observer>``."""
+    from . import observer_layers
+    directory = Path(directory)
+    meta_path, exr_path = directory / f"{scene_name}.json", directory / f"{scene_name}.exr"
+    if meta_path.is_file():  # a record of a name that differs in case only: the same file where case is ignored
+        meta, _bad = read_record(meta_path)
+        other = (meta or {}).get("scene")
+        if isinstance(other, str) and other != scene_name and other.lower() == scene_name.lower():
+            return f"{meta_path} is the record of scene {other!r} (a file system that ignores case)"
+    stem, _, obs = scene_name.rpartition(".")
+    if stem and exr_path.is_file() and observer_layers.NAME.fullmatch(obs) and (directory / f"{stem}.json").is_file():
+        meta, _bad = read_record(directory / f"{stem}.json")
+        item = ((meta or {}).get(observer_layers.RECORD_KEY) or {}) if isinstance(meta, dict) else {}
+        item = item.get(obs) if isinstance(item, dict) else None
+        if isinstance(item, dict) and item.get("file") == exr_path.name:
+            return (f"{exr_path} is scene {stem!r}'s observer layer {obs} in the old layout "
+                    f"({observer_layers._migrate_hint(directory)})")
+    return None
+
+
+def refuse_collision(directory, scene_name):
+    """Raise Collision, naming both scenes, where writing ``scene_name``'s reference into
+    ``directory`` would replace another scene's file (owner_elsewhere)."""
+    owner = owner_elsewhere(directory, scene_name)
+    if owner:
+        raise Collision(f"scene {scene_name!r}: refusing to write its reference into {directory}: {owner}; "
+                        "nothing written, nothing replaced")
+
+
 HALF_MAX = 65504.0
 
 
@@ -283,12 +329,13 @@ def _noise_channel(stderr):
 
 def scene_lock(directory, scene_name):
     """The lock every writer of ``scene_name``'s reference in ``directory`` holds (a file in
-    ``directory``/.work/, which git and the extension build leave out). One lock object per file
+    ``directory``/.work/.locks/, which git and the extension build leave out: a folder no scene's
+    passes, ``.work/<scene>/``, can be, since a scene name never starts with a dot). One lock object per file
     in this process (filelock's singletons), re-entrant and not bound to a thread, so that
     make_references can hold it for a whole scene and save() take it again from an engine's
     callback. (filelock is imported here: only writers need it, not the extension.)"""
     import filelock
-    work = Path(directory) / ".work"
+    work = Path(directory) / ".work" / ".locks"
     work.mkdir(parents=True, exist_ok=True)
     return filelock.FileLock(str(work / f"{scene_name}.lock"), is_singleton=True, thread_local=False)
 
@@ -361,6 +408,7 @@ def save(scene, names, mean, stderr, provenance, directory=None):
     exr_path, meta_path = directory / f"{name}.exr", directory / f"{name}.json"
     fp = fingerprint(scene)
     with scene_lock(directory, name):
+        refuse_collision(directory, name)
         exr_tmp, meta_tmp = _temp(directory, name, ".exr.tmp"), _temp(directory, name, ".json.tmp")
         try:
             exr.write_image(exr_tmp, names, mean, extra)
@@ -485,6 +533,7 @@ def replace(scene, names, mean, stderr, provenance, directory, record, when):
     name = scene["name"]
     old = [p for p in (directory / f"{name}.json", directory / f"{name}.exr") if p.exists()]
     with scene_lock(directory, name):
+        refuse_collision(directory, name)
         if not old:
             return save(scene, names, mean, stderr, provenance, directory), None
         backend = None
