@@ -115,7 +115,8 @@ def compare_job(old, new, old_folder, new_folder, out_dir, base, settings, zmap_
               for k in METRICS if isinstance(mo, dict) and isinstance(mn, dict) and (mo.get(k) is not None or mn.get(k) is not None)}
     return {"scene": new.get("scene"), "backend": new.get("backend"), "mode": new.get("mode"),
             "old_status": old.get("status"), "new_status": new.get("status"), "changes": changes,
-            "changed": bool(changes), "unstable": None if changes else unstable, "unjudged": problems, "baseline": rec, "metrics": deltas, "time": rec.get("time")}
+            "changed": bool(changes), "unstable": None if changes else unstable, "unjudged": problems, "baseline": rec,
+            "metrics": deltas, "time": rec.get("time")}
 
 
 def _failed_job(new, exc):

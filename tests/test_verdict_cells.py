@@ -202,3 +202,58 @@ def test_the_panel_shows_the_failing_part_and_the_unstable_verdict(runs):
         assert any(t and t.startswith("baseline: same") for t in labels), labels
     if rb["status"] == "failed":
         assert any(t and t.startswith("noise test: FAIL: scale test failed: ") for t in out["before"])
+
+
+# -- a probe's verdict that flips within noise (real EXRs, hand-made records) ------------------------------
+def _probe_run(out, seed, measured):
+    """A run folder of one job: a real EXR render with its own noise (4 passes of the same image)
+    and a probe measuring ``measured`` against 1.0 with standard error 0.01, judged by the project's
+    test (stats.compare_means at alpha 0.01); the status follows the probe."""
+    import numpy as np
+    from spectral_bench.batch import exr
+    from spectral_bench.batch.verdict import stats
+    rng = np.random.default_rng(seed)
+    truth = np.broadcast_to(np.linspace(0.2, 1.0, 16)[None, :, None], (16, 16, 3))
+    passes = truth[None] + rng.normal(0.0, 0.05, (4,) + truth.shape)
+    mean, se = passes.mean(axis=0), passes.std(axis=0, ddof=1) / 2
+    res = out / "s" / "results" / "mitsuba"
+    res.mkdir(parents=True)
+    exr.write_image(res / "render.exr", ["R", "G", "B"], mean.astype(np.float32),
+                    {f"stderr.{c}": se[..., i].astype(np.float32) for i, c in enumerate("RGB")})
+    judged = stats.compare_means([measured], [1.0], [0.01], alpha=0.01)
+    stat = {"measured": [measured], "expected": [1.0], "se": [0.01], "threshold": float(judged["threshold"])}
+    passed = bool(judged["pass"])
+    run = {"scene": "s", "case": "c", "backend": "mitsuba", "mode": "m", "status": "ok" if passed else "failed",
+           "reason": "" if passed else "failed: p", "spp": 4096, "passes": 4, "resolution": [16, 16],
+           "image": "s/results/mitsuba/render.exr", "channels": ["R", "G", "B"], "metrics": {},
+           "probes": [{"name": "p", "pass": passed, "stat": stat}], "pass_times": [1.0, 1.1, 0.9, 1.0],
+           "detectable": {"scale": None, "probes": {"p": stats.detectable_scale(stat)}}}
+    (out / "metrics.json").write_text(json.dumps({"options": {"alpha": 0.01, "block": 4}, "runs": [run]}))
+    return run
+
+
+def test_a_probe_that_flips_within_noise_is_unstable_and_one_that_moved_is_changed(tmp_path):
+    """A probe 2.5 standard errors off passes at alpha 0.01, 2.8 off fails: the same render with
+    other noise flips its status while the images and the probe's residuals agree within noise;
+    compare_runs names it unstable with the probe's deviation against what it detects, exit 0. The
+    probe 10 standard errors off (moved beyond both runs' noise) is CHANGED, exit 1."""
+    old, new, moved = tmp_path / "old", tmp_path / "new", tmp_path / "moved"
+    ro, rn = _probe_run(old, 1, 1.025), _probe_run(new, 2, 1.028)
+    assert (ro["status"], rn["status"]) == ("ok", "failed")  # the premise: the probe's verdict flips
+    cmp = compare_runs(old, new)
+    assert cmp.returncode == 0, cmp.stdout[-3000:] + cmp.stderr[-2000:]
+    (j,) = json.loads((new / "compare" / "compare.json").read_text())["jobs"]
+    det = rn["detectable"]["probes"]["p"]
+    m = re.fullmatch(r"verdict unstable: probe p's deviation ([0-9.]+) % is at its detectable ([0-9.]+) % "
+                     r"\(status ok -> failed, probe p pass -> FAIL; the images agree within noise\)", j["unstable"])
+    assert m and j["changed"] is False, j
+    assert float(m.group(2)) == pytest.approx(100 * det, rel=0.05)
+    assert float(m.group(1)) == pytest.approx(100 * (1.025 + 1.028) / 2 - 100, rel=0.05)  # both runs' own, pooled
+    assert "| unstable | s |" in cmp.stdout
+
+    _probe_run(moved, 3, 1.10)
+    cmp = compare_runs(old, moved)
+    assert cmp.returncode == 1, cmp.stdout[-3000:] + cmp.stderr[-2000:]
+    (j,) = json.loads((moved / "compare" / "compare.json").read_text())["jobs"]
+    assert j["changed"] and j["unstable"] is None and any(c.startswith("probe p moved beyond noise") for c in j["changes"]), j
+    assert "| CHANGED | s |" in cmp.stdout

@@ -430,7 +430,8 @@ def _probe_deviation(name, old_entry, new_entry):
     from what it expects; its own detectable figure from the new run) or Nones."""
     stats = []
     for e in (old_entry, new_entry):
-        p = next((p for p in e.get("probes") or [] if isinstance(p, dict) and str(p.get("name")) == name), None)
+        probes = e.get("probes") if isinstance(e.get("probes"), list) else []
+        p = next((p for p in probes if isinstance(p, dict) and str(p.get("name")) == name), None)
         stats.append(_probe_stat(p))
     det = (new_entry.get("detectable") or {}).get("probes") if isinstance(new_entry.get("detectable"), dict) else None
     det = det.get(name) if isinstance(det, dict) else None
@@ -438,8 +439,8 @@ def _probe_deviation(name, old_entry, new_entry):
         return None, det
     best = None
     for i in range(stats[0]["measured"].size):
-        rel = [((s["measured"].flat[i] - s["expected"].flat[i]) / s["expected"].flat[i], s["se"].flat[i] / abs(s["expected"].flat[i]))
-               for s in stats if s["expected"].flat[i] != 0]
+        rel = [((s["measured"].flat[i] - s["expected"].flat[i]) / s["expected"].flat[i],
+                s["se"].flat[i] / abs(s["expected"].flat[i])) for s in stats if s["expected"].flat[i] != 0]
         pooled = _pooled(rel) if len(rel) == 2 else None
         if pooled is not None and (best is None or abs(pooled[0]) / pooled[1] > best[1]):
             best = (abs(pooled[0]), abs(pooled[0]) / pooled[1])
@@ -453,7 +454,9 @@ def _percent(x):
 
 def _at(dev, det):
     """Where a deviation lies against what the test detects with 90 % power: below (under half of
-    it, where the test is seldom right), at (its power between coin toss and sure), above."""
+    it: the test seldom fails such a render, its flip was a rare draw), at (half to 1.5 times it:
+    the test fails such a render with some probability between rarely and nearly always, so with
+    the seed), above."""
     r = dev / det
     return "below" if r < 0.5 else "at" if r <= 1.5 else "above"
 
