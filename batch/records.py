@@ -421,11 +421,56 @@ def _number(x):
     return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
 
 
+def _scale_figures(sc):
+    """The scale test's worst channel (largest |z|) as "B 0.11 % bright (+- 0.03)", or ""."""
+    s, se, z = (sc.get(k) if isinstance(sc.get(k), list) else [] for k in ("s", "se", "z"))
+    worst = [(abs(z[i]), i) for i in range(min(len(s), len(se), len(z)))
+             if _number(z[i]) and _number(s[i]) and _number(se[i])]
+    if not worst:
+        return ""
+    i = max(worst)[1]
+    name = "RGB"[i] if i < 3 else f"channel {i + 1}"
+    word = "bright" if s[i] > 1 else "dark"
+    return f"{name} {abs(s[i] - 1) * 100:.2g} % {word} (+- {se[i] * 100:.2g}), "
+
+
+def noise_test_parts(test):
+    """The parts of a noise test record (a run entry's ``test``, or a comparison's) as [(passed,
+    name, figures)], the failing ones first, each with its own figures: the block test ("p_min P
+    (threshold T), z_max Z"), the scale test ("B 0.11 % bright (+- 0.03), p P (threshold T)": its
+    channel of largest |z|, batch/verdict/compare.py ``scale_stats``) and, for a test that failed
+    while both passed, the render's non-finite pixels (the third way z_test fails). Empty for a
+    record without the block test's figures."""
+    if not isinstance(test, dict) or not (_number(test.get("p_min")) and _number(test.get("threshold"))):
+        return []
+    block_ok = test.get("block_pass")
+    if not isinstance(block_ok, bool):
+        block_ok = test["p_min"] >= test["threshold"]
+    parts = [(block_ok, "block test", f"p_min {test['p_min']:.3g} (threshold {test['threshold']:.3g})"
+              + (f", z_max {test['z_max']:.2f}" if _number(test.get("z_max")) else ""))]
+    sc = test.get("scale_test")
+    if isinstance(sc, dict) and _number(sc.get("p_min")) and _number(sc.get("threshold")):
+        ok = sc.get("pass") if isinstance(sc.get("pass"), bool) else sc["p_min"] >= sc["threshold"]
+        parts.append((ok, "scale test", f"{_scale_figures(sc)}p {sc['p_min']:.3g} (threshold {sc['threshold']:.3g})"))
+    if test.get("pass") is False and all(ok for ok, _, _ in parts):
+        parts.append((False, "finite values", "NaN or Inf in the render"))
+    return sorted(parts, key=lambda part: part[0])  # stable: the failing parts first, in this order
+
+
+def noise_test_failure(test):
+    """What failed in a noise test record, each failing part with its own figures ("scale test: B
+    0.2 % dark (+- 0.05), p P (threshold T)"), or "" when no part failed."""
+    return "; ".join(f"{name}: {figures}" for ok, name, figures in noise_test_parts(test) if not ok)
+
+
 def noise_test_text(test):
-    """The noise test of a run entry (its ``test``) as one line of text: "pass: p_min P
-    (threshold T), z_max Z", "FAIL: p_min P (threshold T), z_max Z", "not judged: why", "FAIL:
-    why", or "" when there is no test (no character that Markdown or HTML would escape). Any value
-    of the wrong type is shown as text or left out, never raises."""
+    """The noise test of a run entry (its ``test``) as one line of text, the cell of summary.md,
+    report.html, JUnit and the panel: "FAIL: scale test failed: B 0.2 % dark (+- 0.05), p P
+    (threshold T); block test passed: p_min P (threshold T), z_max Z" (the failing part first, each
+    part with its own figures: ``noise_test_parts``), "pass: block test p_min ...; scale test ...",
+    for a record without a scale test "pass: p_min P (threshold T), z_max Z" or "FAIL: ...", "not
+    judged: why", "FAIL: why", or "" when there is no test (no character that Markdown or HTML
+    would escape). Any value of the wrong type is shown as text or left out, never raises."""
     if not isinstance(test, dict):
         return ""
     passed, reason = test.get("pass"), test.get("reason")
@@ -433,10 +478,14 @@ def noise_test_text(test):
     if passed is not True and passed is not False:
         return f"not judged: {reason}" if reason else "not judged"
     word = "pass" if passed else "FAIL"
-    if _number(test.get("p_min")) and _number(test.get("threshold")):
-        line = f"{word}: p_min {test['p_min']:.3g} (threshold {test['threshold']:.3g})"
-        return line + (f", z_max {test['z_max']:.2f}" if _number(test.get("z_max")) else "")
-    return f"{word}: {reason}" if reason else word
+    parts = noise_test_parts(test)
+    if not parts:
+        return f"{word}: {reason}" if reason else word
+    if len(parts) == 1 and parts[0][1] == "block test":  # the block test alone (no scale test): its figures
+        return f"{word}: {parts[0][2]}"
+    if passed:
+        return f"{word}: " + "; ".join(f"{name} {figures}" for _, name, figures in parts)
+    return f"{word}: " + "; ".join(f"{name} {'passed' if ok else 'failed'}: {figures}" for ok, name, figures in parts)
 
 
 def flip_text(run):

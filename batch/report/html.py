@@ -347,11 +347,10 @@ def _checks(run):
     if isinstance(test, dict):
         verdict = _verdict(test.get("pass"), "not judged")
         if _num(test.get("p_min")) and _num(test.get("threshold")) and test.get("pass") is not None:
-            ok = test["p_min"] >= test["threshold"]
-            text = (f"noise test ({_text(test.get('name')) or 'block test'}; {_text(test.get('tests'))} tests: blocks of "
-                    f"{_text(test.get('block'))} px x channels, on the render's {_text(test.get('noise'))} noise): smallest p {test['p_min']:.3g} "
-                    f"{'>=' if ok else '<'} threshold {test['threshold']:.3g} (alpha {_text(test.get('alpha'))}, Sidak); "
-                    f"max |z| {_fmt(test.get('z_max'), '{:.3g}')}")
+            # the cell of summary.md, JUnit and the panel (batch/records.py): each part with its own figures
+            text = (f"noise test ({_text(test.get('tests'))} blocks of {_text(test.get('block'))} px x channels, on the "
+                    f"render's {_text(test.get('noise'))} noise, alpha {_text(test.get('alpha'))}, Sidak): "
+                    + records.noise_test_text(test))
         else:
             text = f"noise test: {_text(test.get('reason'))}"
         lines.append({"text": text, "verdict": verdict})

@@ -8,10 +8,16 @@ reference (batch/verdict/compare.py ``z_test``, Sidak-corrected) in the pairing 
 batch/verdict/references.py ``judge_replacement`` makes for two references: the finer image is
 box-filtered to the coarser one's resolution (``reference_at``: pixels are independent, a big pixel
 is the mean of its f x f small ones), the coarser image brings its own per-pixel standard error.
-Its analytic probes are compared too: a probe that passed in the baseline and fails now, or whose
-residual (measured - expected) moved beyond the two runs' noise. The job's family of tests (the
-image test and each compared probe) shares the run's alpha by a Sidak split, so a job that did not
-change is called ``changed`` with probability alpha.
+Its analytic probes are compared too: a probe whose residual (measured - expected) moved beyond the
+two runs' noise, or one that passed in the baseline and fails now where its residuals cannot be
+compared. The job's family of tests (the image test and each compared probe) shares the run's alpha
+by a Sidak split, so a job that did not change is called ``changed`` with probability alpha.
+
+A verdict that flipped (status ok -> failed, the noise test or a probe pass -> FAIL) while the
+images agree within noise and no probe's residual moved is not a change: the render sits at the
+edge of what its checks detect (a deviation of 0.1 % against a test that detects 0.11 % with 90 %
+power fails about half the time), so its verdict follows the seed. The record stays ``same`` and
+says so (``unstable``).
 
 The record (``entry["baseline"]``, field names of the helpers' contract):
   run        the baseline folder as the user gave it
@@ -20,6 +26,11 @@ The record (``entry["baseline"]``, field names of the helpers' contract):
              status is (both skipped, say)
   reason     what changed and where, or why it could not be compared
   p_min, threshold   the image test's smallest p and its Sidak threshold
+  test       the image test in a job's ``test`` layout: its block test and its scale test (either
+             fails it), for batch/records.py ``noise_test_text``
+  unstable   for a ``same`` job whose verdicts flipped: "verdict unstable: the deviation 0.10 % is
+             at the test's detectable 0.11 % (status ok -> failed, ...; the images agree within
+             noise)" (``unstable_text``), also its reason; else null
   ratio      [[mean new / mean baseline, its standard error]] for R, G, B
   detectable the smallest uniform relative scale change of the image that the two-sample test
              detects with 90 % power (``detectable_scale``)
@@ -324,6 +335,154 @@ def _families(rows):
     return 1 + sum(1 for r in rows if r["_stats"][0] is not None and r["_stats"][1] is not None)
 
 
+# -- verdicts that flipped while the images agree ---------------------------------------------------
+DECIDED = ("ok", "failed", "known", "fixed")  # statuses of a judged render (batch/verdict/status.py)
+
+
+def _verdict_word(passed):
+    return {True: "pass", False: "FAIL", None: "not judged"}.get(passed, str(passed))
+
+
+def _test_pass(entry):
+    t = entry.get("test")
+    return t.get("pass") if isinstance(t, dict) else None
+
+
+def verdict_flips(old_entry, new_entry, rows=None):
+    """The verdicts of a job that differ between the baseline and this run: [{"what", "old", "new",
+    "decided", "text"}] for its status, its noise test against the reference and each probe present
+    in both (``rows``: ``compare_probes`` judged by ``judge_probes``, for whether the probe's residual
+    moved). ``decided``: both sides are verdicts of a judged render (a status in DECIDED, pass or
+    FAIL) and, for a probe, its residuals were compared and did not move beyond noise; a flip that
+    is not decided (ok -> unjudged, a probe without statistics, ok -> failed with no check flipped)
+    is a change in itself."""
+    out = []
+    to, tn = _test_pass(old_entry), _test_pass(new_entry)
+    if to != tn:
+        out.append({"what": "noise test", "old": to, "new": tn,
+                    "decided": isinstance(to, bool) and isinstance(tn, bool),
+                    "text": f"noise test against the reference {_verdict_word(to)} -> {_verdict_word(tn)}"})
+    po, pn = _probe_passes(old_entry), _probe_passes(new_entry)
+    moved = {str(r.get("name")): r.get("moved") for r in rows or [] if isinstance(r, dict)}
+    for name in pn:
+        if name not in po or po[name] == pn[name]:
+            continue  # a probe new or gone is the caller's to list
+        a, b = po[name], pn[name]
+        out.append({"what": f"probe {name}", "name": name, "old": a, "new": b,
+                    "decided": isinstance(a, bool) and isinstance(b, bool) and moved.get(name) is False,
+                    "text": f"probe {name} {_verdict_word(a)} -> {_verdict_word(b)}"})
+    so, sn = old_entry.get("status"), new_entry.get("status")
+    if so != sn:
+        # a status follows its checks (and, for known and fixed, their re-judging under a recorded
+        # deviation, which is noisy too): ok -> failed with no check flipped is no seed's doing
+        noisy = any(f["decided"] for f in out) or any(s in ("known", "fixed") for s in (so, sn))
+        out.insert(0, {"what": "status", "old": so, "new": sn, "decided": so in DECIDED and sn in DECIDED and noisy,
+                       "text": f"status {so} -> {sn}"})
+    return out
+
+
+def _probe_passes(entry):
+    p = entry.get("probes")
+    return {str(x.get("name")): x.get("pass") for x in p if isinstance(x, dict)} if isinstance(p, list) else {}
+
+
+def _pooled(values):
+    """Inverse-variance mean of [(estimate, standard error)] (the estimates of one quantity from the
+    two runs), or None."""
+    good = [(v, s) for v, s in values if isinstance(v, (int, float)) and isinstance(s, (int, float))
+            and math.isfinite(v) and math.isfinite(s) and s > 0]
+    if not good:
+        return None
+    w = [1.0 / s**2 for _, s in good]
+    return sum(wi * v for wi, (v, _) in zip(w, good)) / sum(w), 1.0 / math.sqrt(sum(w))
+
+
+def scale_deviation(old_entry, new_entry):
+    """The render's uniform scale deviation from the reference as both runs measure it: per channel
+    the two runs' scale test estimates (batch/verdict/compare.py ``scale_stats``: s and its standard
+    error) pooled by inverse variance, |s - 1| of the channel whose pooled estimate lies most standard
+    errors from 1; None without a scale test in both runs."""
+    scs = [(e.get("test") or {}).get("scale_test") if isinstance(e.get("test"), dict) else None
+           for e in (old_entry, new_entry)]
+    if not all(isinstance(sc, dict) and isinstance(sc.get("s"), list) and isinstance(sc.get("se"), list) for sc in scs):
+        return None
+    best = None
+    for c in range(min(len(sc["s"]) for sc in scs)):
+        pooled = _pooled([(sc["s"][c], sc["se"][c] if c < len(sc["se"]) else None) for sc in scs])
+        if pooled is not None and (best is None or abs(pooled[0] - 1) / pooled[1] > best[1]):
+            best = (abs(pooled[0] - 1), abs(pooled[0] - 1) / pooled[1])
+    return None if best is None else best[0]
+
+
+def _noise_test_detectable(entry):
+    """The smallest uniform scale error the job's noise test detects with 90 % power (its block and
+    scale tests' best: metrics.json ``detectable.tests``), else the run's ``detectable.scale``."""
+    det = entry.get("detectable") if isinstance(entry.get("detectable"), dict) else {}
+    tests = det.get("tests") if isinstance(det.get("tests"), dict) else {}
+    found = [v for v in tests.values() if isinstance(v, (int, float)) and v > 0]
+    if found:
+        return min(found)
+    return det.get("scale") if isinstance(det.get("scale"), (int, float)) and det["scale"] > 0 else None
+
+
+def _probe_deviation(name, old_entry, new_entry):
+    """(|relative residual| of a probe pooled over both runs, at its element most standard errors
+    from what it expects; its own detectable figure from the new run) or Nones."""
+    stats = []
+    for e in (old_entry, new_entry):
+        probes = e.get("probes") if isinstance(e.get("probes"), list) else []
+        p = next((p for p in probes if isinstance(p, dict) and str(p.get("name")) == name), None)
+        stats.append(_probe_stat(p))
+    det = (new_entry.get("detectable") or {}).get("probes") if isinstance(new_entry.get("detectable"), dict) else None
+    det = det.get(name) if isinstance(det, dict) else None
+    if any(s is None for s in stats) or stats[0]["measured"].shape != stats[1]["measured"].shape:
+        return None, det
+    best = None
+    for i in range(stats[0]["measured"].size):
+        rel = [((s["measured"].flat[i] - s["expected"].flat[i]) / s["expected"].flat[i],
+                s["se"].flat[i] / abs(s["expected"].flat[i])) for s in stats if s["expected"].flat[i] != 0]
+        pooled = _pooled(rel) if len(rel) == 2 else None
+        if pooled is not None and (best is None or abs(pooled[0]) / pooled[1] > best[1]):
+            best = (abs(pooled[0]), abs(pooled[0]) / pooled[1])
+    return (None if best is None else best[0]), det
+
+
+def _percent(x):
+    text = f"{100 * x:#.2g}"
+    return text.rstrip(".")
+
+
+def _at(dev, det):
+    """Where a deviation lies against what the test detects with 90 % power: below (under half of
+    it: the test seldom fails such a render, its flip was a rare draw), at (half to 1.5 times it:
+    the test fails such a render with some probability between rarely and nearly always, so with
+    the seed), above."""
+    r = dev / det
+    return "below" if r < 0.5 else "at" if r <= 1.5 else "above"
+
+
+def unstable_text(old_entry, new_entry, flips):
+    """The sentence for verdicts that flipped while the images agree within noise: "verdict
+    unstable: the deviation 0.10 % is at the test's detectable 0.11 % (status ok -> failed, noise
+    test against the reference pass -> FAIL; the images agree within noise)". The deviation is the
+    one both runs measure (``scale_deviation``; a probe's: its relative residual pooled over both
+    runs), against what the check detects with 90 % power: a check that sits at the edge of its
+    power passes or fails with the seed."""
+    figures = []
+    probe_flips = [f for f in flips if f["what"].startswith("probe ")]
+    if any(f["what"] == "noise test" for f in flips) or not probe_flips:
+        dev, det = scale_deviation(old_entry, new_entry), _noise_test_detectable(new_entry)
+        if dev is not None and det:
+            figures.append(f"the deviation {_percent(dev)} % is {_at(dev, det)} the test's detectable {_percent(det)} %")
+    for f in probe_flips:
+        dev, det = _probe_deviation(f["name"], old_entry, new_entry)
+        if dev is not None and det:
+            figures.append(f"{f['what']}'s deviation {_percent(dev)} % is {_at(dev, det)} its detectable {_percent(det)} %")
+    what = ", ".join(f["text"] for f in flips)
+    return ("verdict unstable: " + ("; ".join(figures) + f" ({what}; the images agree within noise)" if figures
+                                    else f"{what} while the images agree within noise"))
+
+
 # -- one job against its baseline ------------------------------------------------------------------
 def _ratio_list(ratio):
     return [ratio.get(c) for c in ("R", "G", "B")]
@@ -391,20 +550,27 @@ def judge_pair(new_entry, new_folder, old_entry, old_folder, settings, zmap_path
     previews.save_signed(zmap_path.with_name(ZMAP_PNG), worst, scale=6)
     y, x = np.unravel_index(int(np.argmax(np.abs(worst))), worst.shape)
     ratio = _ratio_list(res["ratio"])
+    test = zt.as_dict()  # the two-sample noise test, in a job's ``test`` layout (its block and scale tests)
     changes = []
     if not zt.passed:
-        changes.append(f"image differs beyond noise: min p = {zt.p_min:.3g} < {zt.threshold:.3g} "
-                       f"({zt.blocks} tests), max |z| = {zt.z_max:.1f} at pixel ({x}, {y}) of {worst.shape[1]}x"
-                       f"{worst.shape[0]}; mean ratio " + ", ".join(
+        from ..records import noise_test_failure  # the part that failed, with its own figures
+        changes.append(f"image differs beyond noise: {noise_test_failure(test)} ({zt.blocks} blocks); max |z| = "
+                       f"{zt.z_max:.1f} at pixel ({x}, {y}) of {worst.shape[1]}x{worst.shape[0]}; mean ratio " + ", ".join(
                            f"{c} {r[0]:.4f} +- {r[1]:.4f}" for c, r in zip("RGB", ratio) if r))
     for r in rows:
-        if r["old"] is True and r["new"] is False:
-            changes.append(f"probe {r['name']} passed in the baseline and fails now")
-        elif r.get("moved"):
+        if r.get("moved"):
             changes.append(f"probe {r['name']} moved beyond noise (z = {r['z']:.1f})")
+        elif r["old"] is True and r["new"] is False and r.get("moved") is None:  # no residuals to judge it by
+            changes.append(f"probe {r['name']} passed in the baseline and fails now")
     status = "changed" if changes else "same"
     reason = "; ".join(changes) + (f"; z-map: {zmap_rel}" if changes else "")
-    return _record(run_label, status, reason, p_min=zt.p_min, threshold=zt.threshold, ratio=ratio,
+    unstable = None
+    flips = verdict_flips(old_entry, new_entry, rows)
+    if not changes and flips and all(f["decided"] for f in flips):
+        # the verdicts flipped while the images agree within noise: a check at the edge of its power
+        unstable = reason = unstable_text(old_entry, new_entry, flips)
+    return _record(run_label, status, reason, p_min=zt.p_min, threshold=zt.threshold, ratio=ratio, test=test,
+                   unstable=unstable,
                    detectable=det, detectable_exact_reference=det_exact,
                    sees_less=(det / det_exact) if det and det_exact else None,
                    zmap=str(zmap_rel), judged_at=res["judged_at"], z_max=zt.z_max, worst_pixel=[int(x), int(y)],

@@ -257,9 +257,9 @@ def noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings, la
                             min_samples=compare.min_samples_for(entry["scene"], settings["min_samples"]))
         entry["test"] = zt.as_dict()
         if not zt.passed:
-            entry["test"]["reason"] = (
-                f"differs from the reference beyond noise: min p = {zt.p_min:.3g} < {zt.threshold:.3g} "
-                f"(alpha {zt.alpha} Sidak-corrected over {zt.blocks} tests), max |z| = {zt.z_max:.1f}")
+            from ..records import noise_test_failure  # the part that failed, with its own figures
+            entry["test"]["reason"] = (f"differs from the reference beyond noise (alpha {zt.alpha}, Sidak-corrected "
+                                       f"over {zt.blocks} blocks): {noise_test_failure(entry['test'])}")
         previews.write_half(res_dir / "zscore.exr", zt.zmap[..., :3])
         previews.write_half(res_dir / previews.BLOCK_STDERR, zt.semap[..., :3])
     # issue 21: the reader's images kept small (batch/previews.py): one half-float reference per
