@@ -435,7 +435,8 @@ def noise_test_text(test):
     word = "pass" if passed else "FAIL"
     if _number(test.get("p_min")) and _number(test.get("threshold")):
         line = f"{word}: p_min {test['p_min']:.3g} (threshold {test['threshold']:.3g})"
-        return line + (f", z_max {test['z_max']:.2f}" if _number(test.get("z_max")) else "")
+        from .stat_text import format_z  # past 1e4 to 3 significant digits: never hundreds of them (issue 40)
+        return line + (f", z_max {format_z(test['z_max'], 2)}" if _number(test.get("z_max")) else "")
     return f"{word}: {reason}" if reason else word
 
 

@@ -4,12 +4,17 @@ standard error next to zero made a z of 300 digits)."""
 import math
 
 
-def format_z(z):
+def format_z(z, decimals=None):
     """A z score as text: 3 significant digits whatever its size (``-6.27``, ``412``,
-    ``1.23e+03``, ``-6.3e+299``: never hundreds of digits). ``n/a`` for None or NaN."""
+    ``1.23e+03``, ``-6.3e+299``: never hundreds of digits), or ``decimals`` fixed decimals where
+    that is shorter than 7 characters before the point (the noise test's ``z_max 1.20``). ``n/a``
+    for None or NaN."""
     if z is None or math.isnan(z):
         return "n/a"
-    return f"{float(z):.3g}"
+    z = float(z)
+    if decimals is not None and abs(z) < 1e4:
+        return f"{z:.{decimals}f}"
+    return f"{z:.3g}"
 
 
 def format_p(p):

@@ -39,6 +39,7 @@ import numpy as np
 
 from .. import exr
 from ..markdown import cell as _cell
+from ..stat_text import format_z
 # compare, references, stats (scipy) and previews (PIL) are imported where they are used: the
 # Blender panel reads baseline records through this module without them.
 
@@ -394,14 +395,14 @@ def judge_pair(new_entry, new_folder, old_entry, old_folder, settings, zmap_path
     changes = []
     if not zt.passed:
         changes.append(f"image differs beyond noise: min p = {zt.p_min:.3g} < {zt.threshold:.3g} "
-                       f"({zt.blocks} tests), max |z| = {zt.z_max:.1f} at pixel ({x}, {y}) of {worst.shape[1]}x"
+                       f"({zt.blocks} tests), max |z| = {format_z(zt.z_max, 1)} at pixel ({x}, {y}) of {worst.shape[1]}x"
                        f"{worst.shape[0]}; mean ratio " + ", ".join(
                            f"{c} {r[0]:.4f} +- {r[1]:.4f}" for c, r in zip("RGB", ratio) if r))
     for r in rows:
         if r["old"] is True and r["new"] is False:
             changes.append(f"probe {r['name']} passed in the baseline and fails now")
         elif r.get("moved"):
-            changes.append(f"probe {r['name']} moved beyond noise (z = {r['z']:.1f})")
+            changes.append(f"probe {r['name']} moved beyond noise (z = {format_z(r['z'], 1)})")
     status = "changed" if changes else "same"
     reason = "; ".join(changes) + (f"; z-map: {zmap_rel}" if changes else "")
     return _record(run_label, status, reason, p_min=zt.p_min, threshold=zt.threshold, ratio=ratio,
