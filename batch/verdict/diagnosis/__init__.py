@@ -54,7 +54,16 @@ answer: measured on a 0.1 px shift, a 0.7 clamp and too few samples, bench_diagn
 parameters next, then by chi-square removed
 less 2 k (the AIC difference against "no model" on the same evidence, ``delta_aic``). A failure
 whose best model does not fully explain it is reported as "no model explains it" (the best
-partial model is named beside it).
+partial model is named beside it, with what it leaves: its residual's chi-square against the n
+that noise alone gives, and the share it explains to the first digit that differs from 100 %).
+
+Evidence (issue 40): a model is fitted only with more residuals than parameters and, for the
+cluster-robust standard errors, more blocks (clusters) than parameters (``check_evidence``: the
+sandwich has rank at most G - 1, and with one block of 3 residuals a per-channel scale fitted a
+constant grey render exactly, "+- 0.000000"); a fit whose standard error is 0 or below the fit's
+rounding (SE_RESOLVED) is not used either. Such models are listed in ``not_fitted`` with why, and
+the text says how many were left out. A proposed known_deviations.toml entry needs a finite scale
+inside PLAUSIBLE_SCALE (``plausible``).
 """
 from dataclasses import dataclass, field
 from typing import Callable, Optional
