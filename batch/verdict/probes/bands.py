@@ -28,8 +28,11 @@ false-alarm rate at most twice its nominal one), i.e. with at least ``needed_pix
 g^2 (x (2x^2 + 1) / 6)^2 pixels, x the normal quantile of the per-test threshold (Sidak: about
 4.6 for a chart's 2350 tests, 1100 g^2 pixels). g is the region's sample skewness; with k of n
 pixels holding a sample of the band and the rest 0, g^2 is about n / k, so the rule asks for about
-1100 pixels with a sample in the band (Cochran's n > 25 g^2, Sampling Techniques 1977, is the same
-rule at a 95 % two-sided test). A band whose pixels do not vary (no sample at all, or all equal)
+1100 pixels with a sample in the band (compare Cochran's n > 25 g^2 for a 95 % interval, Sampling
+Techniques 1977: the far tail tested here needs more). Checked by simulation (Poisson pixel values,
+a band's sample counts, at alpha 1e-3 where 2e5 trials resolve the tail): at the needed count the
+low tail is 2.6 times its nominal rate and the two tails together 1.4 times; at an eighth of it,
+10 times (benchmarks/CALIBRATION.md, "Band checks: enough samples"). A band whose pixels do not vary (no sample at all, or all equal)
 has no standard error to judge it with. A band not judged is said (``unjudged``: which bands, how
 many pixels and samples they had, how many they need) and never fails; the pooled chart test of a
 band uses the patches judged in that band (a weighted sum of means is no more skewed than the
