@@ -170,6 +170,7 @@ def test_no_confident_diagnosis_from_one_block(tmp_path):
             assert float(se) > 0, (name, run["reason"])
 
 
+@pytest.mark.slow
 def test_a_model_that_does_not_fully_explain_says_what_it_leaves(tmp_path):
     """Issue 40: the per-pass sRGB curve at 128x128 and 16 spp read 'no model explains it (best:
     sRGB transfer applied, explains 100.0 %)'. The curve of each noisy pass is not the curve of
