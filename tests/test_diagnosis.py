@@ -191,3 +191,21 @@ def test_a_model_that_does_not_fully_explain_says_what_it_leaves(tmp_path):
     assert float(left.group(1)) == pytest.approx(best["chi2"], rel=1e-3) and int(left.group(2)) == best["n"]
     assert float(left.group(3)) < 0.01 and best["chi2"] > best["n"], (left.group(0), best)  # beyond the noise
     assert diag["text"] in run["reason"]
+
+
+def test_a_black_render_gets_no_proposed_known_deviation(tmp_path):
+    """Issue 40: a black render (every pixel 0) at 128x128 and 16 spp, many blocks: a uniform scale
+    of about 1e-16 fits it exactly and was printed "scale 0.000000 +- 0.000000" with a ready
+    known_deviations.toml entry of that scale. A proposed entry needs a finite, physically
+    plausible scale (diagnosis PLAUSIBLE_SCALE); and the printed figures keep their digits."""
+    from spectral_bench.batch.verdict import diagnosis
+    proc, data = batch(tmp_path / "out", "-r", "plant_black", "-s", "ggx_copper_50", "--spp", "16", "--no-flip")
+    (run,) = data["runs"]
+    diag = run["diagnosis"]
+    assert run["status"] == "failed" and "known_deviation" not in diag, diag.get("known_deviation")
+    for m in diag["models"]:
+        for p, (value, se) in m["params"].items():
+            assert se is None or se > 0, (m["model"], p, se)
+    assert "+- 0.000000" not in run["reason"] and not any(float(se) == 0 for _, se in _params_text(run["reason"]))
+    assert not diagnosis.plausible({"scale": 1.1e-16, "scale_se": 6.4e-17})
+    assert diagnosis.plausible({"scale": 1.03, "scale_se": 0.0005}) and diagnosis.plausible({"scale": 3.14159, "scale_se": 0.0})
