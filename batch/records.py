@@ -34,6 +34,8 @@ import subprocess
 import tomllib
 from pathlib import Path, PurePosixPath, PureWindowsPath
 
+from .stat_text import format_z
+
 ROOT = Path(__file__).resolve().parents[1]
 SCHEMA_FILE = ROOT / "schemas" / "metrics.schema.json"
 FILE_NAME = "metrics.json"
@@ -447,7 +449,7 @@ def noise_test_parts(test):
     if not isinstance(block_ok, bool):
         block_ok = test["p_min"] >= test["threshold"]
     parts = [(block_ok, "block test", f"p_min {test['p_min']:.3g} (threshold {test['threshold']:.3g})"
-              + (f", z_max {test['z_max']:.2f}" if _number(test.get("z_max")) else ""))]
+              + (f", z_max {format_z(test['z_max'], 2)}" if _number(test.get("z_max")) else ""))]
     sc = test.get("scale_test")
     if isinstance(sc, dict) and _number(sc.get("p_min")) and _number(sc.get("threshold")):
         ok = sc.get("pass") if isinstance(sc.get("pass"), bool) else sc["p_min"] >= sc["threshold"]

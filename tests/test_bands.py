@@ -133,3 +133,37 @@ def test_the_lone_fluorescent_sphere_is_judged_band_by_band(tmp_path):
     del plain["objects"][0]["bsdf"]["fluorescence"]
     dropped = judge(plain)
     assert dropped["pass"] is False and dropped["worst"]["relative"] > 0.1, dropped["worst"]  # the re-radiated light
+
+
+def test_a_correct_render_at_low_settings_is_not_failed_on_bands_without_samples(tmp_path):
+    """Issue 40: the unmodified example renderer at --scale 0.125 --spp 4 (62x42, about 20 pixels a
+    patch, a 5 nm band sampled in one pixel of six) passed the noise test and failed 15 band checks
+    ("patch_bluish_green 495-500 nm: 100 % low, z -6.3e299"): a band without a sample in a patch has
+    mean 0 and standard error 0. A band is now judged only where the t test of its mean holds
+    (bands.py "Enough samples"); one that is not is said, with its pixels, how many hold a sample
+    and how many the test needs, and never fails."""
+    import re
+    from spectral_bench.batch.verdict import stats
+    from spectral_bench.batch.verdict.probes import bands
+    out = tmp_path / "out"
+    proc = run_batch("--renderers", EXAMPLE / "toy.toml", "-r", "toy_spectral", "-s", "macbeth_chart_D65",
+                     "--scale", "0.125", "--spp", "4", "--no-flip", "-o", out)
+    (run,) = metrics(out)["runs"]
+    checks = [p for p in run["probes"] if p["name"].startswith("bands ")]
+    assert run["test"]["pass"] and len(checks) == 25, run["reason"]
+    assert not [p for p in checks if p["pass"] is False], [p["worst"]["text"] for p in checks if p["pass"] is False]
+    threshold = stats.sidak_threshold(stats.ALPHA, 94 * 25)
+    for p in checks[:-1]:  # the patches: each band not judged says why, with its counts
+        assert p["unjudged"] and p["unjudged_text"].startswith(p["region"]), p["name"]
+        for b in p["unjudged"]:
+            assert b["pixels"] == p["pixels"] and 0 <= b["with_sample"] <= b["pixels"], b
+            assert b["needed"] is None or b["needed"] > b["pixels"], b  # short of what its skewness needs
+        judged = np.asarray(p["stat"]["judged"])
+        assert judged.sum() + len(p["unjudged"]) == 94
+        assert not np.any(np.asarray(p["stat"]["se"])[judged] == 0)  # no band judged on a zero standard error
+    assert bands.needed_pixels(1.0, threshold) > 1000  # at 4.6 standard errors a skewness of 1 needs ~1100 pixels
+    assert run["status"] == "ok" and proc.returncode == 0, run["reason"]
+    assert "bands not judged in 25 of 25 band checks" in run["reason"] and "with a sample in the band" in run["reason"]
+    assert "needs" in run["reason"], run["reason"]
+    text = (out / "summary.md").read_text() + (out / "report.html").read_text() + proc.stdout
+    assert not re.search(r"z -?\d{6,}", text) and "e+29" not in text, re.search(r"z -?\d{6,}.{0,40}", text)

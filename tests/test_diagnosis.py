@@ -130,3 +130,82 @@ def test_diagnosis_is_shown_where_the_failure_is(runs):
     assert runs["plant_observer"]["diagnosis"]["known_deviation"].count('observer = "cie1964"') == 1
     model_image = runs["plant_flip"]["diagnosis"]["image"]
     assert (runs["_copper"] / model_image).is_file()
+
+
+def _params_text(text):
+    """Every 'value +- se' a diagnosis text prints, as (value, se) strings."""
+    import re
+    return re.findall(r"(-?[\d.]+(?:e[+-]?\d+)?) \+- (-?[\d.]+(?:e[+-]?\d+)?)", text)
+
+
+def test_no_confident_diagnosis_from_one_block(tmp_path):
+    """Issue 40: ggx_copper_50 at 32x32 and 32 spp is one noise-test block, 3 residuals (R, G, B,
+    one cluster). A constant grey render was 'likely: per-channel scale ... +- 0.000000, explains
+    100 %', a black one got a proposed known deviation of scale 0, and the per-pass sRGB curve at 4
+    spp (128x128, again one block) a per-channel scale: models fitted on no more residuals (or
+    blocks) than parameters, whose sandwich standard errors are 0 by construction. Now such a model
+    is not fitted and the diagnosis says so; no standard error of 0 is printed; nothing is
+    proposed for known_deviations.toml."""
+    runs = {}
+    for scale, spp, renderers in (("0.0625", "32", ("plant_grey", "plant_black")), ("0.25", "4", ("plant_srgb",))):
+        proc, data = batch(tmp_path / f"out{spp}", *[a for r in renderers for a in ("-r", r)], "-s", "ggx_copper_50",
+                           "--scale", scale, "--spp", spp, "--no-flip")
+        assert proc.returncode == 1 and not records.validate(data), proc.stdout[-3000:] + proc.stderr[-3000:]
+        runs.update({r["backend"]: r for r in data["runs"]})
+    for name in ("plant_grey", "plant_black", "plant_srgb"):
+        run = runs[name]
+        assert run["status"] == "failed" and run["test"]["pass"] is False, run["reason"]
+        diag = run["diagnosis"]
+        assert diag["likely"] is None and "known_deviation" not in diag, (name, diag["text"])
+        thin = {t["model"]: t["why"] for t in diag["not_fitted"]}
+        assert "per-channel scale" in thin and "uniform scale" in thin, (name, thin)
+        assert thin["per-channel scale"] == "3 residuals for 3 parameters", thin
+        assert thin["uniform scale"] == "3 residuals in 1 block (independent clusters) for 1 parameter", thin
+        assert "too little evidence" in diag["text"] and "too little evidence" in run["reason"], diag["text"]
+        for m in diag["models"]:  # what was fitted: every parameter on more residuals than parameters
+            assert m["n"] > m["k"], m
+            for p, (value, se) in m["params"].items():
+                assert se is None or se > 0, (name, m["model"], p, se)
+        for value, se in _params_text(run["reason"]):
+            assert float(se) > 0, (name, run["reason"])
+
+
+@pytest.mark.slow
+def test_a_model_that_does_not_fully_explain_says_what_it_leaves(tmp_path):
+    """Issue 40: the per-pass sRGB curve at 128x128 and 16 spp read 'no model explains it (best:
+    sRGB transfer applied, explains 100.0 %)'. The curve of each noisy pass is not the curve of
+    their mean, so something is left; the text now gives the share to the digit that differs from
+    100 % and the residual's chi-square against what noise alone gives, with its p."""
+    import re
+    proc, data = batch(tmp_path / "out", "-r", "plant_srgb", "-s", "ggx_copper_50", "--spp", "16", "--no-flip")
+    (run,) = data["runs"]
+    diag = run["diagnosis"]
+    best = diag["models"][0]
+    assert run["status"] == "failed" and diag["likely"] is None and not best["fully_explains"], diag["text"]
+    assert best["model"] == "sRGB transfer applied", diag["models"][:2]
+    shown = re.search(r"best: sRGB transfer applied, explains ([\d.]+) %", diag["text"])
+    assert shown and float(shown.group(1)) < 100, diag["text"]  # never "100.0 %" for a model that leaves some
+    assert abs(float(shown.group(1)) - 100 * best["explains"]) < 10 ** -(len(shown.group(1).split(".")[1])), (shown, best)
+    left = re.search(r"left: chi-square ([\d.e+]+) where noise alone gives (\d+) \+- [\d.]+, p ([\d.e+-]+)", diag["text"])
+    assert left, diag["text"]
+    assert float(left.group(1)) == pytest.approx(best["chi2"], rel=1e-3) and int(left.group(2)) == best["n"]
+    assert float(left.group(3)) < 0.01 and best["chi2"] > best["n"], (left.group(0), best)  # beyond the noise
+    assert diag["text"] in run["reason"]
+
+
+def test_a_black_render_gets_no_proposed_known_deviation(tmp_path):
+    """Issue 40: a black render (every pixel 0) at 128x128 and 16 spp, many blocks: a uniform scale
+    of about 1e-16 fits it exactly and was printed "scale 0.000000 +- 0.000000" with a ready
+    known_deviations.toml entry of that scale. A proposed entry needs a finite, physically
+    plausible scale (diagnosis PLAUSIBLE_SCALE); and the printed figures keep their digits."""
+    from spectral_bench.batch.verdict import diagnosis
+    proc, data = batch(tmp_path / "out", "-r", "plant_black", "-s", "ggx_copper_50", "--spp", "16", "--no-flip")
+    (run,) = data["runs"]
+    diag = run["diagnosis"]
+    assert run["status"] == "failed" and "known_deviation" not in diag, diag.get("known_deviation")
+    for m in diag["models"]:
+        for p, (value, se) in m["params"].items():
+            assert se is None or se > 0, (m["model"], p, se)
+    assert "+- 0.000000" not in run["reason"] and not any(float(se) == 0 for _, se in _params_text(run["reason"]))
+    assert not diagnosis.plausible({"scale": 1.1e-16, "scale_se": 6.4e-17})
+    assert diagnosis.plausible({"scale": 1.03, "scale_se": 0.0005}) and diagnosis.plausible({"scale": 3.14159, "scale_se": 0.0})

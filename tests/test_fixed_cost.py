@@ -325,3 +325,45 @@ def test_flip_auto_judges_only_the_renders_that_are_not_ok(tmp_path):
     test = exr.read_rgb(folder / "mitsuba" / "render.exr")
     mean, err = flip_isolated.flip_images(ref, test, tmp_path / "f.exr")
     assert err is None and known["metrics"]["flip"] == pytest.approx(mean, rel=1e-4)
+
+
+def test_a_flip_child_that_stops_reading_is_killed_and_the_queue_behind_it_served(tmp_path):
+    """Issue 40: the time limit covers writing the request too. A child that stops reading
+    (SIGSTOP) used to block a request above the pipe's 64 kB for ever, and every request queued
+    behind it; now the whole exchange is bounded, the stuck child is killed and the next request
+    is served by a fresh one."""
+    import threading
+    import time
+    ref, test = _images(9, (128, 128))  # 2 x 192 kB: three times a Linux pipe's 64 kB buffer
+    assert ref.nbytes > 2 * 65536
+    assert flip_isolated.flip_images(ref, test, tmp_path / "warm.exr")[1] is None  # a warm child
+    worker = flip_isolated._WORKER[0]
+    pid = worker.proc.pid
+    os.kill(pid, signal.SIGSTOP)
+    limit = 3.0
+    got, behind = [], []
+    try:
+        first = flip_isolated.start(ref, test, tmp_path / "stuck.exr", timeout=limit)
+        queued = flip_isolated.start(test, ref, tmp_path / "behind.exr")  # waits behind the stuck one
+        threads = [threading.Thread(target=lambda: got.append(first.result()), daemon=True),
+                   threading.Thread(target=lambda: behind.append(queued.result()), daemon=True)]
+        t0 = time.monotonic()
+        for t in threads:
+            t.start()
+        threads[0].join(limit + 60)  # generous for a busy machine; the old code never returned
+        took = time.monotonic() - t0
+        assert got, f"the request to a stopped child still hangs after {took:.0f} s (time limit {limit} s)"
+        threads[1].join(120)
+        assert behind, "the request queued behind the stopped child still waits"
+    finally:
+        try:
+            os.kill(pid, signal.SIGKILL)  # unblocks the old code's write, so the session goes on
+        except ProcessLookupError:
+            pass
+    value, err = got[0]
+    assert value is None and "timed out after 3 s" in err and "stopped reading" in err, err
+    with pytest.raises(ProcessLookupError):  # killed and reaped, not left stopped
+        os.kill(pid, 0)
+    value, err = behind[0]
+    assert err is None and value == _flip_in_a_fresh_process(tmp_path, test, ref)
+    assert flip_isolated._WORKER[0] is not worker and flip_isolated._WORKER[0].alive()

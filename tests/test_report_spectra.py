@@ -65,7 +65,7 @@ def test_record_is_read_defensively():
     assert [r["region"] for r in rec["regions"]] == ["a"]  # the region whose arrays do not fit is left out
     assert rec["edges"] == [(495.0, 505.0), (505.0, 515.0), (515.0, 525.0)]  # no edges_nm: midway, outer half a spacing
     assert rec["regions"][0]["z"][1] == pytest.approx(10.0) and rec["regions"][0]["failing"] == [1]
-    assert spectra.worst_lines({"bands": good}) == ["a 505-515 nm: 1e+02 % high, z 10"]
+    assert spectra.worst_lines({"bands": good}) == ["a 505-515 nm: 100 % high, z 10"]  # 3 significant digits (issue 40: not "1e+02 %")
     for bad in (None, "x", {"centres_nm": [500]}, {"centres_nm": [510, 500]}, {"centres_nm": ["a", "b"]},
                 {"centres_nm": [500, float("nan")]}):
         assert spectra.record({"bands": bad}) is None and spectra.worst_lines({"bands": bad}) == []

@@ -14,6 +14,8 @@ so every list here is a list of numbers or None."""
 import math
 from statistics import NormalDist
 
+from ..stat_text import format_z
+
 Z95 = 1.959963984540054  # two-sided 95 %: the plotted interval is measured +- Z95 standard errors
 PLOT_W, PLOT_H = 240, 130  # one region's plot, px (SVG user units)
 PAD_L, PAD_R, PAD_T, PAD_B = 38, 8, 16, 22  # margins: y labels left, x labels below, title above
@@ -116,7 +118,7 @@ def _worst(rec, region):
     m, e = region["measured"][i], region["expected"][i]
     rel = w.get("relative") if _num(w.get("relative")) else (m / e - 1 if e and math.isfinite(m) and math.isfinite(e) else None)
     z = w.get("z") if _num(w.get("z")) else region["z"][i]
-    how = f"{abs(100 * rel):.2g} % {'low' if rel < 0 else 'high'}" if rel is not None else "relative error unknown"
+    how = f"{abs(100 * rel):.3g} % {'low' if rel < 0 else 'high'}" if rel is not None else "relative error unknown"
     return band_text(*rec["edges"][i]), how, z
 
 
@@ -128,7 +130,7 @@ def worst_text(rec, region):
         return None
     band, how, z = got
     name = " ".join(p for p in (region["probe"], region["region"]) if p)
-    return f"{name} {band}: {how}" + (f", z {z:.2g}" if math.isfinite(z) else "")
+    return f"{name} {band}: {how}" + (f", z {format_z(z)}" if math.isfinite(z) else "")
 
 
 def worst_lines(run):
@@ -174,7 +176,7 @@ def plot(rec, region):
         s = se[i] if math.isfinite(se[i]) else 0.0
         points.append({"x": r1(x(c)), "y": r1(y(m[i])), "y0": r1(y(m[i] - Z95 * s)), "y1": r1(y(m[i] + Z95 * s)),
                        "fail": i in failing, "title": f"{band_text(*edges[i])}: measured {m[i]:.4g} +- {Z95 * s:.2g}, "
-                                                     f"expected {e[i]:.4g}, z {region['z'][i]:.2f}"})
+                                                     f"expected {e[i]:.4g}, z {format_z(region['z'][i])}"})
     expected = " ".join(f"{r1(x(rec['centres'][i]))},{r1(y(e[i]))}" for i in range(n) if math.isfinite(e[i]))
     spans = [{"x": r1(x(edges[i][0])), "w": r1(x(edges[i][1]) - x(edges[i][0]))} for i in sorted(failing)]
     worst, short = worst_text(rec, region), _worst(rec, region)

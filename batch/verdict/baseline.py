@@ -50,6 +50,7 @@ import numpy as np
 
 from .. import exr
 from ..markdown import cell as _cell
+from ..stat_text import format_z
 # compare, references, stats (scipy) and previews (PIL) are imported where they are used: the
 # Blender panel reads baseline records through this module without them.
 
@@ -555,11 +556,11 @@ def judge_pair(new_entry, new_folder, old_entry, old_folder, settings, zmap_path
     if not zt.passed:
         from ..records import noise_test_failure  # the part that failed, with its own figures
         changes.append(f"image differs beyond noise: {noise_test_failure(test)} ({zt.blocks} blocks); max |z| = "
-                       f"{zt.z_max:.1f} at pixel ({x}, {y}) of {worst.shape[1]}x{worst.shape[0]}; mean ratio " + ", ".join(
+                       f"{format_z(zt.z_max, 1)} at pixel ({x}, {y}) of {worst.shape[1]}x{worst.shape[0]}; mean ratio " + ", ".join(
                            f"{c} {r[0]:.4f} +- {r[1]:.4f}" for c, r in zip("RGB", ratio) if r))
     for r in rows:
         if r.get("moved"):
-            changes.append(f"probe {r['name']} moved beyond noise (z = {r['z']:.1f})")
+            changes.append(f"probe {r['name']} moved beyond noise (z = {format_z(r['z'], 1)})")
         elif r["old"] is True and r["new"] is False and r.get("moved") is None:  # no residuals to judge it by
             changes.append(f"probe {r['name']} passed in the baseline and fails now")
     status = "changed" if changes else "same"

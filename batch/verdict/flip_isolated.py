@@ -9,7 +9,10 @@ over its stdin: one JSON line ``{"shape": [H, W], "map": "flip.exr"}`` followed 
 and the test image as raw H x W x 3 float32 (no temporary files); it answers one JSON line
 ``{"flip": mean}`` or ``{"error": "..."}`` and writes the map as half floats
 (batch/previews.py ``write_flip``: one channel Y). A child that dies, exits or overruns its time limit is killed
-and fails only that job's FLIP (the reason is recorded); the next job starts a fresh one.
+and fails only that job's FLIP (the reason is recorded); the next job starts a fresh one. The
+time limit covers the whole exchange: writing the request (a child that stops reading, e.g.
+stopped by a signal, would otherwise block a request above the pipe's 64 kB for ever, and every
+request queued behind it), the computation and the reply.
 
 ``start`` queues a request and returns at once (a Pending: one thread hands the requests to the
 child in order, and the child computes while the verdicts run their probes and the next jobs);
@@ -27,8 +30,10 @@ import concurrent.futures as cf
 import json
 import os
 import queue
+import selectors
 import sys
 import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -56,6 +61,7 @@ class FlipWorker:
         from ..backends import child
         self.child = child.KeptChild([sys.executable, Path(__file__).resolve(), "--serve"],
                                      env=dict(os.environ, **OPENMP))
+        self._pending, self._sent, self.timeout = b"", 0, DEFAULT_TIMEOUT  # bytes read past a line; bytes written
 
     @property
     def proc(self):
@@ -64,22 +70,43 @@ class FlipWorker:
     def alive(self):
         return self.child.alive()
 
-    def send(self, ref, test, map_path):
-        """Send one request (the reply is read by ``receive``); None, or the error when the child is gone."""
+    def send(self, ref, test, map_path, deadline):
+        """Send one request (the reply is read by ``receive``) by ``deadline`` (time.monotonic):
+        None, or the error when the child is gone or stopped reading (then it is killed: a child
+        that stops reading would block a request above the pipe's buffer, 64 kB, for ever)."""
         head = json.dumps({"shape": list(ref.shape[:2]), "map": str(map_path)}) + "\n"
+        data = memoryview(head.encode() + ref.tobytes() + test.tobytes())
+        total = len(data)
+        fd = self.proc.stdin.fileno()
+        os.set_blocking(fd, False)  # written here in pieces the pipe takes, never waiting past the deadline
         try:
-            self.proc.stdin.write(head.encode() + ref.tobytes() + test.tobytes())
-            self.proc.stdin.flush()
+            with selectors.DefaultSelector() as sel:
+                sel.register(fd, selectors.EVENT_WRITE)
+                while data:
+                    left = deadline - time.monotonic()
+                    if left <= 0 or not sel.select(left):
+                        self.kill()
+                        return (f"FLIP timed out after {self.timeout:g} s: the child stopped reading its request "
+                                f"({self._sent} of {total} bytes taken)")
+                    try:
+                        n = os.write(fd, data)
+                    except BlockingIOError:
+                        continue
+                    data = data[n:]
+                    self._sent += n
         except OSError as exc:
             return self._died(f"FLIP worker stopped: {exc}")
+        finally:
+            self._sent = 0
         return None
 
-    def receive(self, timeout):
-        """(mean, None) or (None, error); a child that dies or overruns is killed (``alive`` False)."""
-        line = self.child.read_line(timeout)
+    def receive(self, deadline):
+        """(mean, None) or (None, error) by ``deadline``; a child that dies or overruns is killed
+        (``alive`` False)."""
+        line = self._read_line(deadline)
         if line is None:
             self.kill()
-            return None, f"FLIP timed out after {timeout} s"
+            return None, f"FLIP timed out after {self.timeout:g} s"
         if not line:
             return None, self._died(f"FLIP failed (exit {self.proc.wait()})")
         try:
@@ -89,6 +116,32 @@ class FlipWorker:
         if "error" in reply:
             return None, f"FLIP failed: {reply['error'][-500:]}"
         return reply["flip"], None
+
+    def _read_line(self, deadline):
+        """The child's next line by ``deadline``: bytes (b"" once it has exited), or None when
+        no whole line came in time. Read from the pipe as it comes (a child stopped halfway
+        through a line cannot hold this past the deadline); bytes after the line are kept for the next."""
+        fd = self.proc.stdout.fileno()
+        with selectors.DefaultSelector() as sel:
+            sel.register(fd, selectors.EVENT_READ)
+            while b"\n" not in self._pending:
+                left = deadline - time.monotonic()
+                if left <= 0 or not sel.select(left):
+                    return None
+                chunk = os.read(fd, 1 << 16)
+                if not chunk:
+                    return b""
+                self._pending += chunk
+        line, _, self._pending = self._pending.partition(b"\n")
+        return line + b"\n"
+
+    def exchange(self, ref, test, map_path, timeout):
+        """One request and its reply, the whole exchange bounded by ``timeout`` seconds: (mean or
+        None, error or None); a child that overruns (stopped, stuck, or too slow) is killed."""
+        self.timeout = timeout
+        deadline = time.monotonic() + timeout
+        error = self.send(ref, test, map_path, deadline)
+        return (None, error) if error else self.receive(deadline)
 
     def _died(self, what):
         said = self.child.early_output().strip()
@@ -139,9 +192,7 @@ def _serve_queue():
         ref, img, map_path, timeout, done = _QUEUE.get()
         try:
             with _LOCK:
-                worker = _worker()
-                error = worker.send(ref, img, map_path)
-                outcome = (None, error) if error else worker.receive(timeout)
+                outcome = _worker().exchange(ref, img, map_path, timeout)
         except Exception as exc:  # noqa: BLE001 - a child that cannot be started fails this request
             outcome = (None, f"FLIP failed: {type(exc).__name__}: {exc}")
         done.set_result(outcome)

@@ -95,6 +95,12 @@ def render_verdict(entry, scene, rendered, image, res_dir, settings, deviations)
         entry["reason"] += "; worst bands: " + "; ".join(worst[:4]) + (f" and {len(worst) - 4} more" if len(worst) > 4 else "")
     if auto and entry["status"] == "ok":  # --flip auto: an ok render differs from its reference by noise
         entry["flip_not_computed"] = FLIP_OK
+    bands = [p for p in entry["probes"] if p["name"].startswith(band_probes.PREFIX)]
+    unjudged = [p["unjudged_text"] for p in bands if p.get("unjudged_text")]
+    if unjudged:  # said, never failed: bands with too few samples for their noise (probes/bands.py)
+        entry["reason"] = ((entry["reason"] + "; ") if entry.get("reason") else "") + (
+            f"bands not judged in {len(unjudged)} of {len(bands)} band checks: {unjudged[0]}"
+            + (f" and {len(unjudged) - 1} more" if len(unjudged) > 1 else ""))
     if auto and entry["status"] != "ok":  # --flip auto: the error map where the verdict is not ok
         finishers = []
         for start in auto:

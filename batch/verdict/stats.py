@@ -77,33 +77,43 @@ def region_mean_test(residuals, alpha=ALPHA, tests=1):
             "se": se.tolist(), "mean": mean.tolist(), "n": n, "pass": bool(np.min(p) >= threshold)}
 
 
-def compare_means(measured, expected, se, dof=None, alpha=ALPHA, tests=None):
+def compare_means(measured, expected, se, dof=None, alpha=ALPHA, tests=None, judged=None):
     """Two-sided tests of measured means against expected values, each with its standard error
     (arrays of one shape; dof: degrees of freedom of each se, None for normal). ``tests`` is the
     number of tests the family makes in all (default: this many), for the Sidak correction.
+    ``judged``: a boolean mask of the means that are tested (default: all); the others (too few
+    samples for their standard error to mean anything: probes/bands.py ``enough_samples``) are
+    kept in the arrays, never tested (p 1, z 0), and ``pass`` is None when none is tested.
 
     Returns a dict that also keeps the arrays, so the verdict can be re-judged against a recorded
     deviation (rejudge)."""
     m = np.atleast_1d(np.asarray(measured, dtype=np.float64))
     e = np.atleast_1d(np.asarray(expected, dtype=np.float64))
     s = np.atleast_1d(np.asarray(se, dtype=np.float64))
-    z = (m - e) / np.maximum(s, 1e-300)
-    p = np.atleast_1d(two_sided_p(z, dof))
+    j = np.ones(m.shape, dtype=bool) if judged is None else np.broadcast_to(np.asarray(judged, dtype=bool), m.shape)
+    z = np.where(j, (m - e) / np.maximum(s, 1e-300), 0.0)
+    p = np.where(j, np.atleast_1d(two_sided_p(z, dof)), 1.0)
     threshold = sidak_threshold(alpha, tests or m.size)
+    passed = bool(np.all(p >= threshold) and np.all(np.isfinite(m[j]))) if j.any() else None
     out = {"z": float(np.max(np.abs(z))) if z.size else 0.0, "p": float(np.min(p)) if p.size else 1.0,
-           "threshold": threshold, "pass": bool(np.all(p >= threshold) and np.all(np.isfinite(m))),
+           "threshold": threshold, "pass": passed,
            "measured": m.tolist(), "expected": e.tolist(), "se": s.tolist()}
     if dof is not None:
         out["dof"] = np.broadcast_to(np.asarray(dof, dtype=np.float64), m.shape).tolist()
+    if judged is not None:
+        out["judged"] = j.tolist()
     return out
 
 
 def rejudge(stat, scale=1.0, scale_se=0.0):
     """Would a compare_means result pass if the expected values were ``scale`` times larger
-    (with that factor's own standard error)? The model of a recorded deviation."""
+    (with that factor's own standard error)? The model of a recorded deviation. Only the means it
+    tested (``judged``) are tested again."""
     m, e, s = (np.asarray(stat[k], dtype=np.float64) for k in ("measured", "expected", "se"))
     se = np.sqrt(s**2 + (scale_se * e) ** 2)
     p = np.atleast_1d(two_sided_p((m - scale * e) / np.maximum(se, 1e-300), stat.get("dof")))
+    if stat.get("judged") is not None:
+        p = p[np.broadcast_to(np.asarray(stat["judged"], dtype=bool), p.shape)]
     return bool(np.all(p >= stat["threshold"]))
 
 
@@ -165,6 +175,8 @@ def detectable_scale(stat, power=0.9):
     e, s = np.broadcast_arrays(e, s)
     dof = stat.get("dof")
     sens = np.abs(e) / np.maximum(s, 1e-300)
+    if stat.get("judged") is not None:  # a mean that is not tested detects nothing
+        sens = np.where(np.broadcast_to(np.asarray(stat["judged"], dtype=bool), sens.shape), sens, 0.0)
     if not sens.size or not np.isfinite(sens).any():
         return None
     curve = power_curve(stat["threshold"], dof, sens.shape)

@@ -54,7 +54,16 @@ answer: measured on a 0.1 px shift, a 0.7 clamp and too few samples, bench_diagn
 parameters next, then by chi-square removed
 less 2 k (the AIC difference against "no model" on the same evidence, ``delta_aic``). A failure
 whose best model does not fully explain it is reported as "no model explains it" (the best
-partial model is named beside it).
+partial model is named beside it, with what it leaves: its residual's chi-square against the n
+that noise alone gives, and the share it explains to the first digit that differs from 100 %).
+
+Evidence (issue 40): a model is fitted only with more residuals than parameters and, for the
+cluster-robust standard errors, more blocks (clusters) than parameters (``check_evidence``: the
+sandwich has rank at most G - 1, and with one block of 3 residuals a per-channel scale fitted a
+constant grey render exactly, "+- 0.000000"); a fit whose standard error is 0 or below the fit's
+rounding (SE_RESOLVED) is not used either. Such models are listed in ``not_fitted`` with why, and
+the text says how many were left out. A proposed known_deviations.toml entry needs a finite scale
+inside PLAUSIBLE_SCALE (``plausible``).
 """
 from dataclasses import dataclass, field
 from typing import Callable, Optional
@@ -68,6 +77,15 @@ CORRECTED = "diagnosis_model.exr"
 CRITERION = "AIC (chi2 + 2 k)"
 NOISE_FAMILY = "noise"  # models of the variances (noise.py): ranked after the models of the mean that remove SUBSTANTIAL
 SUBSTANTIAL = 0.5  # share of the excess chi-square a model of the mean must remove to rank before the noise family
+# A standard error below this share of its value is the fit's rounding, not a measurement (the
+# square root of double precision's epsilon: what a least-squares fit resolves, Nocedal & Wright
+# 2006, 8.1): it is never reported as a standard error, and such a fit is not used (issue 40)
+SE_RESOLVED = float(np.sqrt(np.finfo(np.float64).eps))
+# A proposed known deviation's scale must be a factor a renderer's conventions can introduce: the
+# largest in the catalogue's families is the luminous efficacy, 683 lm/W (photometric units where
+# radiometric were due), then 4 pi and pi (per steradian, per area); 1000 either way bounds them,
+# and a scale outside (a black render fitted 1.3e-26, issue 40) is no deviation to record
+PLAUSIBLE_SCALE = (1e-3, 1e3)
 # the checks each kind of evidence speaks to: a model is fitted only when one of them failed (a
 # passing check is never diagnosed, and a known render pays only for what failed)
 EVIDENCE_CHECKS = {"reference": ("noise test",), "probe:ggx": ("ggx *", "beckmann *"),
@@ -219,6 +237,30 @@ class _Shifted:
 
 
 # -- fitting ---------------------------------------------------------------------------------------
+class TooLittleEvidence(Exception):
+    """A model with at least as many parameters as the evidence has residuals (or, for the
+    cluster-robust standard errors, clusters): its fit is exact whatever the truth, and its
+    standard errors 0 (one block of 3 residuals fitted a per-channel scale "+- 0.000000" to a
+    constant grey render, issue 40). The model is not fitted; the diagnosis says why."""
+
+
+def check_evidence(n, k, clusters=None):
+    """Raise TooLittleEvidence unless ``n`` residuals (in ``clusters`` clusters) can fit ``k``
+    parameters with a standard error: n > k, and clusters > k (the cluster-robust sandwich has
+    rank at most clusters - 1: the scores sum to 0 at the optimum)."""
+    if k <= 0:
+        return
+    if n <= k:
+        raise TooLittleEvidence(f"{n} residuals for {_count(k, 'parameter')}")
+    if clusters is not None and clusters <= k:
+        raise TooLittleEvidence(f"{n} residuals in {_count(clusters, 'block')} (independent clusters) "
+                                f"for {_count(k, 'parameter')}")
+
+
+def _count(n, what):
+    return f"{n} {what}" + ("" if n == 1 else "s")
+
+
 def least_squares(residual, starts, bounds=None, var_ratio=None, channels=1):
     """(best x, its standard errors, chi2) of sum(residual(x)^2) from several starting points
     (scipy.optimize.least_squares, trust region); se from (J^T J)^-1 at the optimum, or, with
@@ -229,8 +271,18 @@ def least_squares(residual, starts, bounds=None, var_ratio=None, channels=1):
     (``channels`` consecutive residuals, a block's colour channels, are one cluster: a path
     tracer's R, G and B come from the same paths and are strongly correlated), with the CR1
     small-sample factor G / (G - 1) (n - 1) / (n - k) (the cluster-robust sandwich of Liang and
-    Zeger 1986: right whatever the blocks' variances and the channels' correlation)."""
+    Zeger 1986: right whatever the blocks' variances and the channels' correlation). Raises
+    TooLittleEvidence where the residuals (or clusters) are not more than the parameters."""
     from scipy import optimize
+    starts = list(starts)
+    if starts:
+        try:
+            r0 = np.asarray(residual(np.asarray(starts[0], dtype=np.float64)), dtype=np.float64).ravel()
+        except (ValueError, np.linalg.LinAlgError):
+            r0 = None
+        if r0 is not None:
+            k = len(starts[0])
+            check_evidence(r0.size, k, r0.size // max(channels, 1) if isinstance(var_ratio, str) else None)
     best = None
     for x0 in starts:
         kw = {"bounds": bounds} if bounds is not None else {}
@@ -417,6 +469,7 @@ def diagnose(ev, models=None, quick=False):
     skipped = [m.name for m in left_out]
     ev.quick = quick
     took = {}
+    thin = []  # models not fitted: too little evidence for their parameters
     for model in [m for m in chosen if m not in left_out]:
         t = time.perf_counter()
         try:
@@ -424,6 +477,16 @@ def diagnose(ev, models=None, quick=False):
             # a warning in the terminal would read as a fault of the run
             with np.errstate(all="ignore"):
                 f = model.fit(ev)
+            if f is not None:
+                check_evidence(f.n, f.k)
+                unresolved = [model.params[i] if i < len(model.params) else f"p{i}" for i in range(f.k)
+                              if i < len(f.se) and not _resolved(f.values[i], f.se[i])]
+                if unresolved:
+                    raise TooLittleEvidence(f"no standard error for {', '.join(unresolved)} "
+                                            f"({f.n} residuals for {_count(f.k, 'parameter')})")
+        except TooLittleEvidence as why:
+            thin.append({"model": model.name, "why": str(why)})
+            continue
         except Exception as exc:  # noqa: BLE001 - one model that breaks never takes the verdict down
             fits.append((model, None, f"{type(exc).__name__}: {exc}"))
             continue
@@ -460,7 +523,12 @@ def diagnose(ev, models=None, quick=False):
         if entry:
             out["known_deviation"] = entry
     elif ranked:
-        out["text"] = f"no model explains it (best: {short(ranked[0])})"
+        out["text"] = f"no model explains it (best: {short(ranked[0])}; {left(ranked[0])})"
+    if thin:
+        out["not_fitted"] = thin
+        if not out["likely"]:
+            out["text"] += (f"; {len(thin)} model{'s' if len(thin) > 1 else ''} not fitted, too little evidence "
+                            f"({thin[0]['why']})")
     if broken:
         out["errors"] = broken
     if skipped:
@@ -475,7 +543,8 @@ def _record(model, f):
     params = {}
     for i, v in enumerate(f.values):
         name = model.params[i] if i < len(model.params) else f"p{i}"
-        params[name] = [_num(v), _num(f.se[i]) if i < len(f.se) else None]
+        se = f.se[i] if i < len(f.se) and _resolved(v, f.se[i]) else None  # never a standard error of 0
+        params[name] = [_num(v), None if se is None else _num(se)]
     out = {"model": model.name, "family": model.family, "evidence": model.evidence, "params": params,
            "k": f.k, "chi2": _num(f.chi2), "chi2_none": _num(f.chi2_none), "n": int(f.n),
            "delta_aic": _num(f.aic - f.chi2_none), "explains": f.explains, "fully_explains": bool(f.fully),
@@ -490,11 +559,50 @@ def _num(x):
     return x if np.isfinite(x) else None
 
 
+def _resolved(v, se):
+    """Whether ``se`` is a standard error of ``v`` (finite, and above the fit's rounding: SE_RESOLVED)."""
+    return se is not None and np.isfinite(se) and se > SE_RESOLVED * max(abs(v), np.finfo(np.float64).tiny)
+
+
 def _fmt(v, se):
-    if se is None or not np.isfinite(se) or se == 0:
+    """``v +- se`` to se's second significant digit (fixed point from 1e-6 to 10, else
+    scientific); ``v`` alone to 4 digits when there is no standard error (never "+- 0")."""
+    if se is None or not _resolved(v, se):
         return f"{v:.4g}"
-    digits = max(0, min(6, 1 - int(np.floor(np.log10(se))))) if se > 0 else 3
-    return f"{v:.{digits}f} +- {se:.{digits}f}"
+    digits = 1 - int(np.floor(np.log10(se)))
+    if 0 <= digits <= 6:
+        return f"{v:.{digits}f} +- {se:.{digits}f}"
+    mag = int(np.floor(np.log10(abs(v)))) if v else 0
+    return f"{v:.{max(1, mag - int(np.floor(np.log10(se))) + 1)}e} +- {se:.1e}"
+
+
+def share(explains):
+    """A share explained as a percentage, to the first digit that differs from 100 % (99.97 %,
+    not 100.0 %, for a model that leaves something): "100 %" only when it removes all of the excess."""
+    pct = 100 * explains
+    if explains >= 1:
+        return "100 %"
+    for digits in range(1, 12):
+        if round(pct, digits) < 100:
+            return f"{pct:.{digits}f} %"
+    return f"{pct:.12f} %"
+
+
+def left(record):
+    """What a model leaves unexplained, in words: its residual's chi-square against what noise
+    alone gives (n, the residuals' number) and that excess's p-value."""
+    chi2, n = record.get("chi2"), record.get("n")
+    if record.get("family") == NOISE_FAMILY:  # a model of the variances: its chi-square is n by construction
+        return "the render still fails its noise test under it"
+    if chi2 is None or not n:
+        return "its residual still fails the test"
+    from scipy import stats as _st
+    from ...stat_text import format_p
+    p = float(_st.chi2.sf(chi2, n))
+    text = f"left: chi-square {chi2:.4g} where noise alone gives {n} +- {np.sqrt(2 * n):.2g}, p {format_p(p)}"
+    if chi2 <= n + 2 * np.sqrt(2 * n):
+        text += "; its residual still fails the test where it is largest"
+    return text
 
 
 def short(record):
@@ -505,8 +613,20 @@ def short(record):
             parts.append(f"{name} {_fmt(v, se)}")
     text = " ".join(parts)
     if record.get("explains") is not None:
-        text += f", explains {100 * record['explains']:.1f} %"
+        text += f", explains {share(record['explains'])}"
     return text
+
+
+def plausible(fields):
+    """Whether a known deviation's fields are a finite, physically plausible value: a scale inside
+    PLAUSIBLE_SCALE (positive), with a finite standard error that is not 0 where it was fitted."""
+    if "scale" in fields:
+        scale, se = fields["scale"], fields.get("scale_se", 0.0)
+        if not (np.isfinite(scale) and PLAUSIBLE_SCALE[0] <= scale <= PLAUSIBLE_SCALE[1]):
+            return False
+        if se is None or not np.isfinite(se) or se < 0:
+            return False
+    return True
 
 
 def known_deviation_entry(entry, model, f):
@@ -515,7 +635,7 @@ def known_deviation_entry(entry, model, f):
     if model.deviation is None:
         return None
     fields = model.deviation(f)
-    if not fields:
+    if not fields or not plausible(fields):
         return None
     import datetime
     import json as _json

@@ -17,6 +17,29 @@ least-squares scale of measured over expected patches in that band, against 1 (a
 luminance scale pools the patches' Y), which sees a band error an order of magnitude smaller
 than one patch does. All tests (bands x (patches + 1)) share stats.ALPHA (Sidak).
 
+Enough samples (issue 40): a band is judged on a region only where the t test of its mean holds
+at the test's own threshold. A band's pixel values are skewed where few samples land in it (at 4
+spp a 5 nm band gets a wavelength in one pixel of six: most pixels hold 0, a few a large value),
+and the t statistic of a skewed mean has a heavy tail on one side: its first Edgeworth term (Hall
+1992, The Bootstrap and Edgeworth Expansion, 2.6) moves the tail beyond x by
+n^-1/2 (g/6) (2x^2 + 1) phi(x), where g is the pixels' skewness. Relative to the normal tail
+phi(x)/x that is r = g x (2x^2 + 1) / (6 sqrt(n)); the band is judged when r <= 1 (that tail's
+false-alarm rate at most twice its nominal one), i.e. with at least ``needed_pixels`` =
+g^2 (x (2x^2 + 1) / 6)^2 pixels, x the normal quantile of the per-test threshold (Sidak: about
+4.6 for a chart's 2350 tests, 1100 g^2 pixels). g is the region's sample skewness; with k of n
+pixels holding a sample of the band and the rest 0, g^2 is about n / k, so the rule asks for about
+1100 pixels with a sample in the band (compare Cochran's n > 25 g^2 for a 95 % interval, Sampling
+Techniques 1977: the far tail tested here needs more). Checked by simulation (Poisson pixel values,
+a band's sample counts, at alpha 1e-3 where 2e5 trials resolve the tail): at the needed count the
+low tail is 2.6 times its nominal rate and the two tails together 1.4 times; at an eighth of it,
+10 times (benchmarks/CALIBRATION.md, "Band checks: enough samples"). A band whose pixels do not vary (no sample at all, or all equal)
+has no standard error to judge it with. A band not judged is said (``unjudged``: which bands, how
+many pixels and samples they had, how many they need) and never fails; the pooled chart test of a
+band uses the patches judged in that band (a weighted sum of means is no more skewed than the
+most skewed of them). At the chart's default settings (620x420, 64 spp) every band of every patch
+is judged; at --scale 0.125 --spp 4 none is (benchmarks/CALIBRATION.md, "Band checks: enough
+samples").
+
 Each region is one check ("bands lambert <patch>", "bands lambert chart scale") whose record names
 its worst band ("patch_cyan 480-485 nm: 3.1 % low, z 6.2", ``worst``); the arrays per band
 are in its ``stat`` and in the job's ``bands`` record (judge.py), which the report plots.
@@ -25,6 +48,7 @@ import numpy as np
 
 from ....exporters import spectra
 from ... import spectral_exr
+from ...stat_text import format_z
 from .. import raycast, stats
 from . import lambert
 from .common import MIN_PIXELS, probe as _probe
@@ -64,20 +88,61 @@ def expected_bands(spectrum_fn, centres, model, width=None):
     return out
 
 
+def needed_pixels(skewness, threshold):
+    """Pixels a region needs for the t test of a band's mean to hold at the per-test p
+    ``threshold``, given the pixels' skewness (module docstring, "Enough samples")."""
+    x = stats.z_critical(threshold)
+    return np.ceil(np.asarray(skewness, dtype=np.float64) ** 2 * (x * (2 * x * x + 1) / 6) ** 2)
+
+
+def enough_samples(px, threshold):
+    """Per band of a region's pixels (n x bands): (judged, needed, with_sample): whether its t
+    test holds at ``threshold`` (``needed_pixels``; a band whose pixels all hold one value has no
+    standard error and is not judged), the pixels it needs, and how many hold a sample of it."""
+    n = px.shape[0]
+    d = px - px.mean(axis=0)
+    m2 = np.mean(d**2, axis=0)
+    spread = m2 > 0
+    g = np.where(spread, np.mean(d**3, axis=0) / np.where(spread, m2, 1.0) ** 1.5, np.inf)
+    needed = np.where(spread, np.maximum(needed_pixels(np.where(spread, g, 0.0), threshold), MIN_PIXELS), np.inf)
+    return spread & (n >= needed) & (n >= MIN_PIXELS), needed, np.count_nonzero(px, axis=0)
+
+
 def _worst(stat, edges):
     m, e, s = (np.asarray(stat[k], dtype=np.float64) for k in ("measured", "expected", "se"))
-    z = (m - e) / np.maximum(s, 1e-300)
+    j = _judged(stat)
+    if not j.any():
+        return None
+    z = np.where(j, (m - e) / np.maximum(s, 1e-300), 0.0)
     k = int(np.argmax(np.abs(z)))
     rel = float(m[k] / e[k] - 1.0) if e[k] else None
     return {"band": k, "band_nm": [float(edges[k][0]), float(edges[k][1])], "relative": rel, "z": float(z[k])}
+
+
+def _judged(stat):
+    m = np.asarray(stat["measured"])
+    return np.ones(m.shape, dtype=bool) if stat.get("judged") is None else np.asarray(stat["judged"], dtype=bool)
 
 
 def describe(region, worst):
     """'patch_cyan 480-485 nm: 3.1 % low, z 6.2'."""
     lo, hi = worst["band_nm"]
     rel = worst["relative"]
-    how = "" if rel is None else f"{abs(rel) * 100:.1f} % {'low' if rel < 0 else 'high'}, "
-    return f"{region} {lo:g}-{hi:g} nm: {how}z {worst['z']:.1f}"
+    how = "" if rel is None else f"{abs(rel) * 100:.3g} % {'low' if rel < 0 else 'high'}, "
+    return f"{region} {lo:g}-{hi:g} nm: {how}z {format_z(worst['z'])}"
+
+
+def describe_unjudged(region, unjudged, bands):
+    """'patch_cyan: 90 of 94 bands not judged, too few samples (e.g. 495-500 nm: 18 pixels, 3
+    with a sample in the band; the t test at this threshold needs 4800)'."""
+    if not unjudged:
+        return ""
+    w = min(unjudged, key=lambda b: b["needed"] if b["needed"] is not None else float("inf"))  # the nearest to judged
+    lo, hi = w["band_nm"]
+    had = f"{w['pixels']} pixels" + (f", {w['with_sample']} with a sample in the band" if w["with_sample"] is not None else "")
+    need = ("no spread to estimate its noise from" if w["needed"] is None
+            else f"the t test at this threshold needs {w['needed']:.0f}")
+    return f"{region}: {len(unjudged)} of {bands} bands not judged, too few samples (e.g. {lo:g}-{hi:g} nm: {had}; {need})"
 
 
 def judged(sp):
@@ -116,6 +181,7 @@ def lambert_bands(m):
     edges = band_edges(centres, model, width)
     nb = len(centres)
     tests = nb * (len(found) + (1 if len(found) > 1 else 0))
+    threshold = stats.sidak_threshold(stats.ALPHA, tests)
     radiance = env["radiance"]
     rows, out = [], []
     for obj, mask in found:
@@ -126,35 +192,52 @@ def lambert_bands(m):
         n = px.shape[0]
         measured = px.mean(axis=0)
         se = px.std(axis=0, ddof=1) / np.sqrt(n)
-        rows.append((measured, expected, se))
+        tested, needed, with_sample = enough_samples(px, threshold)
+        rows.append((measured, expected, se, tested))
         out.append(_region_record(f"{PREFIX}lambert {obj['name']}", obj["name"], measured, expected, se, n - 1, tests,
-                                  edges, pixels=n))
+                                  edges, tested, needed=needed, with_sample=with_sample, pixels=n))
     if len(found) > 1:
-        # per band: the WLS scale of measured over expected patches, against 1
+        # per band: the WLS scale of measured over expected patches, against 1, over the patches
+        # judged in that band
         M, E, S = (np.array([r[i] for r in rows]) for i in range(3))  # patches x bands
-        wts = 1.0 / np.maximum(S, 1e-300) ** 2
+        J = np.array([r[3] for r in rows])
+        wts = np.where(J, 1.0 / np.maximum(S, 1e-300) ** 2, 0.0)
         den = np.sum(wts * E**2, axis=0)
-        ok = den > 0
+        ok = (den > 0) & np.isfinite(den)
         scale = np.where(ok, np.sum(wts * M * E, axis=0) / np.where(ok, den, 1.0), 1.0)
-        se = np.where(ok, 1.0 / np.sqrt(np.where(ok, den, 1.0)), np.inf)
+        se = np.where(ok, 1.0 / np.sqrt(np.where(ok, den, 1.0)), 0.0)
         out.append(_region_record(f"{PREFIX}lambert chart scale", "chart", scale, np.ones(nb), se, None, tests, edges,
-                                  patches=len(found)))
+                                  ok, patches=len(found), patches_judged=J.sum(axis=0).tolist()))
     return out
 
 
 def _failing_bands(stat, edges):
-    """Every band whose test fails, worst first: [{"band", "band_nm", "relative", "z"}]."""
+    """Every judged band whose test fails, worst first: [{"band", "band_nm", "relative", "z"}]."""
     m, e, s = (np.asarray(stat[k], dtype=np.float64) for k in ("measured", "expected", "se"))
-    z = (m - e) / np.maximum(s, 1e-300)
-    p = np.atleast_1d(stats.two_sided_p(z, stat.get("dof")))
+    j = _judged(stat)
+    z = np.where(j, (m - e) / np.maximum(s, 1e-300), 0.0)
+    p = np.where(j, np.atleast_1d(stats.two_sided_p(z, stat.get("dof"))), 1.0)
     bad = [int(k) for k in np.argsort(-np.abs(z)) if p[k] < stat["threshold"]]
     return [{"band": k, "band_nm": [float(edges[k][0]), float(edges[k][1])],
              "relative": float(m[k] / e[k] - 1.0) if e[k] else None, "z": float(z[k])} for k in bad]
 
 
-def _region_record(name, region, measured, expected, se, dof, tests, edges, **extra):
-    stat = stats.compare_means(measured, expected, se, dof=dof, tests=tests)
+def _region_record(name, region, measured, expected, se, dof, tests, edges, tested, needed=None, with_sample=None,
+                   **extra):
+    stat = stats.compare_means(measured, expected, se, dof=dof, tests=tests, judged=tested)
+    pixels = extra.get("pixels")
+    unjudged = [{"band": int(k), "band_nm": [float(edges[k][0]), float(edges[k][1])], "pixels": pixels,
+                 "with_sample": None if with_sample is None else int(with_sample[k]),
+                 "needed": None if needed is None or not np.isfinite(needed[k]) else float(needed[k]),
+                 **({} if "patches_judged" not in extra else {"patches_judged": int(extra["patches_judged"][k])})}
+                for k in np.flatnonzero(~np.asarray(tested, dtype=bool))]
+    if needed is None:  # the pooled test: a band no patch could judge
+        unjudged = [dict(b, needed=None) for b in unjudged]
+    note = describe_unjudged(region, unjudged, len(edges))
     worst = _worst(stat, edges)
+    if worst is None:
+        return _probe(name, None, None, None, "relative", None, stat=stat, worst={"text": note}, failing_bands=[],
+                      unjudged=unjudged, unjudged_text=note, region=region, **extra)
     failing = _failing_bands(stat, edges)
     text = describe(region, worst)
     if len(failing) > 1:  # the other failing bands, nm and size only: "also 550-555 nm +1.9 %"
@@ -163,7 +246,8 @@ def _region_record(name, region, measured, expected, se, dof, tests, edges, **ex
             for b in failing[1:4]) + (f" and {len(failing) - 4} more" if len(failing) > 4 else "")
     return _probe(name, float(np.asarray(expected)[worst["band"]]), float(np.asarray(measured)[worst["band"]]),
                   worst["relative"], "relative", stat["pass"], z=stat["z"], stat=stat,
-                  worst=dict(worst, text=text), failing_bands=failing, region=region, **extra)
+                  worst=dict(worst, text=text), failing_bands=failing, unjudged=unjudged, unjudged_text=note,
+                  region=region, **extra)
 
 
 def lone_sphere_bands(m):
@@ -188,9 +272,10 @@ def lone_sphere_bands(m):
                               centres, model, width)
     px = cube[mask].astype(np.float64)
     n = px.shape[0]
+    tested, needed, with_sample = enough_samples(px, stats.sidak_threshold(stats.ALPHA, len(centres)))
     return [_region_record(f"{PREFIX}lone sphere {obj['name']}", obj["name"], px.mean(axis=0), expected,
                            px.std(axis=0, ddof=1) / np.sqrt(n), n - 1, len(centres), band_edges(centres, model, width),
-                           pixels=n)]
+                           tested, needed=needed, with_sample=with_sample, pixels=n)]
 
 
 PROBES = [lambert_bands, lone_sphere_bands]
@@ -209,10 +294,14 @@ def record(entry_probes, sp):
         if not p["name"].startswith(PREFIX) or not p.get("stat"):
             continue
         st = p["stat"]
+        j = _judged(st)
         z = ((np.asarray(st["measured"]) - np.asarray(st["expected"])) / np.maximum(np.asarray(st["se"]), 1e-300))
+        # a band not judged has no z and no standard error to draw (None: the report leaves them out)
         regions.append({"probe": p["name"], "region": p.get("region"), "check": p["name"],
-                        "measured": st["measured"], "se": st["se"], "expected": st["expected"],
-                        "z": [float(x) for x in z], "pass": p["pass"], "worst": p.get("worst")})
+                        "measured": st["measured"], "se": [float(v) if ok else None for v, ok in zip(st["se"], j)],
+                        "expected": st["expected"], "z": [float(x) if ok else None for x, ok in zip(z, j)],
+                        "judged": j.tolist(), "pass": p["pass"], "worst": p.get("worst"),
+                        "unjudged": p.get("unjudged_text") or None})
     threshold = next((p["stat"]["threshold"] for p in entry_probes if p["name"].startswith(PREFIX) and p.get("stat")), None)
     return {"model": model, "source": sp.get("source", "declared"), "centres_nm": [float(c) for c in centres],
             "edges_nm": None if model == "point" else [[float(a), float(b)] for a, b in edges],
