@@ -1,0 +1,89 @@
+"""Does the same seed give a bit-identical render? (benchmarks/TESTS.md, issue 45 item 7)
+
+    .venv/bin/python benchmarks/measure_determinism.py [--repeats 3] [--spp 16] [--size 32]
+
+Renders one small canonical scene (golden/ir/ggx_copper_50, and the RGB backends' own plane of
+tests/test_rgb_backends.py's kind: the golden scene exported for them) REPEATS times with the same
+seed and passes through each backend this machine has (Mitsuba scalar_spectral, llvm_ad_spectral,
+ART, Cycles, LuxCore), and prints, per backend, whether the mean image and the per-pixel standard
+error are bit-identical between the repeats (and the largest difference when not). A backend whose
+same-seed renders are bit-identical makes a statistical test on its render a fixed outcome: the
+test cannot false-alarm between runs of the suite (on the same machine and build)."""
+import argparse
+import copy
+import json
+import shutil
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+import pkg_bootstrap  # noqa: E402
+
+pkg_bootstrap.package()
+
+
+def render_once(backend, variant, scene, folder, spp, passes, seed):
+    from spectral_bench.batch import backends, exr
+    from spectral_bench.exporters import ir
+    sc = copy.deepcopy(scene)
+    sc["needs"] = ir.derived_needs({k: v for k, v in sc.items() if k != "needs"})
+    b = backends.get(backend, force_variant=variant) if variant else backends.get(backend)
+    path = b.export(sc, Path(folder) / backend)
+    mode = b.mode_for(sc)[0]
+    info = b.render(path, mode, spp, Path(folder) / "render.exr", passes=passes, seed=seed)
+    _names, img, se = exr.read_image_and_stderr(Path(folder) / "render.exr")
+    return mode, info, img, se
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--scene", default="ggx_copper_50")
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--spp", type=int, default=16)
+    ap.add_argument("--passes", type=int, default=2)
+    ap.add_argument("--size", type=int, default=32)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--only", nargs="*", help="backend labels to measure (default: all)")
+    args = ap.parse_args()
+    from spectral_bench.exporters import ir_json
+    scene = ir_json.load(ROOT / "golden" / "ir" / f"{args.scene}.json")
+    scene["render"]["width"] = scene["render"]["height"] = args.size
+    scene["render"]["spp"] = args.spp
+    cases = [("mitsuba scalar_spectral", "mitsuba", "scalar_spectral"),
+             ("mitsuba llvm_ad_spectral", "mitsuba", "llvm_ad_spectral"),
+             ("art", "art", None), ("cycles", "cycles", None), ("luxcore", "luxcore", None)]
+    rows = []
+    for label, backend, variant in cases:
+        if args.only and label.split()[-1] not in args.only and backend not in args.only:
+            continue
+        renders = []
+        try:
+            for _ in range(args.repeats):
+                folder = Path(tempfile.mkdtemp(prefix="det_"))
+                try:
+                    renders.append(render_once(backend, variant, scene, folder, args.spp, args.passes, args.seed))
+                finally:
+                    shutil.rmtree(folder, ignore_errors=True)
+        except Exception as exc:  # a backend this machine lacks (ART unbuilt, no bpy, ...)
+            rows.append({"backend": label, "measured": False, "why": f"{type(exc).__name__}: {str(exc)[:200]}"})
+            print(json.dumps(rows[-1]), flush=True)
+            continue
+        mode, info, img0, se0 = renders[0]
+        same_img = all(np.array_equal(img0, r[2]) for r in renders[1:])
+        same_se = all((se0 is None and r[3] is None) or np.array_equal(se0, r[3]) for r in renders[1:])
+        diff = max(float(np.max(np.abs(img0 - r[2]))) for r in renders[1:])
+        rel = diff / max(float(np.mean(np.abs(img0))), 1e-30)
+        spps = [r[1].get("spp") for r in renders]
+        rows.append({"backend": label, "mode": mode, "measured": True, "repeats": args.repeats,
+                     "bit_identical": bool(same_img and same_se), "max_abs_diff": diff, "max_diff_over_mean": rel,
+                     "spp_taken": spps, "per_pass": [r[1].get("samples_per_pixel_per_pass") for r in renders]})
+        print(json.dumps(rows[-1]), flush=True)
+    return rows
+
+
+if __name__ == "__main__":
+    main()
