@@ -8,7 +8,14 @@ seed and passes through each backend this machine has (Mitsuba scalar_spectral, 
 ART, Cycles, LuxCore), and prints, per backend, whether the mean image and the per-pixel standard
 error are bit-identical between the repeats (and the largest difference when not). A backend whose
 same-seed renders are bit-identical makes a statistical test on its render a fixed outcome: the
-test cannot false-alarm between runs of the suite (on the same machine and build)."""
+test cannot false-alarm between runs of the suite (on the same machine and build).
+
+    .venv/bin/python benchmarks/measure_determinism.py --mitsuba-threads
+
+renders Mitsuba's Cornell box (mi.cornell_box) in-process with Dr.Jit's thread count 1, 2, 7 and 16,
+twice each, through a one-pixel box filter (what the IR's exporters write) and through the box's
+default Gaussian filter, in scalar_spectral and llvm_ad_spectral: is the render bit-identical
+whatever the thread count (the machine's cores)?"""
 import argparse
 import copy
 import json
@@ -39,8 +46,33 @@ def render_once(backend, variant, scene, folder, spp, passes, seed):
     return mode, info, img, se
 
 
+def mitsuba_threads(spp=16, seed=3):
+    """Per variant and filter: the thread counts whose two renders are bit-identical to each other
+    and to the one-thread render, and the largest difference from it."""
+    import drjit as dr
+    import mitsuba as mi
+    rows = []
+    for variant in ("scalar_spectral", "llvm_ad_spectral"):
+        mi.set_variant(variant)
+        for rfilter in ("box", "gaussian"):
+            d = mi.cornell_box()
+            d["sensor"]["film"]["rfilter"] = {"type": rfilter}
+            scene = mi.load_dict(d)
+            out, repeat_same = {}, {}
+            for n in (1, 2, 7, 16):
+                dr.set_thread_count(n)
+                a, b = (np.array(mi.render(scene, spp=spp, seed=seed)) for _ in range(2))
+                out[n], repeat_same[n] = a, bool(np.array_equal(a, b))
+            rows.append({"variant": variant, "rfilter": rfilter, "repeat_bit_identical": repeat_same,
+                         "same_as_one_thread": {n: bool(np.array_equal(out[1], img)) for n, img in out.items()},
+                         "max_abs_diff_from_one_thread": max(float(np.abs(out[1] - img).max()) for img in out.values())})
+            print(json.dumps(rows[-1]), flush=True)
+    return rows
+
+
 def main():
     ap = argparse.ArgumentParser()
+    ap.add_argument("--mitsuba-threads", action="store_true", help="the thread-count measurement instead (see above)")
     ap.add_argument("--scene", default="ggx_copper_50")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--spp", type=int, default=16)
@@ -49,6 +81,8 @@ def main():
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--only", nargs="*", help="backend labels to measure (default: all)")
     args = ap.parse_args()
+    if args.mitsuba_threads:
+        return mitsuba_threads()
     from spectral_bench.exporters import ir_json
     scene = ir_json.load(ROOT / "golden" / "ir" / f"{args.scene}.json")
     scene["render"]["width"] = scene["render"]["height"] = args.size
