@@ -67,6 +67,12 @@ def mitsuba_threads(spp=16, seed=3):
                          "same_as_one_thread": {n: bool(np.array_equal(out[1], img)) for n, img in out.items()},
                          "max_abs_diff_from_one_thread": max(float(np.abs(out[1] - img).max()) for img in out.values())})
             print(json.dumps(rows[-1]), flush=True)
+    if args.art_threads:
+        os.cpu_count = real_cpu_count
+        first = next(iter(by_label.values()), None)
+        same = {label: bool(np.array_equal(first, img)) for label, img in by_label.items()}
+        rows.append({"art_same_image_whatever_the_thread_count": same})
+        print(json.dumps(rows[-1]), flush=True)
     return rows
 
 
@@ -80,6 +86,8 @@ def main():
     ap.add_argument("--size", type=int, default=32)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--only", nargs="*", help="backend labels to measure (default: all)")
+    ap.add_argument("--art-threads", type=int, nargs="*",
+                    help="ART only, once per thread count given (artist -j N; the backend passes the machine's cores)")
     args = ap.parse_args()
     if args.mitsuba_threads:
         return mitsuba_threads()
@@ -90,9 +98,19 @@ def main():
     cases = [("mitsuba scalar_spectral", "mitsuba", "scalar_spectral"),
              ("mitsuba llvm_ad_spectral", "mitsuba", "llvm_ad_spectral"),
              ("art", "art", None), ("cycles", "cycles", None), ("luxcore", "luxcore", None)]
-    rows = []
+    if args.art_threads:
+        import os
+        counts = args.art_threads
+        cases = []
+        for n in counts:
+            cases.append((f"art -j {n}", "art", None))
+        real_cpu_count = os.cpu_count
+    rows, by_label = [], {}
     for label, backend, variant in cases:
-        if args.only and label.split()[-1] not in args.only and backend not in args.only:
+        if args.art_threads:
+            n = int(label.split()[-1])
+            os.cpu_count = lambda n=n: n  # the ART backend runs artist -j os.cpu_count()
+        if args.only and not args.art_threads and label.split()[-1] not in args.only and backend not in args.only:
             continue
         renders = []
         try:
@@ -107,6 +125,7 @@ def main():
             print(json.dumps(rows[-1]), flush=True)
             continue
         mode, info, img0, se0 = renders[0]
+        by_label[label] = img0
         same_img = all(np.array_equal(img0, r[2]) for r in renders[1:])
         same_se = all((se0 is None and r[3] is None) or np.array_equal(se0, r[3]) for r in renders[1:])
         diff = max(float(np.max(np.abs(img0 - r[2]))) for r in renders[1:])
@@ -115,6 +134,12 @@ def main():
         rows.append({"backend": label, "mode": mode, "measured": True, "repeats": args.repeats,
                      "bit_identical": bool(same_img and same_se), "max_abs_diff": diff, "max_diff_over_mean": rel,
                      "spp_taken": spps, "per_pass": [r[1].get("samples_per_pixel_per_pass") for r in renders]})
+        print(json.dumps(rows[-1]), flush=True)
+    if args.art_threads:
+        os.cpu_count = real_cpu_count
+        first = next(iter(by_label.values()), None)
+        same = {label: bool(np.array_equal(first, img)) for label, img in by_label.items()}
+        rows.append({"art_same_image_whatever_the_thread_count": same})
         print(json.dumps(rows[-1]), flush=True)
     return rows
 
