@@ -31,9 +31,10 @@ ALL_SCENES = sorted(REFLECTANCE + SPECTRAL_ACCURACY + POLARIZATION + IRIDESCENCE
 # to run. Mitsuba (scalar and llvm variants) and Cycles render bit-identical images for one seed
 # (measured: benchmarks/measure_determinism.py), and every pure-numpy Monte Carlo test seeds its
 # generator, so a test on those has the same outcome in every run: it cannot cry wolf. LuxCore's
-# renders differ from run to run with one seed (its threads, and where its halt lands between polls),
-# and ART's are not known to be the same (its threads; not measured here: no ART build): each of
-# their judgements below is one family of tests with its own false-alarm rate. The suite's budget
+# renders differ from run to run with one seed (where its halt lands between polls, even on one
+# thread), and ART's are the same for one seed and thread count but differ between thread counts
+# (the backend runs artist -j <the machine's cores>): on a fleet of machines its outcome is random.
+# Each of their judgements below is one family of tests with its own false-alarm rate. The suite's budget
 # SUITE_ALPHA is split among them (Bonferroni): each at RANDOM_TEST_ALPHA, so that the whole suite
 # false-alarms less than once in 1000 runs. A test added on a renderer whose renders are random must
 # be counted here (and in benchmarks/TESTS.md) and judge at RANDOM_TEST_ALPHA.
@@ -46,9 +47,11 @@ RANDOM_JUDGEMENTS = {  # test (file::function) -> how many families of tests its
     "test_rgb_backends.py::test_colorchecker_renders_the_rule_exactly_within_noise[luxcore]": 2,  # D65, D50 charts
     "test_rgb_backends.py::test_colorchecker_d65_is_within_its_bound_and_d50_shows_the_rgb_error[luxcore]": 1,  # calibrated bound
     "test_warm_rgb.py::test_one_warm_luxcore_worker_renders_scene_after_scene_as_fresh_children": 3,  # A, B, A again
-    # ART (tests/test_art.py): the module's four judged runs (noise test + one probe family each),
-    # shared by the tests that read them, and the four Brewster renders (one probe family each)
-    "test_art.py::art_runs (test_art_renders_the_five_scenes_and_judges_them, test_art_chart_keeps_out_of_gamut_colour)": 8,
+    # ART (tests/test_art.py): the module's four judged runs, shared by the tests that read them: each
+    # run's noise test and its probe families (fluorescent_sphere_lone: fluorescence, bands;
+    # polarizing_plane_0: Brewster, Stokes; macbeth_chart_D65: lambert, bands; polarizing_spheres:
+    # Stokes), and the four Brewster renders (one probe family each)
+    "test_art.py::art_runs (test_art_renders_the_five_scenes_and_judges_them, test_art_chart_keeps_out_of_gamut_colour)": 11,
     "test_art.py::test_art_brewster_and_polariser_convention": 4,
 }
 N_RANDOM_TESTS = sum(RANDOM_JUDGEMENTS.values())
