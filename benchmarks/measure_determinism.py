@@ -15,7 +15,14 @@ test cannot false-alarm between runs of the suite (on the same machine and build
 renders Mitsuba's Cornell box (mi.cornell_box) in-process with Dr.Jit's thread count 1, 2, 7 and 16,
 twice each, through a one-pixel box filter (what the IR's exporters write) and through the box's
 default Gaussian filter, in scalar_spectral and llvm_ad_spectral: is the render bit-identical
-whatever the thread count (the machine's cores)?"""
+whatever the thread count (the machine's cores)?
+
+    .venv/bin/python benchmarks/measure_determinism.py --luxcore-threads
+
+renders ggx_copper_50 (32x32) exported for LuxCore three times with one seed and 8 samples per
+pixel asked (batch.haltspp), with LuxCore's default threads and with native.threads.count = 1,
+in a child process that imports only pyluxcore (as batch/backends/luxcore/worker.py does): the
+samples it took and whether the images are bit-identical."""
 import argparse
 import copy
 import json
@@ -76,8 +83,65 @@ def mitsuba_threads(spp=16, seed=3):
     return rows
 
 
+LUXCORE_CHILD = r"""
+import json, sys, time
+from pathlib import Path
+import numpy as np
+import pyluxcore
+cfg = Path(sys.argv[1]); folder = cfg.parent
+pyluxcore.Init()
+
+def render(threads, spp=8, seed=1):
+    pyluxcore.ClearFileNameResolverPaths(); pyluxcore.AddFileNameResolverPath(str(folder))
+    base = pyluxcore.Properties(str(cfg))
+    w, h = base.Get("film.width").GetInt(), base.Get("film.height").GetInt()
+    scene = pyluxcore.Scene(); scene.Parse(pyluxcore.Properties(str(folder / base.Get("scene.file").GetString())))
+    props = pyluxcore.Properties(base)
+    props.Set(pyluxcore.Property("renderengine.seed", seed))
+    props.Set(pyluxcore.Property("batch.haltspp", spp))
+    if threads:
+        props.Set(pyluxcore.Property("native.threads.count", threads))
+    s = pyluxcore.RenderSession(pyluxcore.RenderConfig(props, scene))
+    s.Start()
+    while True:
+        time.sleep(0.02); s.UpdateStats()
+        if s.HasDone():
+            break
+    s.Stop()
+    n = s.GetStats().Get("stats.renderengine.total.samplecount").GetFloat() / (w * h)
+    buf = np.zeros(w * h * 3, dtype=np.float32); s.GetFilm().GetOutputFloat(pyluxcore.FilmOutputType.RGB, buf)
+    return n, buf
+
+for threads in (None, 1):
+    r = [render(threads) for _ in range(3)]
+    print(json.dumps({"luxcore_threads": threads or "default (all cores)", "spp_asked": 8,
+                      "spp_taken": [round(x[0], 3) for x in r],
+                      "bit_identical": all(np.array_equal(r[0][1], x[1]) for x in r[1:])}), flush=True)
+"""
+
+
+def luxcore_threads():
+    import subprocess
+    from spectral_bench.batch import backends
+    from spectral_bench.exporters import ir, ir_json
+    sc = ir_json.load(ROOT / "golden" / "ir" / "ggx_copper_50.json")
+    sc["render"]["width"] = sc["render"]["height"] = 32
+    sc["needs"] = ir.derived_needs({k: v for k, v in sc.items() if k != "needs"})
+    folder = Path(tempfile.mkdtemp(prefix="det_lux_"))
+    try:
+        cfg = backends.get("luxcore").export(sc, folder / "luxcore")
+        proc = subprocess.run([sys.executable, "-c", LUXCORE_CHILD, str(cfg)], capture_output=True, text=True, timeout=600)
+        rows = [json.loads(line) for line in proc.stdout.splitlines() if line.startswith("{")]
+        for row in rows:
+            print(json.dumps(row), flush=True)
+        return rows
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
 def main():
     ap = argparse.ArgumentParser()
+    ap.add_argument("--luxcore-threads", action="store_true", help="the LuxCore one-thread measurement instead (see above)")
     ap.add_argument("--mitsuba-threads", action="store_true", help="the thread-count measurement instead (see above)")
     ap.add_argument("--scene", default="ggx_copper_50")
     ap.add_argument("--repeats", type=int, default=3)
@@ -91,6 +155,8 @@ def main():
     args = ap.parse_args()
     if args.mitsuba_threads:
         return mitsuba_threads()
+    if args.luxcore_threads:
+        return luxcore_threads()
     from spectral_bench.exporters import ir_json
     scene = ir_json.load(ROOT / "golden" / "ir" / f"{args.scene}.json")
     scene["render"]["width"] = scene["render"]["height"] = args.size
