@@ -6,9 +6,15 @@ The render tests need ART 2.1.2 (not in any package registry): scripts/build_art
 from its source into .art/ (.ci/run does when ../shared/art/ holds the source) and writes
 .art/env.json, which the runner reads; an ``artist`` on PATH, or ART_ARTIST, also serves. Without
 one they skip with a visible reason. They share one batch run of the five scenes of issue 32 at
-reduced settings (a quarter of the resolution, 32 spp, 2 passes: ART costs about 13x Mitsuba's
+reduced settings (a quarter of the resolution, 48 spp, 2 passes: ART costs about 13x Mitsuba's
 time) and one run with a planted error (every illuminant of the .arm 1.03 times too bright, the
-writer's test hook); each judged run asserts its own power (``detectable``) below that 3 %."""
+writer's test hook); each judged run asserts its own power (``detectable``) below that 3 %.
+
+ART's renders are not known to be the same from run to run for one seed (its threads, -j): every
+judgement here takes its share of the suite's false-alarm budget (tests/conftest.py
+RANDOM_TEST_ALPHA, benchmarks/TESTS.md): the runs' noise tests through --alpha, their probes
+through the probes' alpha (random_run_env), the Brewster probes in this process likewise; the
+planted run is judged at the same alpha, so its power is the power at the alpha the suite uses."""
 import copy
 import io
 import json
@@ -21,10 +27,10 @@ import tarfile
 import numpy as np
 import pytest
 
-from conftest import ALL_SCENES, ROOT, metrics, run_batch, write_scene
+from conftest import ALL_SCENES, RANDOM_TEST_ALPHA, ROOT, metrics, random_run_env, run_batch, write_scene
 from spectral_bench.batch import backends, exr, spectral_exr
 from spectral_bench.batch.backends.art import backend as art_backend
-from spectral_bench.batch.verdict import probes
+from spectral_bench.batch.verdict import probes, stats
 from spectral_bench.exporters import art_writer
 
 ARTIST = os.environ.get("ART_ARTIST") or (str(art_backend.find_artist()) if art_backend.find_artist() else None)
@@ -305,12 +311,17 @@ def test_planted_error_hook_scales_every_emitter_and_says_so(golden, tmp_path, m
 # -- ART renders, judged like any other backend's (one batch run per condition, shared) ----------------------
 JUDGED = ["macbeth_chart_D65", "polarizing_plane_0", "polarizing_spheres", "fluorescent_sphere_lone"]
 SCENES = [*JUDGED, "ggx_copper_50"]  # upstream ART has no GGX: unsupported, naming object and field
-REDUCED = ["--scale", "0.25", "--spp", "32"]  # 2 passes; detectable 0.9-2.1 % (the polarised scenes the most)
+# 2 passes. At 32 spp the runs' detectable was 0.9-2.1 % at alpha 0.01, 1.2-2.7 % at the suite's
+# RANDOM_TEST_ALPHA (4e-5): polarizing_plane_0's 2.7 % left the planted 3 % a 3.5 % chance to pass
+# on another machine (its scale test: power 0.965; at alpha 0.01 it had been 0.9995). 48 spp
+# brings that back (0.9993)
+REDUCED = ["--scale", "0.25", "--spp", "48"]
 PLANTED = 1.03  # the illuminant error the runs must see (issue 32)
 
 
 def _art_batch(out, scenes, *extra):
-    proc = run_batch("-r", "art", *EXEC, *[a for s in scenes for a in ("-s", s)], *REDUCED, *extra, "-o", out, timeout=1200)
+    proc = run_batch("-r", "art", *EXEC, *[a for s in scenes for a in ("-s", s)], *REDUCED, "--alpha", RANDOM_TEST_ALPHA,
+                     *extra, "-o", out, timeout=1200, env=random_run_env())
     assert (out / "metrics.json").is_file(), proc.stderr[-3000:]
     return proc, {r["scene"]: r for r in metrics(out)["runs"]}
 
@@ -431,7 +442,7 @@ def test_art_spectral_exr_header_as_art_writes_it(art_runs, tmp_path):
 @needs_artist
 @pytest.mark.parametrize("angle, turned, expect_bright", [(0.0, 0.0, True), (90.0, 0.0, False), (30.0, 30.0, True),
                                                          (-30.0, 30.0, False)])
-def test_art_brewster_and_polariser_convention(golden, tmp_path, angle, turned, expect_bright):
+def test_art_brewster_and_polariser_convention(golden, tmp_path, angle, turned, expect_bright, monkeypatch):
     """ART's polariser angle follows the IR's convention (counter-clockwise from image right, seen
     from the camera): parallel to the reflection's s direction the Brewster reflection is bright,
     crossed it is near zero (a factor of ~20 apart), each judged on its own noise (64x64, 2 passes
@@ -443,6 +454,7 @@ def test_art_brewster_and_polariser_convention(golden, tmp_path, angle, turned, 
     b = backends.get("art", executable=ARTIST)
     b.render(b.export(sc, tmp_path / "art"), b.mode_for(sc)[0], 32, tmp_path / "r.exr", passes=2)
     names, img, se = exr.read_image_and_stderr(tmp_path / "r.exr")
+    monkeypatch.setattr(stats, "ALPHA", RANDOM_TEST_ALPHA)  # ART's render is random from run to run: the suite's share
     p = next(x for x in probes.evaluate(sc, names, img, stderr=se, passes=2) if x["name"].startswith("brewster"))
     assert p["pass"], p
     assert (sum(p["measured"]) > 0.5) == expect_bright

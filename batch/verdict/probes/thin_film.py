@@ -151,7 +151,8 @@ def _tile_stat(rgb, expected, blocks, alpha):
     return stats.compare_means(np.ravel(meas), np.ravel(exp), np.ravel(se), dof=np.ravel(dof), alpha=alpha)
 
 
-def smooth_film(m, alpha=stats.ALPHA):
+def smooth_film(m, alpha=None):
+    alpha = stats.ALPHA if alpha is None else alpha
     scene, image = m.scene, m.image
     env = scene.get("environment")
     films = [i for i, obj in enumerate(scene["objects"]) if applies(obj)]
