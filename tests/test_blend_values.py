@@ -167,3 +167,14 @@ def test_list_caps_are_named_per_list_in_the_error(tmp_path, golden):
     assert proc.returncode == 2
     assert (f"field 'lights': holds {n} items, more than {n - 1}: the limit for a scene's lights "
             "(exporters/validate.py LIST_LIMITS") in proc.stdout, proc.stdout[-2000:]
+
+
+def test_the_documented_caps_are_the_table():
+    """docs/scene-format.md section 5 states each cap of exporters/validate.py LIST_LIMITS with its field."""
+    from spectral_bench.exporters import validate
+    assert {"objects", "lights", "warnings"} <= set(validate.LIST_LIMITS)  # each list a Blender scene fills, named
+    text = " ".join((ROOT / "docs" / "scene-format.md").read_text().split())
+    for field, limit in validate.LIST_LIMITS.items():
+        if not field.endswith("[]"):
+            assert f"{limit} (`{field}`)" in text or f"`{field}`" in text and str(limit) in text, (field, limit)
+    assert f"{validate.MAX_OTHER_LIST} (any other list" in text

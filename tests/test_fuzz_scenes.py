@@ -78,3 +78,23 @@ def test_the_checker_sees_what_it_must_refuse(tmp_path):
     before = scene_fuzz.snapshot(tmp_path)
     (tmp_path / "outside" / "x").write_text(json.dumps({}))
     assert scene_fuzz.snapshot(tmp_path) != before
+
+
+def _blend(specs):
+    with tempfile.TemporaryDirectory() as d:
+        return scene_fuzz.check_blend(specs, d)
+
+
+@fuzz(3)
+@given(scene_fuzz.blend_scenes())
+def test_ordinary_blend_files_export_scene_by_scene_or_fail_by_name(specs):
+    """Hypothesis-made .blend files (a bpy child per file of 4 scenes) through batch/run.py
+    --export-only: each scene exported or failed alone naming scene, object and field."""
+    assert set(_blend(specs).values()) <= {"exported", "failed"}
+
+
+@pytest.mark.slow
+@fuzz(20)
+@given(scene_fuzz.blend_scenes(n=6))
+def test_ordinary_blend_files_many(specs):
+    assert set(_blend(specs).values()) <= {"exported", "failed"}
