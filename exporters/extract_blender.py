@@ -597,6 +597,11 @@ def _camera(scene, problems):
         axis, sensor = "x", d.sensor_width
     else:
         axis, sensor = "y", d.sensor_height
+    if not (sensor > 0 and d.lens > 0):  # Blender's minimum is 1 mm for both: a file can hold less
+        field = "data.lens" if not d.lens > 0 else ("data.sensor_height" if fit == "VERTICAL" else "data.sensor_width")
+        problems.append((cam.name, field, f"focal length {d.lens:g} mm and sensor {sensor:g} mm: both must be > 0 "
+                                          "(a camera's field of view is 2 atan(sensor / (2 lens)))"))
+        return None
     fov = math.degrees(2 * math.atan(sensor / (2 * d.lens)))
     out = {**_named(cam.name, ()), "to_world": _matrix(_world(cam)), "fov": _clean(fov), "fov_axis": axis}
     if d.spectral_bench.polarizer:

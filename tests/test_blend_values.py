@@ -62,11 +62,13 @@ def blend(tmp_path_factory):
         plain("area_size_0", lights=[area("panel", size=0.0), point("key")]),
         plain("disk_size_y_0", lights=[area("oval", shape="ELLIPSE", size=1.0, size_y=0.0), point("key")]),
         plain("area_scaled_0", lights=[area("panel", scale=(0, 0, 0), size=1.0), point("key")]),
+        plain("area_flattened", lights=[area("panel", scale=(2, 1, 0), size=1.0), point("key")]),
         plain("object_scaled_0", objects=[{"name": "gone", "mesh": "cube", "scale": (0, 0, 0)},
                                           {"name": "ball", "mesh": "cube", "sphere": True, "scale": (0, 0, 0)}]),
         plain("object_flattened", objects=[{"name": "flat", "mesh": "cube", "scale": (1, 1, 0)}]),
         plain("degenerate_mesh", objects=[{"name": "sliver", "mesh": "degenerate"}]),
-        plain("negative_light", lights=[point("dark", energy=-100.0), point("key")]),
+        plain("negative_light", lights=[point("dark", energy=-100.0), point("key")],
+              objects=[{"name": "sink", **QUAD, "material": {"kind": "principled", "emission": -2.0}}]),
         plain("cold_world", world={"strength": 1.0, "blackbody": 0.0}),
         plain("missing_sky", world={"strength": 1.0, "image": str(folder / "no_such_sky.exr")}),
         plain("folder_sky", world={"strength": 1.0, "image": str(folder / "a_folder.exr")}),
@@ -125,6 +127,16 @@ def test_zero_area_lights_are_dropped_saying_they_emit_nothing(blend):
             warned(sc)[(f"{scene}_{obj}", field)]
 
 
+def test_an_area_light_flattened_along_its_normal_keeps_its_area_and_direction(blend):
+    sc = exported(blend, "area_flattened")
+    panel = next(o for o in sc["objects"] if o["name"] == "area_flattened_panel")
+    m = panel["shape"]["to_world"]
+    assert [row[:3] for row in m[:3]] == [[1.0, 0.0, 0.0], [0.0, -0.5, 0.0], [0.0, 0.0, -1.0]], m  # 2 x 1 m, emits down
+    # L = P / (pi A), A = 2 m^2 (2 x 1 scale of a 1 m square): cie_d65 scaled to 50 / (2 pi)
+    assert "z axis is scaled to 0: taken as its unit normal" in warned(sc)[("area_flattened_panel", "scale")]
+    assert "radiance L = P / (pi A) = 50 / (pi 2) = 7.95775" in warned(sc)[("area_flattened_panel", "data.color")]
+
+
 def test_objects_scaled_to_zero_are_dropped_and_a_flattened_one_keeps_its_geometry(blend):
     sc = exported(blend, "object_scaled_0")
     assert [o["name"] for o in sc["objects"]] == ["object_scaled_0_floor"]
@@ -144,6 +156,10 @@ def test_negative_light_and_cold_blackbody_are_converted_with_a_warning(blend):
     sc = exported(blend, "negative_light")
     assert [light["name"] for light in sc["lights"]] == ["negative_light_key"]
     assert warned(sc)[("negative_light_dark", "data.energy")].startswith("negative power -100: Blender subtracts light")
+    sink = next(o for o in sc["objects"] if o["name"] == "negative_light_sink")
+    assert sink["emitter"] is None and "negative strength -2: Blender subtracts light" in \
+        warned(sc)[("negative_light_sink", "material[negative_light_negative_light_sink_mat].node_tree.nodes[Principled BSDF]."
+                                           "inputs[Emission Strength]")]
     sc = exported(blend, "cold_world")
     assert sc["environment"]["radiance"] == {"type": "blackbody", "temperature": 800.0,
                                              "scale": sc["environment"]["radiance"]["scale"]}
