@@ -70,6 +70,7 @@ def blend(tmp_path_factory):
         plain("negative_light", lights=[point("dark", energy=-100.0), point("key")],
               objects=[{"name": "sink", **QUAD, "material": {"kind": "principled", "emission": -2.0}}]),
         plain("cold_world", world={"strength": 1.0, "blackbody": 0.0}),
+        plain("dark_world", world={"strength": -1.0}),
         plain("missing_sky", world={"strength": 1.0, "image": str(folder / "no_such_sky.exr")}),
         plain("folder_sky", world={"strength": 1.0, "image": str(folder / "a_folder.exr")}),
     ]
@@ -152,7 +153,7 @@ def test_objects_scaled_to_zero_are_dropped_and_a_flattened_one_keeps_its_geomet
     assert warned(sc)[("degenerate_mesh_sliver", "data")].startswith("every face (2) has zero area in the world"), warned(sc)
 
 
-def test_negative_light_and_cold_blackbody_are_converted_with_a_warning(blend):
+def test_negative_light_and_world_and_cold_blackbody_are_converted_with_a_warning(blend):
     sc = exported(blend, "negative_light")
     assert [light["name"] for light in sc["lights"]] == ["negative_light_key"]
     assert warned(sc)[("negative_light_dark", "data.energy")].startswith("negative power -100: Blender subtracts light")
@@ -165,6 +166,9 @@ def test_negative_light_and_cold_blackbody_are_converted_with_a_warning(blend):
                                              "scale": sc["environment"]["radiance"]["scale"]}
     assert "temperature 0 K: Cycles' Blackbody node gives the colour of 800 K" in \
         warned(sc)[("world[cold_world_world]", "node_tree.nodes[Background].Color")]
+    sc = exported(blend, "dark_world")
+    assert sc["environment"] is None and "negative strength -1: Blender subtracts light" in \
+        warned(sc)[("world[dark_world_world]", "node_tree.nodes[Background].Strength")]
 
 
 def test_list_caps_are_named_per_list_in_the_error(tmp_path, golden):
