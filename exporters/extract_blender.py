@@ -200,16 +200,16 @@ def _mesh_in_world(name, shape, mw, warnings):
     v = np.asarray(shape["vertices"], dtype=np.float64) @ m[:3, :3].T + m[:3, 3]
     f = np.asarray(shape["faces"], dtype=np.int64)
     areas = 0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
-    top = float(areas.max()) if np.isfinite(areas).all() else math.inf
-    if top == 0:
+    finite = bool(np.isfinite(areas).all())  # else validation names the coordinates that are not
+    if finite and not areas.any():
         singular = not _invertible(shape["to_world"])
         warnings.append((name, "scale" if singular else "data", (f"{_scale_text(mw)}: " if singular else "")
                          + f"every face ({len(f)}) has zero area in the world (Blender renders nothing of it): not "
                          "exported"))
         return None
-    keep = areas > 1e-12 * top if math.isfinite(top) else np.ones(len(f), dtype=bool)
+    keep = areas > 0 if finite else np.ones(len(f), dtype=bool)  # exactly 0 only: a fine detail of a big mesh stays
     out = dict(shape, faces=f[keep].tolist()) if not keep.all() else dict(shape)
-    if not _invertible(shape["to_world"]) and math.isfinite(top):
+    if not _invertible(shape["to_world"]) and finite:
         out["vertices"] = [[_clean(c) for c in p] for p in v]
         out["to_world"] = _matrix(Matrix.Identity(4))
         warnings.append((name, "scale", f"{_scale_text(mw)} flattens the object (the IR's transform must be "
