@@ -81,9 +81,9 @@ def _size_problems(data, own_records=False):
         elif isinstance(node, list):
             limit = LIST_LIMITS.get(key, MAX_OTHER_LIST)
             if len(node) > limit:
-                what = f"a scene's {key}" if key in LIST_LIMITS else f"a {key or 'list'} (any list not named in the table)"
-                yield obj, where, (f"holds {len(node)} items, more than {limit}: the limit for {what} "
-                                   "(exporters/validate.py LIST_LIMITS, docs/scene-format.md section 5)")
+                what = f"a scene's {key} (exporters/validate.py LIST_LIMITS)" if key in LIST_LIMITS else \
+                    f"a list of a few numbers such as {key or 'this'} (exporters/validate.py LIST_LIMITS names the longer ones)"
+                yield obj, where, f"holds {len(node)} items, more than {limit}: the limit for {what}"
                 continue
             for i, v in reversed(list(enumerate(node))):
                 if isinstance(v, (dict, list)):
