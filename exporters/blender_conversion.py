@@ -306,6 +306,10 @@ def _roughness(rough, distribution, field, warn):
 def surface_emission(inp, colour_key, strength_key, warn):
     strength = float(inp.get(strength_key, 0.0) or 0.0)
     colour = np.asarray(inp.get(colour_key, (1, 1, 1)), dtype=np.float64)[:3]
+    if strength < 0:
+        warn(f"inputs[{strength_key}]", f"negative strength {strength:.4g}: Blender subtracts light, the IR's emission "
+                                        "is >= 0: not emitted")
+        return None
     if strength <= 0 or colour.max() <= 0:
         return None
     spec = emission(colour, strength)

@@ -9,6 +9,7 @@ Background node) by exporters/blender_conversion.py, and every approximation or 
 camera, an empty mesh) is an error naming object and field.
 """
 import math
+import os
 
 import bpy
 import numpy as np
@@ -141,9 +142,18 @@ def _mesh_object(obj, depsgraph, problems, warnings):
     kind = obj.spectral_bench.shape
     mw = _world(obj)
     if kind == "RECTANGLE":
-        shape = {"type": "rectangle", "to_world": _matrix(mw)}
+        m3 = mw.to_3x3()
+        if m3.col[0].cross(m3.col[1]).length == 0:
+            warnings.append((name, "scale", f"{_scale_text(mw)}: the rectangle has zero area in the world (Blender "
+                             "renders nothing of it): not exported"))
+            return None
+        shape = {"type": "rectangle", "to_world": _matrix(_flat_frame(mw, name, "scale", warnings))}
     elif kind == "SPHERE":
         loc, _rot, scale = mw.decompose()
+        if max(abs(s) for s in scale) == 0:
+            warnings.append((name, "scale", f"{_scale_text(mw)}: a sphere of radius 0 (Blender renders nothing of "
+                             "it): not exported"))
+            return None
         if max(scale) - min(scale) > 1e-6 * max(scale):
             problems.append((name, "scale", f"an analytic sphere needs a uniform scale, got {tuple(scale)}"))
             return None
@@ -164,7 +174,68 @@ def _mesh_object(obj, depsgraph, problems, warnings):
             warnings.append((name, "data.polygons.use_smooth", "smooth shading: the IR's mesh faces are flat (no "
                              "interpolated normals): rendered faceted"))
         shape = {"type": "mesh", "to_world": _matrix(mw), "vertices": verts, "faces": faces}
+        if faces:
+            shape = _mesh_in_world(name, shape, mw, warnings)
+            if shape is None:
+                return None
     return {"name": name, "shape": shape, "bsdf": bsdf, "emitter": emitter}
+
+
+def _scale_text(mw):
+    """The world scale of a matrix, for a message: "scale (0, 0, 0)"."""
+    return f"scale {conv.fmt(tuple(mw.to_3x3().col[i].length for i in range(3)))}"
+
+
+def _invertible(m):
+    """Whether the IR takes ``m`` (a to_world, nested lists) as a frame (exporters/validate.py)."""
+    return validate.transform_problem(m) is None
+
+
+def _mesh_in_world(name, shape, mw, warnings):
+    """A mesh as Blender renders it: its faces of zero area in the world (a degenerate face, or every
+    face of an object scaled to 0) dropped, exactly (they show nothing); None, warned, when no face
+    is left. A transform that flattens space (a scale of 0 along one axis) cannot be the IR's
+    to_world (writers and probes invert it): the vertices are then given in world space, exactly."""
+    m = np.asarray(shape["to_world"], dtype=np.float64)
+    v = np.asarray(shape["vertices"], dtype=np.float64) @ m[:3, :3].T + m[:3, 3]
+    f = np.asarray(shape["faces"], dtype=np.int64)
+    areas = 0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
+    finite = bool(np.isfinite(areas).all())  # else validation names the coordinates that are not
+    if finite and not areas.any():
+        singular = not _invertible(shape["to_world"])
+        warnings.append((name, "scale" if singular else "data", (f"{_scale_text(mw)}: " if singular else "")
+                         + f"every face ({len(f)}) has zero area in the world (Blender renders nothing of it): not "
+                         "exported"))
+        return None
+    keep = areas > 0 if finite else np.ones(len(f), dtype=bool)  # exactly 0 only: a fine detail of a big mesh stays
+    out = dict(shape, faces=f[keep].tolist()) if not keep.all() else dict(shape)
+    if not _invertible(shape["to_world"]) and finite:
+        out["vertices"] = [[_clean(c) for c in p] for p in v]
+        out["to_world"] = _matrix(Matrix.Identity(4))
+        warnings.append((name, "scale", f"{_scale_text(mw)} flattens the object (the IR's transform must be "
+                         "invertible): its vertices are exported in world space, the same geometry"))
+    return out
+
+
+def _flat_frame(m, name, field, warnings):
+    """``m`` (a Matrix) for a flat shape (a rectangle, a disk in its z = 0 plane): when its z axis is
+    lost (scaled to 0) while x and y span the shape, z becomes their unit normal, warned (Blender's
+    flat shape has the same extent; the IR's to_world must be invertible)."""
+    if _invertible(_matrix(m)):
+        return m
+    x, y, z = (m.to_3x3().col[i] for i in range(3))
+    n = x.cross(y)
+    if n.length == 0:
+        return m  # refused by validation, naming the field
+    n.normalize()
+    if z.dot(n) < 0:
+        n = -n
+    out = m.copy()
+    for i in range(3):
+        out[i][2] = n[i]
+    warnings.append((name, field, f"{_scale_text(m)}: the flat shape's z axis is scaled to 0: taken as its unit "
+                     "normal (the shape's extent is unchanged)"))
+    return out
 
 
 def _value(v):
@@ -304,7 +375,8 @@ def _light_spectrum(obj, factor, quantity, warnings):
             col = node.inputs["Color"]
             src = col.links[0].from_node if col.is_linked else None
             if src is not None and src.bl_idname == "ShaderNodeBlackbody" and not src.inputs[0].is_linked:
-                temperature, field = float(src.inputs[0].default_value), f"data.node_tree.nodes[{src.name}].Temperature"
+                field = f"data.node_tree.nodes[{src.name}].Temperature"
+                temperature = _node_temperature(float(src.inputs[0].default_value), field, warn)
             elif src is not None:
                 warn("data.node_tree.Color", f"linked to a {src.bl_idname} node: not converted, its unlinked value used")
                 colour = colour * np.asarray(col.default_value[:3])
@@ -334,6 +406,13 @@ def _light_object(obj, problems, warnings):
     power = float(light.energy) * 2.0 ** float(getattr(light, "exposure", 0.0))
     if getattr(light, "exposure", 0.0):
         warn("data.exposure", f"exposure {light.exposure:g}: power (a sun's strength) x 2^exposure = {power:.6g}")
+    if not annotated and not math.isfinite(power):
+        problems.append((obj.name, "data.energy", f"power {power!r} (energy x 2^exposure) is not a finite number"))
+        return None, None
+    if not annotated and power < 0:
+        warn("data.energy", f"negative power {power:.6g}: Blender subtracts light, the IR's emission is >= 0: not "
+             "exported (emits nothing)")
+        return None, None
     if light.type == "AREA":
         return _area_light(obj, light, world, power, annotated, problems, warn, warnings), None
     if annotated and light.spectral_bench.collimated:
@@ -359,6 +438,9 @@ def _light_object(obj, problems, warnings):
     if light.type == "POINT":
         return None, {"type": "point", "position": [_clean(c) for c in loc], "intensity": spec}
     cutoff, beam = conv.spot_cone(light.spot_size, light.spot_blend)
+    if not cutoff > 0:
+        warn("data.spot_size", f"spot size {light.spot_size:g}: a cone of zero angle emits nothing: not exported")
+        return None, None
     if light.spot_blend > 0:
         warn("data.spot_blend", f"blend {light.spot_blend:g}: Blender's smooth falloff over the cone's outer part "
              f"becomes the IR's linear falloff in angle from {beam:.4g} to {cutoff:.4g} deg")
@@ -378,6 +460,13 @@ def _area_light(obj, light, world, power, annotated, problems, warn, warnings):
     flip = Matrix.Rotation(math.pi, 4, "X")
     m3 = world.to_3x3()
     area = (m3.col[0].cross(m3.col[1])).length * 4 * sx * sy  # the world-space area of the 2 sx x 2 sy light
+    if not area > 0:
+        field = "data.size" if sx <= 0 else "data.size_y" if sy <= 0 else "scale"
+        what = {"data.size": f"size {light.size:g}", "data.size_y": f"size_y {light.size_y:g}"}.get(field) or \
+            _scale_text(world)
+        warn(field, f"{what}: an area light of zero area emits nothing (in Blender too): not exported")
+        return None
+    world = _flat_frame(world, obj.name, "scale", warnings)
     if light.shape in ("SQUARE", "RECTANGLE"):
         shape = {"type": "rectangle", "to_world": _matrix(world @ Matrix.Diagonal((sx, sy, 1.0, 1.0)) @ flip)}
     else:
@@ -409,9 +498,23 @@ def _area_light(obj, light, world, power, annotated, problems, warn, warnings):
     return {"name": obj.name, "shape": shape, "bsdf": None, "emitter": emitter}
 
 
-def _converted_world(world, warnings):
+def _node_temperature(t, field, warn):
+    """A Blackbody node's temperature as Cycles renders it: below 800 K (0, negative) its colour is
+    that of 800 K (Cycles' lower limit), warned."""
+    if math.isfinite(t) and t >= BLACKBODY_MIN_K:
+        return t
+    warn(field, f"temperature {t:g} K: Cycles' Blackbody node gives the colour of {BLACKBODY_MIN_K:g} K below "
+                f"{BLACKBODY_MIN_K:g} K: {BLACKBODY_MIN_K:g} K used")
+    return BLACKBODY_MIN_K
+
+
+BLACKBODY_MIN_K = 800.0  # Cycles' Blackbody node (and a light's temperature, whose minimum it is)
+
+
+def _converted_world(world, warnings, problems=None):
     """The IR environment of a world without an annotation: its Background node's colour x strength
-    as a uniform environment; anything else a warning naming the world and field."""
+    as a uniform environment; anything else a warning naming the world and field; what cannot be
+    converted (an environment map whose image has no pixels) a problem in ``problems``."""
     name = f"world[{world.name}]"
     warn = lambda field, message: warnings.append((name, field, message))  # noqa: E731
     if _surface(world.node_tree, "Volume") is not None:
@@ -431,15 +534,26 @@ def _converted_world(world, warnings):
         colour = np.asarray(node.inputs["Color"].default_value[:3], dtype=np.float64)
         src = node.inputs["Color"].links[0].from_node if node.inputs["Color"].is_linked else None
         if src is not None and src.bl_idname == "ShaderNodeBlackbody" and not src.inputs[0].is_linked:
-            t = float(src.inputs[0].default_value)
+            t = _node_temperature(float(src.inputs[0].default_value), field, warn)
             warn(field, f"blackbody {t:g} K kept exact, luminance = strength {strength:g} (Cycles' normalisation)")
             return {"type": "uniform", "radiance": conv.blackbody(t, strength)}
         if src is not None and src.bl_idname == "ShaderNodeTexEnvironment" and src.image is not None:
             colour = _image_mean(src.image)
+            if colour is None:
+                img = src.image
+                path = os.path.normpath(bpy.path.abspath(img.filepath)) if img.filepath else ""
+                (problems if problems is not None else []).append((name, f"node_tree.nodes[{src.name}].image", (
+                    f"image {img.name!r} has no pixels (file {path!r}: missing, a folder or not an image): the "
+                    "environment map's mean radiance is unknown (Blender renders a missing image magenta)")))
+                return None
             warn(field, f"environment map {src.image.name!r}: the IR's environment is uniform: substituted the map's "
                  f"mean radiance over the sphere {conv.fmt(colour)} (solid-angle weighted, equirectangular)")
         elif src is not None:
             warn(field, f"linked to a {src.bl_idname} node: not converted, its unlinked colour {conv.fmt(colour)} used")
+    if strength < 0:
+        warn(f"{field.rsplit('.', 1)[0]}.Strength" if node is not None else "color", f"negative strength "
+             f"{strength:g}: Blender subtracts light, the IR's emission is >= 0: no environment")
+        return None
     if strength * colour.max() <= 0:
         return None
     spec = conv.emission(colour, strength)
@@ -449,11 +563,16 @@ def _converted_world(world, warnings):
 
 
 def _image_mean(image):
-    """Mean linear RGB of an equirectangular image over the sphere (rows weighted by cos latitude)."""
+    """Mean linear RGB of an equirectangular image over the sphere (rows weighted by cos latitude);
+    None when the image has no pixels (its file missing, a folder, not an image)."""
     w, h = image.size
-    px = np.empty(w * h * image.channels, dtype=np.float32)
+    channels = image.channels
+    if w * h * channels == 0 or len(image.pixels) != w * h * channels:
+        return None
+    px = np.empty(w * h * channels, dtype=np.float32)
     image.pixels.foreach_get(px)
-    rgb = px.reshape(h, w, image.channels)[..., :3].astype(np.float64)
+    px = px.reshape(h, w, channels)
+    rgb = (px[..., :3] if channels >= 3 else np.repeat(px[..., :1], 3, axis=-1)).astype(np.float64)  # grey: 1-2
     lat = (np.arange(h) + 0.5) / h * math.pi - math.pi / 2
     wts = np.cos(lat)[:, None]
     return (rgb * wts[..., None]).sum(axis=(0, 1)) / (wts.sum() * w)
@@ -478,6 +597,11 @@ def _camera(scene, problems):
         axis, sensor = "x", d.sensor_width
     else:
         axis, sensor = "y", d.sensor_height
+    if not (sensor > 0 and d.lens > 0):  # Blender's minimum is 1 mm for both: a file can hold less
+        field = "data.lens" if not d.lens > 0 else ("data.sensor_height" if fit == "VERTICAL" else "data.sensor_width")
+        problems.append((cam.name, field, f"focal length {d.lens:g} mm and sensor {sensor:g} mm: both must be > 0 "
+                                          "(a camera's field of view is 2 atan(sensor / (2 lens)))"))
+        return None
     fov = math.degrees(2 * math.atan(sensor / (2 * d.lens)))
     out = {**_named(cam.name, ()), "to_world": _matrix(_world(cam)), "fov": _clean(fov), "fov_axis": axis}
     if d.spectral_bench.polarizer:
@@ -523,14 +647,17 @@ def extract_scene(scene):
         out["render"]["output"] = a.output.lower()
     world = scene.world
     warnings = list(_scene_losses(scene))
-    if world is not None and world.spectral_bench.enabled:
-        out["environment"] = {"type": "uniform", "radiance": spectrum(world.spectral_bench.radiance)}
-    elif world is not None:
-        out["environment"] = _converted_world(world, warnings)
-    if world is not None and world.spectral_bench.enabled and not spectrum_set(world.spectral_bench.radiance):
-        out["environment"] = _converted_world(world, warnings)
-        warnings.append((f"world[{world.name}]", "spectral_bench.radiance", "Uniform Environment on without a "
-                         "radiance spectrum: Blender's world colour x strength is used, not the default 0.5"))
+    try:
+        if world is not None and world.spectral_bench.enabled:
+            out["environment"] = {"type": "uniform", "radiance": spectrum(world.spectral_bench.radiance)}
+        elif world is not None:
+            out["environment"] = _converted_world(world, warnings, problems)
+        if world is not None and world.spectral_bench.enabled and not spectrum_set(world.spectral_bench.radiance):
+            out["environment"] = _converted_world(world, warnings, problems)
+            warnings.append((f"world[{world.name}]", "spectral_bench.radiance", "Uniform Environment on without a "
+                             "radiance spectrum: Blender's world colour x strength is used, not the default 0.5"))
+    except Exception as exc:  # noqa: BLE001 - an exporter fault fails this scene, naming the world
+        problems.append((f"world[{world.name}]", "(conversion)", _fault(exc)))
     lights = []
     depsgraph = scene.view_layers[0].depsgraph if scene.view_layers else None
     taken = []
@@ -538,10 +665,15 @@ def extract_scene(scene):
         if obj.hide_render:
             continue
         light = None
-        if obj.type == "MESH":
-            item = _mesh_object(obj, depsgraph, problems, warnings)
-        elif obj.type == "LIGHT":
-            item, light = _light_object(obj, problems, warnings)
+        if obj.type in ("MESH", "LIGHT"):
+            try:
+                if obj.type == "MESH":
+                    item = _mesh_object(obj, depsgraph, problems, warnings)
+                else:
+                    item, light = _light_object(obj, problems, warnings)
+            except Exception as exc:  # noqa: BLE001 - an exporter fault fails this scene, naming the object
+                problems.append((obj.name, "(conversion)", _fault(exc)))
+                continue
         else:
             if obj.type not in ("CAMERA", "EMPTY"):
                 warnings.append((obj.name, "type", f"a {obj.type} object is not exported (only meshes and lights)"))
@@ -560,9 +692,16 @@ def extract_scene(scene):
         out["warnings"] = [{"object": o, "field": f, "message": m} for o, f, m in warnings]
     if problems:
         raise validate.SceneError(out["name"], problems)
-    validate.check(out)
+    validate.check(out, own_records=True)  # its warnings are the exporter's own records: not capped
     out["needs"] = ir.derived_needs(out)
     return out
+
+
+def _fault(exc):
+    """The message of an unexpected exception in a conversion (a fault of the exporter, not of the
+    file): what it was, for the user's report."""
+    return (f"the conversion failed: {type(exc).__name__}: {exc} (a fault of the exporter, not a value it "
+            "refuses: please report it with the .blend file)")
 
 
 def _named(blender_name, taken, problem=names.problem):
@@ -591,4 +730,6 @@ def extract(wanted=None):
             results.append((ir_name, extract_scene(scene)))
         except validate.SceneError as exc:
             results.append((ir_name, exc))
+        except Exception as exc:  # noqa: BLE001 - one scene's fault fails that scene alone, named
+            results.append((ir_name, validate.SceneError(ir_name, [("scene", "(conversion)", _fault(exc))])))
     return results

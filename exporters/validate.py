@@ -40,34 +40,50 @@ def _short(text):
     return text if len(text) <= MAX_MESSAGE else f"{text[:MAX_MESSAGE - 40]} ... ({len(text)} characters in all)"
 
 
-# The longest list each field may hold, checked before any other work (the schema's checks and
-# their messages cost time in the length of a list): a sampled spectrum's or a fluorescence grid's
-# samples, an inline mesh's vertices and faces, the objects; any other list (a transform's rows,
-# Sellmeier terms, a point) holds a handful of numbers. Every shipped scene is far below them.
+# The longest list each field may hold, by the field's name: the one table of caps, checked before
+# any other work (the schema's checks and their messages cost time in the length of a list, and a
+# hostile file could ask for any length). Sized for real scenes, far above every shipped one: a
+# Blender scene of thousands of objects and hundreds of lights, each object with its conversion
+# warnings. A list of a field not named here (a transform's rows, Sellmeier terms, a point, a face's
+# indices) holds a handful of numbers: MAX_OTHER_LIST. The exporter's own records (``warnings`` of a
+# scene just extracted from Blender, ``check(..., own_records=True)``) are never capped: their length
+# follows the scene's.
 MAX_SAMPLES = 16384
 MAX_MESH_ITEMS = 1 << 22
-LIST_LIMITS = {"wavelengths": MAX_SAMPLES, "values": MAX_SAMPLES, "matrix": 1024, "matrix[]": 1024,
-               "vertices": MAX_MESH_ITEMS, "faces": MAX_MESH_ITEMS, "objects": 10000}
+LIST_LIMITS = {
+    "wavelengths": MAX_SAMPLES, "values": MAX_SAMPLES,  # a sampled spectrum's or a fluorescence grid's samples
+    "matrix": 1024, "matrix[]": 1024,  # a fluorescence matrix and its rows
+    "vertices": MAX_MESH_ITEMS, "faces": MAX_MESH_ITEMS,  # an inline mesh
+    "objects": 100_000,  # shapes: meshes, spheres, rectangles, area lights
+    "lights": 10_000,  # delta lights: point, spot, directional
+    "warnings": 1 << 20,  # what an exporter converted or lost, a few per object and light
+}
 MAX_OTHER_LIST = 64
+OWN_RECORDS = ("warnings",)  # lists an exporter writes about its own conversion: not capped in its own output
 
 
-def _size_problems(data):
+def _size_problems(data, own_records=False):
     """Lists longer than their field's LIST_LIMITS (MAX_OTHER_LIST elsewhere), found without looking
     at the items of a list that is too long; (object, field, message) with the object as validation
-    names it."""
+    names it. With ``own_records`` the top-level OWN_RECORDS are not capped."""
     stack = [(data, "", "scene", "")]
     while stack:
         node, key, obj, where = stack.pop()
         if isinstance(node, dict):
-            if where.startswith("objects[") and where.count(".") == 0 and names.problem(node.get("name")) is None:
+            if where.startswith(("objects[", "lights[")) and where.count(".") == 0 \
+                    and names.problem(node.get("name")) is None:
                 obj, where = node["name"], ""
             for k, v in reversed(node.items()):  # a stack: reversed, so problems come in the file's order
+                if own_records and node is data and k in OWN_RECORDS:
+                    continue
                 if isinstance(v, (dict, list)):
                     stack.append((v, str(k), obj, f"{where}.{k}" if where else str(k)))
         elif isinstance(node, list):
             limit = LIST_LIMITS.get(key, MAX_OTHER_LIST)
             if len(node) > limit:
-                yield obj, where, f"holds {len(node)} items, more than {limit}: too long to be a scene's {key or 'list'}"
+                what = f"a scene's {key} (exporters/validate.py LIST_LIMITS)" if key in LIST_LIMITS else \
+                    f"a list of a few numbers such as {key or 'this'} (exporters/validate.py LIST_LIMITS names the longer ones)"
+                yield obj, where, f"holds {len(node)} items, more than {limit}: the limit for {what}"
                 continue
             for i, v in reversed(list(enumerate(node))):
                 if isinstance(v, (dict, list)):
@@ -269,6 +285,12 @@ def _transform_problems(m, field):
         yield field, "is singular or nearly so (its 3x3 part flattens space): an object or camera needs a frame"
 
 
+def transform_problem(m):
+    """The first (field, message) of what keeps ``m`` (4x4 nested lists) from being a to_world, or
+    None when it is one."""
+    return next(_transform_problems(m, "to_world"), None)
+
+
 def _shape_problems(shape, base_dir):
     if "to_world" in shape:
         yield from _transform_problems(shape["to_world"], "shape.to_world")
@@ -400,8 +422,10 @@ def _spectrum_max(spec):
     return float(max(values)) if isinstance(values, list) and values else None
 
 
-def check(scene):
+def check(scene, own_records=False):
     """Raise SceneError listing every problem of ``scene`` (an IR dict); return it otherwise.
+    ``own_records``: the scene was just made by an exporter of this project (its ``warnings`` are
+    its own records, not capped; see LIST_LIMITS).
     A scene in the self-contained form (inline tables) is first turned into the internal IR, in
     place (exporters/inline_data.py ``apply``)."""
     name = scene.get("name", "?") if isinstance(scene, dict) else "?"
@@ -413,7 +437,7 @@ def check(scene):
         raise SceneError(name, [("scene", "version", f"expected format {ir.FORMAT!r} version {ir.VERSION}, "
                                  f"got {scene.get('format')!r} version {scene.get('version')!r}")])
     try:
-        problems = list(_size_problems({k: v for k, v in scene.items() if not k.startswith("_")}))
+        problems = list(_size_problems({k: v for k, v in scene.items() if not k.startswith("_")}, own_records))
         if problems:
             raise SceneError(name, problems)
         inline_data.apply(scene)  # a self-contained file's tables: dropped when the project's, else they win

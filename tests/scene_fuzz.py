@@ -276,3 +276,120 @@ def art_vocabulary_cached():
     if "v" not in _VOCAB:
         _VOCAB["v"] = art_vocabulary()
     return _VOCAB["v"]
+
+
+# -- ordinary .blend files (issue 40) -------------------------------------------------------------
+# Scenes as a Blender user makes them, with the values Blender allows: lights of every type with
+# sizes, scales and powers of 0 (and negative, huge, tiny), objects scaled to 0 or flattened, faces
+# of zero area, meshes without faces, materials linked to image textures, environment maps whose file
+# is missing, a folder or empty, Blackbody nodes at 0 K. tests/blend_builder.py turns a list of them
+# into one .blend (one bpy child per file, not per scene); ``check_blend`` runs batch/run.py on it.
+SCALES = [(1, 1, 1), (0, 0, 0), (1, 1, 0), (0, 1, 1), (1e-9, 1e-9, 1e-9), (-1, 1, 1), (2, 0.5, 1)]
+POWERS = [0.0, 10.0, -5.0, 1e30, 1e-30]
+SIZES = [0.0, 1e-9, 0.5, 1e4]
+IMAGES = ["missing", "folder", "empty", "packed"]  # paths: see image_path
+TEMPERATURES = [None, 0.0, -100.0, 5000.0]
+
+
+def _light(kind):
+    settings = {"energy": st.sampled_from(POWERS)}
+    if kind == "AREA":
+        settings.update(shape=st.sampled_from(["SQUARE", "RECTANGLE", "DISK", "ELLIPSE"]), size=st.sampled_from(SIZES),
+                        size_y=st.sampled_from(SIZES))
+    elif kind == "SPOT":
+        settings.update(spot_size=st.sampled_from([0.0175, 1.0, 3.14159]), spot_blend=st.sampled_from([0.0, 1.0]),
+                        shadow_soft_size=st.sampled_from([0.0, 0.5]))
+    elif kind == "SUN":
+        settings.update(angle=st.sampled_from([0.0, 0.1]))
+    else:
+        settings.update(shadow_soft_size=st.sampled_from([0.0, 0.5]))
+    return st.fixed_dictionaries({"type": st.just(kind), "settings": st.fixed_dictionaries(settings),
+                                  "scale": st.sampled_from(SCALES), "blackbody": st.sampled_from(TEMPERATURES)})
+
+
+def _material():
+    return st.one_of(st.none(), st.fixed_dictionaries({"kind": st.just("principled"),
+                                                       "emission": st.sampled_from([-1.0, 0.0, 5.0])}),
+                     st.fixed_dictionaries({"kind": st.just("image"), "path": st.sampled_from(IMAGES)}),
+                     st.just({"kind": "mix"}))
+
+
+def _object():
+    return st.fixed_dictionaries({"mesh": st.sampled_from(["quad", "cube", "degenerate", "no_faces"]),
+                                  "scale": st.sampled_from(SCALES), "sphere": st.booleans(), "material": _material()})
+
+
+def _world():
+    return st.one_of(st.none(), st.fixed_dictionaries({
+        "strength": st.sampled_from([-1.0, 0.0, 1.0, 1e30]), "colour": st.sampled_from([(0.2, 0.3, 0.4), (0, 0, 0)]),
+        "image": st.one_of(st.none(), st.sampled_from(IMAGES)), "blackbody": st.sampled_from(TEMPERATURES)}))
+
+
+@st.composite
+def blend_scenes(draw, n=4):
+    """A list of ``n`` scenes for tests/blend_builder.py, named case0... (objects caseK_oJ, lights
+    caseK_lJ: Blender's object names are the file's); image paths are tokens (IMAGES)."""
+    scenes = []
+    for k in range(n):
+        lights = draw(st.lists(st.sampled_from(["POINT", "SPOT", "SUN", "AREA"]).flatmap(_light), max_size=3))
+        objects = draw(st.lists(_object(), min_size=1, max_size=3))
+        scenes.append({"name": f"case{k}", "world": draw(_world()),
+                       "objects": [dict(o, name=f"case{k}_o{j}") for j, o in enumerate(objects)],
+                       "lights": [dict(light, name=f"case{k}_l{j}") for j, light in enumerate(lights)]})
+    return scenes
+
+
+def image_path(token, root):
+    """The path an image token stands for: a file that does not exist, a folder, nothing, packed."""
+    return {"missing": str(Path(root) / "no_such_image.exr"), "folder": str(Path(root)), "empty": "",
+            "packed": "packed"}[token]
+
+
+def _with_paths(specs, root):
+    out = json.loads(json.dumps(specs))
+    for sc in out:
+        for o in sc["objects"]:
+            if o.get("material") and o["material"]["kind"] == "image":
+                o["material"]["path"] = image_path(o["material"]["path"], root)
+        if sc.get("world") and sc["world"].get("image"):
+            sc["world"]["image"] = image_path(sc["world"]["image"], root)
+    return out
+
+
+SCENE_PROBLEM = re.compile(r"scene '([^']+)', object '([^']*)', field '([^']*)': ")
+
+
+def check_blend(specs, root, timeout=180):
+    """Build one .blend of ``specs`` (a bpy child) and export it with batch/run.py (a child, under
+    ``timeout``: a hang fails); returns {scene: status}. Asserts: an exit status of 0-3, no
+    traceback, every scene of the file recorded under its own name (one bad scene fails alone),
+    every failure naming scene, object and field (none a fault of the exporter), every exported
+    JSON loading back."""
+    import subprocess
+    import sys
+    root = Path(root)
+    spec = root / "spec.json"
+    spec.write_text(json.dumps(_with_paths(specs, root)))
+    blend = root / "fuzz.blend"
+    proc = subprocess.run([sys.executable, str(ROOT / "tests" / "blend_builder.py"), str(spec), str(blend)],
+                          capture_output=True, text=True, timeout=timeout)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    out = root / "out"
+    proc = subprocess.run([sys.executable, str(ROOT / "batch" / "run.py"), "-i", str(blend), "--export-only",
+                           "--format", "json", "--format", "mitsuba", "-o", str(out)],
+                          capture_output=True, text=True, timeout=timeout, cwd=ROOT)
+    assert proc.returncode in (0, 1, 2, 3), (proc.returncode, proc.stderr[-3000:])
+    assert "Traceback" not in proc.stderr + proc.stdout, proc.stderr[-3000:]
+    runs = json.loads((out / "metrics.json").read_text())["runs"]
+    statuses = {}
+    for r in runs:
+        statuses.setdefault(r["scene"], set()).add(r["status"])
+        if r["status"] == "failed":
+            m = SCENE_PROBLEM.search(r["reason"] or "")
+            assert m and m.group(1) == r["scene"] and m.group(3) not in ("", "(file)"), r["reason"]
+            assert "a fault of the exporter" not in r["reason"], r["reason"]
+    assert set(statuses) == {s["name"] for s in specs}, (sorted(statuses), proc.stderr[-2000:])
+    for name, status in statuses.items():
+        if "failed" not in status:
+            ir_json.load(out / name / "json" / f"{name}.json")  # what was exported loads back
+    return {name: "failed" if "failed" in s else "exported" for name, s in statuses.items()}
