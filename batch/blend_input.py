@@ -10,14 +10,28 @@ drivers that would need Python before anything evaluates them (``drop_python_dri
 registered text blocks of such data are unregistered (they would run when the file is next opened
 with Auto Run on). A file that Blender itself opened before the runner started (``blender -b
 FILE -P batch/run.py``) was opened under Blender's own setting: add ``--disable-autoexec`` there.
+
+Opening a .blend opens its linked libraries too: ``open_blend`` first reads their paths from the
+file's blocks (exporters/blend_safety.py) and refuses a file whose library (or the file itself) is
+not a regular file, a FIFO or device that would make the open wait forever.
 """
 from pathlib import Path
 
 
+class BlendRefused(ValueError):
+    """A .blend that is not opened (why: the file or which library, and its path)."""
+
+
 def open_blend(path):
     """Open ``path`` as the main file with its scripts off: no registered text block runs and no
-    driver runs Python, whatever Blender's Auto Run preference (until another file is opened)."""
+    driver runs Python, whatever Blender's Auto Run preference (until another file is opened).
+    Raises BlendRefused, opening nothing, when the file or one of its linked libraries is not a
+    regular file."""
     import bpy
+    from ..exporters import blend_safety
+    problem = blend_safety.file_problem(path) or blend_safety.library_problem(path)
+    if problem:
+        raise BlendRefused(problem)
     bpy.ops.wm.open_mainfile(filepath=str(path), load_ui=False, use_scripts=False)
 
 
@@ -70,10 +84,14 @@ def drop_python_drivers(blocks):
 def load_blend(path, names=None):
     """[(scene name, IR dict or SceneError)]."""
     import bpy
+    from ..exporters.validate import SceneError
     path = Path(path).resolve()
     already_open = bool(bpy.data.filepath) and Path(bpy.data.filepath).resolve() == path
     if not already_open:
-        open_blend(path)
+        try:
+            open_blend(path)
+        except BlendRefused as exc:
+            raise SceneError(path.stem, [("scene", "(file)", f"{path} not opened: {exc}")]) from None
     if not hasattr(bpy.types.Scene, "spectral_bench"):
         # only the annotation properties the extraction reads: no operator, panel or preference
         # of the extension is registered to read a .blend

@@ -1,0 +1,219 @@
+"""A small .blend cannot hang the runner or take the machine's memory (issue 40, item 4).
+
+Each .blend is built here with real bpy (a child process), then read by the real entry point,
+``batch/run.py -i FILE.blend --export-only``, in a child whose address space is capped
+(``RLIMIT_AS``) and which is killed after a time-out: before these checks existed, a FIFO as a
+linked library or an environment image waited forever, and a generated 4096 x 4096 environment
+image, a cube with a level-9 subdivision or a large array were read into Python lists (gigabytes,
+minutes). Now each is refused before anything is read, naming scene, object, field, the cap and
+the value, and the file's other scenes export.
+"""
+import os
+import resource
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+from conftest import ROOT, metrics
+from spectral_bench.exporters import blend_safety
+
+MEMORY_CAP = 3 << 30  # address space of the runner's child: bpy alone reserves ~1.4 GB
+TIMEOUT = 120
+
+
+def bpy_child(code, timeout=300):
+    """Run ``code`` (bpy imported, a factory-empty file, SCENE's functions defined) in a child Python."""
+    prelude = "import bpy, json, os, sys\nbpy.ops.wm.read_factory_settings(use_empty=True)\n"
+    proc = subprocess.run([sys.executable, "-c", prelude + SCENE + textwrap.dedent(code)], capture_output=True, text=True,
+                          timeout=timeout)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+
+
+# a scene of a camera and a cube (Blender's own data, no annotation), for bpy_child
+SCENE = """
+import bmesh
+def scene(name):
+    sc = bpy.data.scenes.new(name)
+    sc.render.resolution_x, sc.render.resolution_y = 32, 24
+    cam = bpy.data.objects.new(name + " camera", bpy.data.cameras.new(name + " camera"))
+    cam.location = (0, -6, 0)
+    cam.rotation_euler = (1.5708, 0, 0)
+    sc.collection.objects.link(cam)
+    sc.camera = cam
+    me = bpy.data.meshes.new(name + " mesh")
+    bm = bmesh.new()
+    bmesh.ops.create_cube(bm, size=1)
+    bm.to_mesh(me)
+    bm.free()
+    cube = bpy.data.objects.new(name + " cube", me)
+    sc.collection.objects.link(cube)
+    world = bpy.data.worlds.new(name + " world")
+    world.use_nodes = True
+    sc.world = world
+    return sc, cube, world
+def environment(world, image):
+    tree = world.node_tree
+    tex = tree.nodes.new("ShaderNodeTexEnvironment")
+    tex.name = "Environment"
+    tex.image = image
+    tree.links.new(tex.outputs["Color"], tree.nodes["Background"].inputs["Color"])
+"""
+
+
+def run_capped(*args, timeout=TIMEOUT):
+    """batch/run.py in a child with its address space capped at MEMORY_CAP, killed after ``timeout``."""
+    def cap():
+        resource.setrlimit(resource.RLIMIT_AS, (MEMORY_CAP, MEMORY_CAP))
+    return subprocess.run([sys.executable, str(ROOT / "batch" / "run.py"), *map(str, args)], capture_output=True,
+                          text=True, timeout=timeout, cwd=ROOT, preexec_fn=cap)
+
+
+def export(blend, out):
+    proc = run_capped("-i", blend, "--export-only", "--format", "json", "-o", out)
+    assert "Traceback" not in proc.stderr, proc.stderr[-3000:]
+    return proc, {r["scene"]: r for r in metrics(out)["runs"]}
+
+
+@pytest.mark.slow
+def test_meshes_above_the_caps_fail_their_scene_before_they_are_read(tmp_path):
+    """A cube with a level-9 subdivision (3 million triangles, refused from its predicted size
+    before it is evaluated) and a cube in an array of 100000 (1.2 million triangles, evaluated when
+    Blender opens the file, refused from its evaluated size before it is read) fail their scenes
+    naming object, field, cap and value; the plain cube's scene of the same file exports. (Blender
+    evaluates the modifiers of a file's active scene: each is the active scene of its file.)"""
+    subdivided, arrayed = tmp_path / "subdivided.blend", tmp_path / "arrayed.blend"
+    bpy_child(f"""
+        sc, cube, _ = scene("subdivided")
+        mod = cube.modifiers.new("Subdivision", "SUBSURF")
+        mod.levels = mod.render_levels = 9
+        scene("plain")
+        bpy.data.scenes.remove(bpy.data.scenes["Scene"])
+        bpy.context.window.scene = sc  # the file's active scene: Blender evaluates it on opening the file
+        bpy.ops.wm.save_as_mainfile(filepath={str(subdivided)!r})
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        sc, cube, _ = scene("arrayed")
+        cube.modifiers.new("Array", "ARRAY").count = 100000
+        bpy.data.scenes.remove(bpy.data.scenes["Scene"])
+        bpy.context.window.scene = sc
+        bpy.ops.wm.save_as_mainfile(filepath={str(arrayed)!r})
+    """)
+    out = tmp_path / "out"
+    proc = run_capped("-i", subdivided, arrayed, "--export-only", "--format", "json", "-o", out)
+    assert "Traceback" not in proc.stderr, proc.stderr[-3000:]
+    assert proc.returncode == 1, proc.stderr[-2000:]
+    runs = {r["scene"]: r for r in metrics(out)["runs"]}
+    assert runs["plain"]["status"] == "ok", runs["plain"]
+    sub = runs["subdivided"]["reason"]
+    assert runs["subdivided"]["status"] == "failed"
+    for part in ("subdivided", "subdivided cube", "modifiers[Subdivision].levels", "3145728 triangles",
+                 f"cap of {blend_safety.MAX_MESH_TRIANGLES}", "MAX_MESH_TRIANGLES"):
+        assert part in sub, sub
+    arr = runs["arrayed"]["reason"]
+    assert runs["arrayed"]["status"] == "failed"
+    for part in ("arrayed cube", "modifiers", "1200000 triangles", f"cap of {blend_safety.MAX_MESH_TRIANGLES}"):
+        assert part in arr, arr
+
+
+def test_the_predicted_size_of_a_subdivision(tmp_path):
+    """4^levels quads per base quad (level 1: one quad per face corner), 2 triangles a quad; only
+    the modifiers evaluation applies (viewport or render levels, shown or not)."""
+    class Mod:
+        def __init__(self, type, levels, render_levels=None, shown=True):
+            self.type, self.name, self.levels = type, type.title(), levels
+            self.render_levels = levels if render_levels is None else render_levels
+            self.show_viewport = self.show_render = shown
+    cube = (8, 6, 24)
+    assert blend_safety.subdivided(cube, [Mod("SUBSURF", 9)], False)[1] == 6 * 4 ** 9 * 2
+    assert blend_safety.subdivided(cube, [Mod("SUBSURF", 1, 9)], True)[1] == 6 * 4 ** 9 * 2
+    assert blend_safety.subdivided(cube, [Mod("SUBSURF", 2), Mod("MULTIRES", 3)], False)[1] == 6 * 4 ** 5 * 2
+    assert blend_safety.subdivided(cube, [Mod("SUBSURF", 9, shown=False)], False)[1:] == (12, [])
+
+
+@pytest.mark.slow
+def test_an_environment_image_above_the_cap_or_not_a_regular_file_fails_its_scene(tmp_path):
+    """A generated 4096 x 4096 environment image (an 85 kB .blend that took 1.6 GB) is refused from
+    its settings, before a pixel is made; an environment image whose file is a FIFO (which waited
+    forever) or a device is refused from os.stat, never opened; a small image file exports."""
+    blend = tmp_path / "images.blend"
+    small, fifo = tmp_path / "small.png", tmp_path / "fifo.png"
+    bpy_child(f"""
+        small = bpy.data.images.new("small", 8, 4)
+        small.filepath_raw = {str(small)!r}
+        small.file_format = "PNG"
+        small.save()
+        _, _, world = scene("small map")
+        environment(world, bpy.data.images.load({str(small)!r}))
+        _, _, world = scene("generated map")
+        environment(world, bpy.data.images.new("huge", 4096, 4096, float_buffer=True))
+        _, _, world = scene("fifo map")
+        fifo = bpy.data.images.load({str(small)!r}, check_existing=False)
+        fifo.name = "fifo"
+        fifo.filepath = {str(fifo)!r}
+        environment(world, fifo)
+        _, _, world = scene("device map")
+        dev = bpy.data.images.load({str(small)!r}, check_existing=False)
+        dev.name = "device"
+        dev.filepath = "/dev/zero"
+        environment(world, dev)
+        bpy.data.scenes.remove(bpy.data.scenes["Scene"])
+        bpy.ops.wm.save_as_mainfile(filepath={str(blend)!r})
+    """)
+    os.mkfifo(fifo)
+    assert blend.stat().st_size < 200_000
+    proc, runs = export(blend, tmp_path / "out")
+    assert proc.returncode == 1, proc.stderr[-2000:]
+    assert runs["small_map"]["status"] == "ok", runs["small_map"]
+    field = "node_tree.nodes[Environment].image"
+    for scene, parts in (("generated_map", ("world[generated map world]", field, "4096 x 4096 = 16777216 pixels",
+                                            f"cap of {blend_safety.MAX_IMAGE_PIXELS}", "MAX_IMAGE_PIXELS")),
+                         ("fifo_map", ("world[fifo map world]", field, str(fifo), "a FIFO (named pipe)")),
+                         ("device_map", ("world[device map world]", field, "/dev/zero", "a character device"))):
+        assert runs[scene]["status"] == "failed", runs[scene]
+        for part in parts:
+            assert part in runs[scene]["reason"], runs[scene]["reason"]
+
+
+@pytest.mark.slow
+def test_a_blend_whose_linked_library_is_a_fifo_fails_alone_naming_the_library(tmp_path):
+    """Blender opens a .blend's linked libraries when it opens the file: a FIFO there made
+    open_mainfile wait forever. The library paths are read from the file's blocks first: that
+    .blend fails naming the library, and another .blend of the same run exports."""
+    lib, main, good = tmp_path / "lib.blend", tmp_path / "main.blend", tmp_path / "good.blend"
+    bpy_child(f"""
+        scene("library")
+        bpy.data.scenes.remove(bpy.data.scenes["Scene"])
+        bpy.ops.wm.save_as_mainfile(filepath={str(lib)!r})
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        scene("good")
+        bpy.data.scenes.remove(bpy.data.scenes["Scene"])
+        bpy.ops.wm.save_as_mainfile(filepath={str(good)!r})
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        sc, _, _ = scene("linking")
+        with bpy.data.libraries.load({str(lib)!r}, link=True, relative=True) as (src, dst):
+            dst.objects = ["library cube"]
+        sc.collection.objects.link(dst.objects[0])
+        bpy.data.scenes.remove(bpy.data.scenes["Scene"])
+        bpy.ops.wm.save_as_mainfile(filepath={str(main)!r})
+    """)
+    assert blend_safety.library_paths(main) == ["//lib.blend"]
+    lib.unlink()
+    os.mkfifo(lib)
+    out = tmp_path / "out"
+    proc = run_capped("-i", main, good, "--export-only", "--format", "json", "-o", out)
+    assert "Traceback" not in proc.stderr, proc.stderr[-3000:]
+    assert proc.returncode == 1, proc.stderr[-2000:]
+    runs = {r["scene"]: r for r in metrics(out)["runs"]}
+    assert runs["good"]["status"] == "ok", runs["good"]
+    reason = runs["main"]["reason"]
+    assert runs["main"]["status"] == "failed"
+    for part in (str(main), "linked library '//lib.blend'", str(lib), "a FIFO (named pipe)", "not opened"):
+        assert part in reason, reason
+
+
+def test_library_paths_of_a_blend_without_libraries_and_of_no_blend(tmp_path):
+    assert blend_safety.library_paths(ROOT / "scenes.blend") == []
+    other = tmp_path / "x.blend"
+    other.write_bytes(b"not a blend")
+    assert blend_safety.library_paths(other) is None
