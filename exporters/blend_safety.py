@@ -58,9 +58,15 @@ def file_problem(path):
 
 
 def image_header_size(path):
-    """(width, height) of an image file from its header (OpenImageIO reads no pixels for it), or
-    None when no reader knows the file. Call only after ``file_problem(path)`` is None."""
-    import OpenImageIO as oiio
+    """(width, height) of an image file from its header (OpenImageIO reads no pixels for it; where
+    its Python module is missing, as in some Blender builds, ``header_size`` reads PNG, JPEG,
+    Radiance HDR and OpenEXR headers), or None when no reader knows the file. Call only after
+    ``file_problem(path)`` is None."""
+    try:
+        import OpenImageIO as oiio
+    except ImportError:
+        with open(path, "rb") as f:
+            return header_size(f.read(1 << 16))
     inp = oiio.ImageInput.open(str(path))
     if inp is None:
         oiio.geterror()  # clears OpenImageIO's error
@@ -70,6 +76,44 @@ def image_header_size(path):
         return int(spec.full_width or spec.width), int(spec.full_height or spec.height)
     finally:
         inp.close()
+
+
+def header_size(head):
+    """(width, height) from the first bytes of a PNG, JPEG, Radiance HDR or OpenEXR file (its
+    data window), or None."""
+    if head[:8] == b"\x89PNG\r\n\x1a\n" and head[12:16] == b"IHDR":
+        return struct.unpack(">II", head[16:24])
+    if head[:4] == b"\x76\x2f\x31\x01":  # OpenEXR: attributes (name, type, size, value) up to an empty name
+        pos = 8
+        while pos < len(head) and head[pos] != 0:
+            name_end = head.index(b"\0", pos)
+            type_end = head.index(b"\0", name_end + 1)
+            size, = struct.unpack_from("<i", head, type_end + 1)
+            if head[pos:name_end] == b"dataWindow" and size == 16:
+                x0, y0, x1, y1 = struct.unpack_from("<4i", head, type_end + 5)
+                return x1 - x0 + 1, y1 - y0 + 1
+            pos = type_end + 5 + size
+        return None
+    if head[:2] == b"#?":  # Radiance: text lines up to an empty one, then "-Y h +X w"
+        lines = head.split(b"\n")
+        for i, line in enumerate(lines[:-1]):
+            if not line.strip():
+                parts = lines[i + 1].split()
+                if len(parts) == 4 and parts[0][1:2] in (b"Y", b"X") and parts[2][1:2] in (b"Y", b"X"):
+                    a, b = int(parts[1]), int(parts[3])
+                    return (b, a) if parts[0][1:2] == b"Y" else (a, b)
+                return None
+        return None
+    if head[:2] == b"\xff\xd8":  # JPEG: the first start-of-frame segment
+        pos = 2
+        while pos + 9 <= len(head) and head[pos] == 0xFF:
+            marker, length = head[pos + 1], struct.unpack(">H", head[pos + 2:pos + 4])[0]
+            if 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):
+                h, w = struct.unpack(">HH", head[pos + 5:pos + 9])
+                return w, h
+            pos += 2 + length
+        return None
+    return None
 
 
 def image_bytes_size(data):

@@ -198,10 +198,14 @@ def test_a_blend_whose_linked_library_is_a_fifo_fails_alone_naming_the_library(t
         bpy.ops.wm.save_as_mainfile(filepath={str(main)!r})
     """)
     assert blend_safety.library_paths(main) == ["//lib.blend"]
+    proc, runs = export(main, tmp_path / "linked")  # a regular library: opened, its object exported
+    assert proc.returncode == 0 and runs["linking"]["status"] == "ok", (proc.stderr[-2000:], runs)
     lib.unlink()
     os.mkfifo(lib)
+    fifo_blend = tmp_path / "fifo.blend"
+    os.mkfifo(fifo_blend)
     out = tmp_path / "out"
-    proc = run_capped("-i", main, good, "--export-only", "--format", "json", "-o", out)
+    proc = run_capped("-i", main, good, fifo_blend, "--export-only", "--format", "json", "-o", out)
     assert "Traceback" not in proc.stderr, proc.stderr[-3000:]
     assert proc.returncode == 1, proc.stderr[-2000:]
     runs = {r["scene"]: r for r in metrics(out)["runs"]}
@@ -210,6 +214,7 @@ def test_a_blend_whose_linked_library_is_a_fifo_fails_alone_naming_the_library(t
     assert runs["main"]["status"] == "failed"
     for part in (str(main), "linked library '//lib.blend'", str(lib), "a FIFO (named pipe)", "not opened"):
         assert part in reason, reason
+    assert runs["fifo"]["status"] == "failed" and f"{str(fifo_blend)!r} is a FIFO" in runs["fifo"]["reason"], runs
 
 
 def test_library_paths_of_a_blend_without_libraries_and_of_no_blend(tmp_path):
@@ -217,3 +222,14 @@ def test_library_paths_of_a_blend_without_libraries_and_of_no_blend(tmp_path):
     other = tmp_path / "x.blend"
     other.write_bytes(b"not a blend")
     assert blend_safety.library_paths(other) is None
+
+
+def test_image_sizes_from_headers_without_pixels(tmp_path):
+    """PNG, JPEG, Radiance HDR and OpenEXR files written by OpenImageIO: the size read from their
+    first bytes (the fallback where OpenImageIO's Python module is missing) is OpenImageIO's."""
+    import OpenImageIO as oiio
+    for ext, fmt in (("png", "uint8"), ("jpg", "uint8"), ("hdr", "float"), ("exr", "half")):
+        path = tmp_path / f"image.{ext}"
+        assert oiio.ImageBuf(oiio.ImageSpec(70, 33, 3, fmt)).write(str(path))
+        assert blend_safety.header_size(path.read_bytes()[:1 << 16]) == (70, 33) == blend_safety.image_header_size(path)
+    assert blend_safety.header_size(b"not an image") is None
