@@ -13,7 +13,8 @@ level-9 subdivision). So:
 - The caps below: an image is refused when its pixel count, read from its file's header (or from a
   generated image's settings) without reading pixels, is above ``MAX_IMAGE_PIXELS``; a mesh when
   its predicted size (subdivision: 4^levels faces per base quad) or its evaluated size is above
-  ``MAX_MESH_TRIANGLES`` / ``MAX_MESH_VERTICES``, checked before any list of it is built.
+  ``MAX_MESH_TRIANGLES`` / ``MAX_MESH_VERTICES``, or would take the scene's meshes above
+  ``MAX_SCENE_TRIANGLES`` / ``MAX_SCENE_VERTICES``, checked before any list of it is built.
 """
 import gzip
 import os
@@ -27,6 +28,9 @@ MAX_IMAGE_PIXELS = 1 << 23
 # one evaluated mesh object of a Blender scene (its IR lists cost ~150 bytes a vertex or triangle)
 MAX_MESH_TRIANGLES = 1 << 20
 MAX_MESH_VERTICES = 1 << 20
+# all the mesh objects of one Blender scene (the IR's own cap on one list is exporters/validate.py's)
+MAX_SCENE_TRIANGLES = 1 << 21
+MAX_SCENE_VERTICES = 1 << 21
 # linked libraries followed from one .blend (libraries of libraries included)
 MAX_LIBRARIES = 256
 PSEUDO_FILE_SYSTEMS = ("/proc", "/sys", "/dev")

@@ -121,7 +121,7 @@ def material_bsdf(mat):
     return out
 
 
-def _mesh_object(obj, depsgraph, problems, warnings):
+def _mesh_object(obj, depsgraph, problems, warnings, used=None):
     name = obj.name
     mat = obj.active_material
     emitter = None
@@ -155,14 +155,14 @@ def _mesh_object(obj, depsgraph, problems, warnings):
         shape = {"type": "sphere", "center": [_clean(c) for c in loc], "radius": _clean(scale[0])}
     else:
         # modifiers are applied when the scene has been evaluated, the base mesh is used otherwise
-        refused = _mesh_size_problem(obj, depsgraph)
+        refused = _mesh_size_problem(obj, depsgraph, used=used)
         if refused:
             problems.append((name, *refused))
             return None
         source = obj.evaluated_get(depsgraph) if depsgraph is not None else obj
         mesh = source.to_mesh()
         try:
-            refused = _mesh_size_problem(obj, depsgraph, mesh)
+            refused = _mesh_size_problem(obj, depsgraph, mesh, used)
             if refused:
                 problems.append((name, *refused))
                 return None
@@ -180,11 +180,13 @@ def _mesh_object(obj, depsgraph, problems, warnings):
     return {"name": name, "shape": shape, "bsdf": bsdf, "emitter": emitter}
 
 
-def _mesh_size_problem(obj, depsgraph, mesh=None):
+def _mesh_size_problem(obj, depsgraph, mesh=None, used=None):
     """(field, message) when a mesh object is above the caps of exporters/blend_safety.py, else
     None: before evaluation its size predicted from its base mesh and subdivision levels (a level-9
     subdivision of a cube is 3 million triangles), after it (``mesh``) the evaluated counts, both
-    before any of its data is read."""
+    before any of its data is read. ``used`` ({"triangles": n, "vertices": n}) holds what the
+    scene's meshes read so far: the scene's total is capped too, and an evaluated mesh that passes
+    is added to it."""
     cap_v, cap_t = blend_safety.MAX_MESH_VERTICES, blend_safety.MAX_MESH_TRIANGLES
     if mesh is None:
         base = obj.data
@@ -204,6 +206,17 @@ def _mesh_size_problem(obj, depsgraph, mesh=None):
         if count > cap:
             return field, (f"the mesh has {count} {noun} ({what}), above the cap of {cap} ({cap_name}, "
                            f"exporters/blend_safety.py): not exported")
+    if used is None:
+        return None
+    for count, key, cap, cap_name in ((tris, "triangles", blend_safety.MAX_SCENE_TRIANGLES, "MAX_SCENE_TRIANGLES"),
+                                      (verts, "vertices", blend_safety.MAX_SCENE_VERTICES, "MAX_SCENE_VERTICES")):
+        if used[key] + count > cap:
+            return field, (f"the mesh has {count} {key} ({what}): with the {used[key]} of the scene's meshes read "
+                           f"before it, {used[key] + count}, above the scene's cap of {cap} ({cap_name}, "
+                           "exporters/blend_safety.py): not exported")
+    if mesh is not None:
+        used["triangles"] += tris
+        used["vertices"] += verts
     return None
 
 
@@ -609,13 +622,14 @@ def extract_scene(scene):
                          "radiance spectrum: Blender's world colour x strength is used, not the default 0.5"))
     lights = []
     depsgraph = scene.view_layers[0].depsgraph if scene.view_layers else None
+    used = {"triangles": 0, "vertices": 0}  # by the scene's meshes (exporters/blend_safety.py caps it)
     taken = []
     for obj in sorted(scene.objects, key=lambda o: o.name):
         if obj.hide_render:
             continue
         light = None
         if obj.type == "MESH":
-            item = _mesh_object(obj, depsgraph, problems, warnings)
+            item = _mesh_object(obj, depsgraph, problems, warnings, used)
         elif obj.type == "LIGHT":
             item, light = _light_object(obj, problems, warnings)
         else:

@@ -116,6 +116,34 @@ def test_meshes_above_the_caps_fail_their_scene_before_they_are_read(tmp_path):
         assert part in arr, arr
 
 
+@pytest.mark.slow
+def test_a_scene_whose_meshes_together_are_above_the_cap_fails_before_the_last_is_read(tmp_path):
+    """Three cubes of a level-8 subdivision (786432 triangles each, under the cap of one mesh):
+    the third would take the scene above MAX_SCENE_TRIANGLES; it is refused before it is read,
+    naming it, the scene's count and the cap."""
+    blend = tmp_path / "many.blend"
+    bpy_child(f"""
+        sc, first, _ = scene("many")
+        for name in ("cube a", "cube b", "cube c"):
+            cube = bpy.data.objects.new(name, first.data)
+            sc.collection.objects.link(cube)
+            mod = cube.modifiers.new("Subdivision", "SUBSURF")
+            mod.levels = mod.render_levels = 8
+        bpy.data.objects.remove(first)
+        bpy.data.scenes.remove(bpy.data.scenes["Scene"])
+        bpy.context.window.scene = sc
+        bpy.ops.wm.save_as_mainfile(filepath={str(blend)!r})
+    """)
+    proc, runs = export(blend, tmp_path / "out")
+    assert proc.returncode == 1, proc.stderr[-2000:]
+    reason = runs["many"]["reason"]
+    assert runs["many"]["status"] == "failed"
+    assert "cube a" not in reason and "cube b" not in reason, reason
+    for part in ("cube c", "modifiers[Subdivision].levels", "786432 triangles", f"{2 * 786432 + 786432}",
+                 f"scene's cap of {blend_safety.MAX_SCENE_TRIANGLES}", "MAX_SCENE_TRIANGLES"):
+        assert part in reason, reason
+
+
 def test_the_predicted_size_of_a_subdivision(tmp_path):
     """4^levels quads per base quad (level 1: one quad per face corner), 2 triangles a quad; only
     the modifiers evaluation applies (viewport or render levels, shown or not)."""
