@@ -289,11 +289,18 @@ def library_paths(path):
     if sdna is None:
         raise BlendScanError("linked libraries but no DNA1 block")
     fields = _sdna(sdna, psize, end).get("Library", {})
-    field = fields.get("filepath") or fields.get("name")  # DNA's name of Library.filepath until 5.0 (and after)
-    if field is None or field[1] < 2:
+    # the path's field: "filepath" (2.8 to 4.x; 5.0's DNA calls it "name"), "filepath_abs" or an
+    # older "name": every one present is read, so no version's path is missed
+    found = [fields[k] for k in ("filepath", "name", "filepath_abs") if k in fields and fields[k][1] >= 64]
+    if not found:
         raise BlendScanError("no Library.filepath in the file's DNA")
-    offset, size = field
-    return [raw[offset:offset + size].split(b"\0", 1)[0].decode("utf-8", "replace") for _index, raw in libs]
+    out = []
+    for _index, raw in libs:
+        for offset, size in found:
+            text = raw[offset:offset + size].split(b"\0", 1)[0].decode("utf-8", "replace")
+            if text and text not in out:
+                out.append(text)
+    return out
 
 
 def library_problem(blend):
