@@ -163,9 +163,10 @@ def test_the_predicted_size_of_a_subdivision(tmp_path):
 def test_an_environment_image_above_the_cap_or_not_a_regular_file_fails_its_scene(tmp_path):
     """A generated 4096 x 4096 environment image (an 85 kB .blend that took 1.6 GB) is refused from
     its settings, before a pixel is made; an environment image whose file is a FIFO (which waited
-    forever) or a device is refused from os.stat, never opened; a small image file exports."""
+    forever) or a device is refused from os.stat, never opened, and so is a fluorescent material's
+    re-radiation matrix file that is a FIFO; a small image file exports."""
     blend = tmp_path / "images.blend"
-    small, fifo = tmp_path / "small.png", tmp_path / "fifo.png"
+    small, fifo, matrix = tmp_path / "small.png", tmp_path / "fifo.png", tmp_path / "matrix.json"
     bpy_child(f"""
         small = bpy.data.images.new("small", 8, 4)
         small.filepath_raw = {str(small)!r}
@@ -185,10 +186,20 @@ def test_an_environment_image_above_the_cap_or_not_a_regular_file_fails_its_scen
         dev.name = "device"
         dev.filepath = "/dev/zero"
         environment(world, dev)
+        sys.path.insert(0, {str(ROOT)!r})
+        import pkg_bootstrap; pkg_bootstrap.package()
+        from spectral_bench.exporters import blender_properties
+        blender_properties.register()
+        _, cube, _ = scene("fifo matrix")
+        mat = bpy.data.materials.new("fluorescent")
+        mat.spectral_bench.kind, mat.spectral_bench.fluorescence = "DIFFUSE", "MATRIX"
+        mat.spectral_bench.fluorescence_matrix_file = {str(matrix)!r}
+        cube.data.materials.append(mat)
         bpy.data.scenes.remove(bpy.data.scenes["Scene"])
         bpy.ops.wm.save_as_mainfile(filepath={str(blend)!r})
     """)
     os.mkfifo(fifo)
+    os.mkfifo(matrix)
     assert blend.stat().st_size < 200_000
     proc, runs = export(blend, tmp_path / "out")
     assert proc.returncode == 1, proc.stderr[-2000:]
@@ -197,7 +208,9 @@ def test_an_environment_image_above_the_cap_or_not_a_regular_file_fails_its_scen
     for scene, parts in (("generated_map", ("world[generated map world]", field, "4096 x 4096 = 16777216 pixels",
                                             f"cap of {blend_safety.MAX_IMAGE_PIXELS}", "MAX_IMAGE_PIXELS")),
                          ("fifo_map", ("world[fifo map world]", field, str(fifo), "a FIFO (named pipe)")),
-                         ("device_map", ("world[device map world]", field, "/dev/zero", "a character device"))):
+                         ("device_map", ("world[device map world]", field, "/dev/zero", "a character device")),
+                         ("fifo_matrix", ("fifo matrix cube", "material[fluorescent].spectral_bench.fluorescence_matrix_"
+                                          "file", str(matrix), "a FIFO (named pipe)"))):
         assert runs[scene]["status"] == "failed", runs[scene]
         for part in parts:
             assert part in runs[scene]["reason"], runs[scene]["reason"]
