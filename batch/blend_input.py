@@ -29,10 +29,67 @@ def open_blend(path):
     regular file."""
     import bpy
     from ..exporters import blend_safety
-    problem = blend_safety.file_problem(path) or blend_safety.library_problem(path)
+    problem = blend_safety.file_problem(path) or blend_safety.library_problem(path) or _trial_problem(path)
     if problem:
         raise BlendRefused(problem)
     bpy.ops.wm.open_mainfile(filepath=str(path), load_ui=False, use_scripts=False)
+
+
+def _trial_problem(path):
+    """Why the .blend at ``path`` is not opened here (text), or None. Blender evaluates the active
+    scene's modifiers while it opens a file, before anything can check their size: a file with a
+    modifier that can multiply geometry (exporters/blend_safety.py's GROWING_MODIFIERS) is first
+    opened in a child process, killed when its resident memory passes TRIAL_MEMORY or its time
+    TRIAL_SECONDS (an address-space limit would not do: Blender gives up on a modifier whose memory
+    it cannot allocate and opens the file without it); a file the child cannot open within them is
+    refused, naming those modifiers."""
+    import subprocess
+    import sys
+    import time
+    import bpy
+    from ..exporters import blend_safety as bs
+    try:
+        growing = bs.growing_modifiers(path)
+    except (bs.BlendScanError, OSError, ValueError) as exc:
+        return f"{str(path)!r}: its modifiers cannot be read: {exc}"
+    if not growing:
+        return None
+    opener = "import bpy, sys; bpy.ops.wm.open_mainfile(filepath=sys.argv[-1], load_ui=False, use_scripts=False)"
+    cmd = ([bpy.app.binary_path, "-b", "--factory-startup", "--disable-autoexec", "--python-expr", opener, "--"]
+           if bpy.app.binary_path else [sys.executable, "-c", opener])
+    proc = subprocess.Popen([*cmd, str(path)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    start, why = time.monotonic(), None
+    try:
+        while proc.poll() is None:
+            if _resident(proc.pid) > bs.TRIAL_MEMORY:
+                why = f"used more than {bs.TRIAL_MEMORY >> 30} GiB of memory (TRIAL_MEMORY)"
+            elif time.monotonic() - start > bs.TRIAL_SECONDS:
+                why = f"did not finish within {bs.TRIAL_SECONDS} s (TRIAL_SECONDS)"
+            if why:
+                break
+            time.sleep(0.02)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait()
+    if why is None and proc.returncode != 0:
+        why = f"failed (exit status {proc.returncode})"
+    if why is None:
+        return None
+    return (f"opening it in a trial process {why}, exporters/blend_safety.py; its modifiers that multiply "
+            f"geometry: {', '.join(growing[:5])}{' ...' if len(growing) > 5 else ''}")
+
+
+def _resident(pid):
+    """Resident memory of process ``pid`` in bytes (0 where /proc cannot say)."""
+    try:
+        with open(f"/proc/{pid}/status", "rb") as f:
+            for line in f:
+                if line.startswith(b"VmRSS:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return 0
 
 
 def _ids(data):

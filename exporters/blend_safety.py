@@ -33,6 +33,17 @@ MAX_SCENE_TRIANGLES = 1 << 21
 MAX_SCENE_VERTICES = 1 << 21
 # linked libraries followed from one .blend (libraries of libraries included)
 MAX_LIBRARIES = 256
+# Blender evaluates the modifiers of a file's active scene while it opens the file, before any check
+# can run (an 84 kB file: a cube in an array of 4 million, 1.9 GB): a .blend with a modifier that
+# multiplies geometry beyond these settings is first opened in a trial process (batch/blend_input.py),
+# killed at TRIAL_MEMORY bytes resident (bpy alone is ~0.3 GB) or after TRIAL_SECONDS
+GROWING_MODIFIERS = {  # DNA struct: (its fields, the largest value opened without a trial)
+    "SubsurfModifierData": (("levels", "renderLevels"), 6), "MultiresModifierData": (("lvl", "renderlvl"), 6),
+    "ArrayModifierData": (("count",), 1000), "ScrewModifierData": (("steps", "render_steps", "iter"), 1000),
+    "RemeshModifierData": (("depth",), 8), "OceanModifierData": (("resolution",), 16),
+    "NodesModifierData": ((), -1)}  # geometry nodes: anything
+TRIAL_MEMORY = 3 << 30
+TRIAL_SECONDS = 120
 PSEUDO_FILE_SYSTEMS = ("/proc", "/sys", "/dev")
 
 
@@ -258,32 +269,45 @@ def _sdna(data, psize, end):
     return structs
 
 
-def library_paths(path):
-    """The linked libraries' file paths stored in the .blend at ``path``, as Blender stores them
-    (``//`` relative to the file), without opening any of them; None when the file is no .blend
-    (Blender itself then says what it is). Raises BlendScanError when a .blend's blocks cannot be
-    read."""
+def _blocks(path, keep):
+    """(pointer size, endian, DNA1 data or None, [(code, sdna index, data)] of the blocks for which
+    ``keep(code, sdna index)`` is true), or None when the file is no .blend."""
     with _reader(path) as stream:
         head = _header(stream)
         if head is None:
             return None
         psize, end, kind = head
-        libs, sdna = [], None
+        kept, sdna = [], None
         while True:
             code, index, length, _nr = _bhead(stream, psize, end, kind)
             if code == b"ENDB":
                 break
             if length < 0:
                 raise BlendScanError("a block of negative length")
-            if code == b"LI\0\0":
-                if len(libs) >= MAX_LIBRARIES:
-                    raise BlendScanError(f"more than {MAX_LIBRARIES} linked libraries")
-                libs.append((index, _read(stream, min(length, 1 << 16))))
-                _skip(stream, length - min(length, 1 << 16))
-            elif code == b"DNA1":
+            if code == b"DNA1":
                 sdna = _read(stream, length)
+            elif keep(code, index):
+                if len(kept) >= 100000:
+                    raise BlendScanError("more than 100000 blocks of one kind")
+                part = min(length, 1 << 16)
+                kept.append((code, index, _read(stream, part)))
+                _skip(stream, length - part)
             else:
                 _skip(stream, length)
+    return psize, end, sdna, kept
+
+
+def library_paths(path):
+    """The linked libraries' file paths stored in the .blend at ``path``, as Blender stores them
+    (``//`` relative to the file), without opening any of them; None when the file is no .blend
+    (Blender itself then says what it is). Raises BlendScanError when a .blend's blocks cannot be
+    read."""
+    scan = _blocks(path, lambda code, index: code == b"LI\0\0")
+    if scan is None:
+        return None
+    psize, end, sdna, libs = scan
+    if len(libs) > MAX_LIBRARIES:
+        raise BlendScanError(f"more than {MAX_LIBRARIES} linked libraries")
     if not libs:
         return []
     if sdna is None:
@@ -295,11 +319,50 @@ def library_paths(path):
     if not found:
         raise BlendScanError("no Library.filepath in the file's DNA")
     out = []
-    for _index, raw in libs:
+    for _code, _index, raw in libs:
         for offset, size in found:
             text = raw[offset:offset + size].split(b"\0", 1)[0].decode("utf-8", "replace")
             if text and text not in out:
                 out.append(text)
+    return out
+
+
+def growing_modifiers(path):
+    """["modifiers[Array] (count 4000000)", ...]: the modifiers stored in the .blend at ``path`` that
+    can multiply its geometry beyond GROWING_MODIFIERS' settings (read from the file's blocks, two
+    passes: the DNA comes last); [] when none, None when the file is no .blend."""
+    first = _blocks(path, lambda code, index: False)
+    if first is None:
+        return None
+    psize, end, sdna, _ = first
+    if sdna is None:
+        raise BlendScanError("no DNA1 block")
+    structs = _sdna(sdna, psize, end)
+    order = list(structs)
+    wanted = {i for i, name in enumerate(order) if name in GROWING_MODIFIERS}
+    if not wanted:
+        return []
+    _, _, _, blocks = _blocks(path, lambda code, index: code == b"DATA" and index in wanted)
+    base = structs.get("ModifierData", {})
+    out = []
+    for _code, index, raw in blocks:
+        name_struct = order[index]
+        fields, most = GROWING_MODIFIERS[name_struct]
+        own = structs[name_struct]
+        values = {}
+        for field in fields:
+            if field in own and own[field][1] in (1, 2, 4):
+                offset, size = own[field]
+                if offset + size <= len(raw):
+                    values[field] = struct.unpack_from(end + {1: "B", 2: "h", 4: "i"}[size], raw, offset)[0]
+        if most >= 0 and all(v <= most for v in values.values()):
+            continue
+        label = name_struct[:-len("ModifierData")]
+        if "name" in base:
+            offset, size = base["name"]
+            label = raw[offset:offset + size].split(b"\0", 1)[0].decode("utf-8", "replace") or label
+        shown = ", ".join(f"{k} {v}" for k, v in values.items()) or "geometry nodes"
+        out.append(f"modifiers[{label}] ({shown})")
     return out
 
 

@@ -62,10 +62,10 @@ def environment(world, image):
 """
 
 
-def run_capped(*args, timeout=TIMEOUT):
-    """batch/run.py in a child with its address space capped at MEMORY_CAP, killed after ``timeout``."""
+def run_capped(*args, timeout=TIMEOUT, memory=MEMORY_CAP):
+    """batch/run.py in a child with its address space capped at ``memory``, killed after ``timeout``."""
     def cap():
-        resource.setrlimit(resource.RLIMIT_AS, (MEMORY_CAP, MEMORY_CAP))
+        resource.setrlimit(resource.RLIMIT_AS, (memory, memory))
     return subprocess.run([sys.executable, str(ROOT / "batch" / "run.py"), *map(str, args)], capture_output=True,
                           text=True, timeout=timeout, cwd=ROOT, preexec_fn=cap)
 
@@ -141,6 +141,38 @@ def test_a_scene_whose_meshes_together_are_above_the_cap_fails_before_the_last_i
     assert "cube a" not in reason and "cube b" not in reason, reason
     for part in ("cube c", "modifiers[Subdivision].levels", "786432 triangles", f"{2 * 786432 + 786432}",
                  f"scene's cap of {blend_safety.MAX_SCENE_TRIANGLES}", "MAX_SCENE_TRIANGLES"):
+        assert part in reason, reason
+
+
+@pytest.mark.slow
+def test_a_blend_whose_modifiers_blow_up_when_blender_opens_it_fails_alone(tmp_path):
+    """Blender evaluates the active scene's modifiers while it opens the file, before any check can
+    run: an 84 kB .blend whose cube is in an array of 8 million (64 million vertices, ~4 GB inside
+    Blender) is first opened in a trial process, killed when it passes TRIAL_MEMORY, and refused
+    naming the modifier; a file with an array of 2000 (a trial too: above 1000) opens and exports.
+    The runner's address space is capped at 6 GB here, above the trial's resident cap (under a
+    tighter cap Blender would give up on the array itself and open the file without it)."""
+    big, small = tmp_path / "big.blend", tmp_path / "small.blend"
+    bpy_child(f"""
+        for path, count in (({str(big)!r}, 8000000), ({str(small)!r}, 2000)):
+            bpy.ops.wm.read_factory_settings(use_empty=True)
+            sc, cube, _ = scene("array")
+            cube.modifiers.new("Array", "ARRAY").count = count
+            bpy.data.scenes.remove(bpy.data.scenes["Scene"])
+            bpy.context.window.scene = sc
+            bpy.ops.wm.save_as_mainfile(filepath=path)
+    """)
+    assert blend_safety.growing_modifiers(big) == ["modifiers[Array] (count 8000000)"]
+    out = tmp_path / "out"
+    proc = run_capped("-i", big, small, "--export-only", "--format", "json", "-o", out, memory=6 << 30)
+    assert "Traceback" not in proc.stderr, proc.stderr[-3000:]
+    assert proc.returncode == 1, proc.stderr[-2000:]
+    runs = {r["scene"]: r for r in metrics(out)["runs"]}
+    assert runs["array"]["status"] == "ok", runs["array"]
+    reason = runs["big"]["reason"]
+    assert runs["big"]["status"] == "failed"
+    for part in (str(big), "trial process", f"more than {blend_safety.TRIAL_MEMORY >> 30} GiB", "TRIAL_MEMORY",
+                 "modifiers[Array] (count 8000000)"):
         assert part in reason, reason
 
 
