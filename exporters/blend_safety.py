@@ -375,7 +375,7 @@ def library_problem(blend):
         current = todo.pop()
         try:
             paths = library_paths(current)
-        except (BlendScanError, OSError, ValueError, struct.error) as exc:
+        except Exception as exc:  # noqa: BLE001 - any fault of a hostile file: it is not opened
             return f"{str(current)!r}: its linked libraries cannot be read: {exc}"
         for lib in paths or ():
             full = Path(os.path.normpath(current.parent / lib[2:] if lib.startswith("//") else Path(lib)))
