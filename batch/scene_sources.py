@@ -4,9 +4,10 @@ One bad input fails alone: whatever goes wrong with one file (unreadable, not UT
 nested too deeply, not a scene, a name that cannot be an output folder) becomes that input's
 SceneError, naming the file and the field, and the other inputs load.
 """
+import os
 from pathlib import Path
 
-from ..exporters import ir_json, names, validate
+from ..exporters import blend_safety, ir_json, names, validate
 
 DEFAULT_BLEND = Path(__file__).resolve().parents[1] / "scenes.blend"
 
@@ -65,8 +66,10 @@ def _load(paths):
         path = Path(p)
         try:
             if path.suffix == ".blend":
-                if not path.is_file():
-                    raise validate.SceneError(path.stem, [("scene", "(file)", f"no such file: {path}")])
+                if not path.is_file():  # missing, a folder, a FIFO or device (opening it would wait)
+                    problem = blend_safety.file_problem(path)
+                    raise validate.SceneError(path.stem, [("scene", "(file)", f"no such file: {path}" if problem is None
+                                                           or not os.path.lexists(path) else problem)])
                 from .blend_input import load_blend
                 results += [(r, str(path)) for r in load_blend(path)]
             else:

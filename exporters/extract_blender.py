@@ -15,6 +15,7 @@ import bpy
 import numpy as np
 from mathutils import Matrix
 
+from . import blend_safety
 from . import blender_conversion as conv
 from . import ir, names, validate
 
@@ -80,6 +81,9 @@ def fluorescence(a):
         import json
         from pathlib import Path
         path = bpy.path.abspath(a.fluorescence_matrix_file) if a.fluorescence_matrix_file else ""
+        refused = blend_safety.file_problem(path) if path and os.path.lexists(path) else None
+        if refused:
+            raise ValueError(f"cannot read a re-radiation matrix: {refused}")
         try:
             data = json.loads(Path(path).read_text())
             return {"type": "matrix", "wavelengths": [float(w) for w in data["wavelengths"]],
@@ -117,7 +121,7 @@ def material_bsdf(mat):
     return out
 
 
-def _mesh_object(obj, depsgraph, problems, warnings):
+def _mesh_object(obj, depsgraph, problems, warnings, used=None):
     name = obj.name
     mat = obj.active_material
     emitter = None
@@ -160,9 +164,17 @@ def _mesh_object(obj, depsgraph, problems, warnings):
         shape = {"type": "sphere", "center": [_clean(c) for c in loc], "radius": _clean(scale[0])}
     else:
         # modifiers are applied when the scene has been evaluated, the base mesh is used otherwise
+        refused = _mesh_size_problem(obj, depsgraph, used=used)
+        if refused:
+            problems.append((name, *refused))
+            return None
         source = obj.evaluated_get(depsgraph) if depsgraph is not None else obj
         mesh = source.to_mesh()
         try:
+            refused = _mesh_size_problem(obj, depsgraph, mesh, used)
+            if refused:
+                problems.append((name, *refused))
+                return None
             mesh.calc_loop_triangles()
             verts = [[_clean(c) for c in v.co] for v in mesh.vertices]
             faces = [list(t.vertices) for t in mesh.loop_triangles]
@@ -236,6 +248,46 @@ def _flat_frame(m, name, field, warnings):
     warnings.append((name, field, f"{_scale_text(m)}: the flat shape's z axis is scaled to 0: taken as its unit "
                      "normal (the shape's extent is unchanged)"))
     return out
+
+
+def _mesh_size_problem(obj, depsgraph, mesh=None, used=None):
+    """(field, message) when a mesh object is above the caps of exporters/blend_safety.py, else
+    None: before evaluation its size predicted from its base mesh and subdivision levels (a level-9
+    subdivision of a cube is 3 million triangles), after it (``mesh``) the evaluated counts, both
+    before any of its data is read. ``used`` ({"triangles": n, "vertices": n}) holds what the
+    scene's meshes read so far: the scene's total is capped too, and an evaluated mesh that passes
+    is added to it."""
+    cap_v, cap_t = blend_safety.MAX_MESH_VERTICES, blend_safety.MAX_MESH_TRIANGLES
+    if mesh is None:
+        base = obj.data
+        counts = (len(base.vertices), len(base.polygons), len(base.loops))
+        render = depsgraph is not None and depsgraph.mode == "RENDER"
+        mods = obj.modifiers if depsgraph is not None else ()
+        verts, tris, fields = blend_safety.subdivided(counts, mods, render)
+        field = fields[-1] if fields else "data"
+        what = (f"predicted from its base mesh ({counts[1]} faces) and {', '.join(fields)}, before evaluating it"
+                if fields else "its base mesh")
+    else:
+        verts, tris = len(mesh.vertices), len(mesh.loops) - 2 * len(mesh.polygons)
+        field, what = "modifiers" if depsgraph is not None and len(obj.modifiers) else "data", (
+            "evaluated (modifiers applied), before reading it")
+    for count, cap, noun, cap_name in ((tris, cap_t, "triangles", "MAX_MESH_TRIANGLES"),
+                                       (verts, cap_v, "vertices", "MAX_MESH_VERTICES")):
+        if count > cap:
+            return field, (f"the mesh has {count} {noun} ({what}), above the cap of {cap} ({cap_name}, "
+                           f"exporters/blend_safety.py): not exported")
+    if used is None:
+        return None
+    for count, key, cap, cap_name in ((tris, "triangles", blend_safety.MAX_SCENE_TRIANGLES, "MAX_SCENE_TRIANGLES"),
+                                      (verts, "vertices", blend_safety.MAX_SCENE_VERTICES, "MAX_SCENE_VERTICES")):
+        if used[key] + count > cap:
+            return field, (f"the mesh has {count} {key} ({what}): with the {used[key]} of the scene's meshes read "
+                           f"before it, {used[key] + count}, above the scene's cap of {cap} ({cap_name}, "
+                           "exporters/blend_safety.py): not exported")
+    if mesh is not None:
+        used["triangles"] += tris
+        used["vertices"] += verts
+    return None
 
 
 def _value(v):
@@ -538,6 +590,11 @@ def _converted_world(world, warnings, problems=None):
             warn(field, f"blackbody {t:g} K kept exact, luminance = strength {strength:g} (Cycles' normalisation)")
             return {"type": "uniform", "radiance": conv.blackbody(t, strength)}
         if src is not None and src.bl_idname == "ShaderNodeTexEnvironment" and src.image is not None:
+            refused = _image_problem(src.image)
+            if refused:
+                (problems if problems is not None else []).append(
+                    (name, f"node_tree.nodes[{src.name}].image", f"image {src.image.name!r}: {refused}"))
+                return None
             colour = _image_mean(src.image)
             if colour is None:
                 img = src.image
@@ -560,6 +617,37 @@ def _converted_world(world, warnings, problems=None):
     warn(field, f"background colour {conv.fmt(colour)} x strength {strength:g} -> a uniform environment of that "
          f"radiance (Cycles' convention): {conv.emission_note(spec)}")
     return {"type": "uniform", "radiance": spec}
+
+
+def _image_problem(image):
+    """Why the pixels of ``image`` are not read (text), or None: its file must be a regular file
+    (exporters/blend_safety.py) and its size, read from the file's header (a packed image's bytes,
+    a generated image's settings) without loading it, at most MAX_IMAGE_PIXELS. A file that is
+    missing is left to Blender (it has no pixels then)."""
+    cap = blend_safety.MAX_IMAGE_PIXELS
+    size = None
+    if image.source == "GENERATED":
+        size = (image.generated_width, image.generated_height)
+    elif image.packed_file is not None:
+        size = blend_safety.image_bytes_size(bytes(image.packed_file.data))
+        if size is None:
+            return "its packed data is no image file whose size can be read from its header: not read"
+    elif image.source != "FILE":
+        return f"source {image.source}: only a single image file, packed or generated image is read"
+    else:
+        path = os.path.normpath(bpy.path.abspath(image.filepath, library=image.library)) if image.filepath else ""
+        if not path or not os.path.lexists(path):
+            return None
+        refused = blend_safety.file_problem(path)
+        if refused:
+            return refused
+        size = blend_safety.image_header_size(path)
+        if size is None:
+            return f"{path!r} is no image file whose size can be read from its header: not read"
+    if size[0] * size[1] > cap:
+        return (f"{size[0]} x {size[1]} = {size[0] * size[1]} pixels, above the cap of {cap} (MAX_IMAGE_PIXELS, "
+                "exporters/blend_safety.py): not read")
+    return None
 
 
 def _image_mean(image):
@@ -660,6 +748,7 @@ def extract_scene(scene):
         problems.append((f"world[{world.name}]", "(conversion)", _fault(exc)))
     lights = []
     depsgraph = scene.view_layers[0].depsgraph if scene.view_layers else None
+    used = {"triangles": 0, "vertices": 0}  # by the scene's meshes (exporters/blend_safety.py caps it)
     taken = []
     for obj in sorted(scene.objects, key=lambda o: o.name):
         if obj.hide_render:
@@ -668,7 +757,7 @@ def extract_scene(scene):
         if obj.type in ("MESH", "LIGHT"):
             try:
                 if obj.type == "MESH":
-                    item = _mesh_object(obj, depsgraph, problems, warnings)
+                    item = _mesh_object(obj, depsgraph, problems, warnings, used)
                 else:
                     item, light = _light_object(obj, problems, warnings)
             except Exception as exc:  # noqa: BLE001 - an exporter fault fails this scene, naming the object
