@@ -104,11 +104,13 @@ def test_each_scene_of_the_file_is_exported_or_fails_alone_by_name(blend):
         assert (blend["out"] / name / "mitsuba" / "scene.xml").is_file(), name
 
 
-@pytest.mark.parametrize("scene, file", [("missing_sky", "no_such_sky.exr"), ("folder_sky", "a_folder.exr")])
-def test_an_environment_image_without_pixels_names_scene_world_and_field(blend, scene, file):
+@pytest.mark.parametrize("scene, file, why", [
+    ("missing_sky", "no_such_sky.exr", "' has no pixels (file {path!r}"),
+    ("folder_sky", "a_folder.exr", "': {path!r} is a folder, not a regular file: not opened")])  # refused before Blender reads it
+def test_an_environment_image_without_pixels_names_scene_world_and_field(blend, scene, file, why):
     reason = {r["scene"]: r for r in metrics(blend["out"])["runs"]}[scene]["reason"]
     assert (f"scene {scene!r}, object 'world[{scene}_world]', field 'node_tree.nodes[Environment Texture].image': "
-            f"image '{scene}_sky' has no pixels (file {str(blend['folder'] / file)!r}") in reason, reason
+            f"image '{scene}_sky" + why.format(path=str(blend["folder"] / file))) in reason, reason
 
 
 def test_seventy_objects_without_material_and_seventy_lights_load(blend):
