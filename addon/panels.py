@@ -1,7 +1,7 @@
 """Panels: annotations (Material, Light, World, Camera, Object, Scene) with inline validation,
 and the benchmark panel with its References and Results sub-panels (Properties > Scene). Draw code
 only: the logic is in validation.py, benchmark.py, reference_sources.py and batch/report/results.py.
-tests/test_blender_ui.py runs every panel's draw() against a recording layout that checks each
+tests/extension/test_blender_ui.py runs every panel's draw() against a recording layout that checks each
 drawn property, operator and icon exists."""
 import bpy
 

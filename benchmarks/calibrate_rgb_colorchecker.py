@@ -1,4 +1,4 @@
-"""Calibrates the ColorChecker bound of tests/test_rgb_backends.py: renders macbeth_chart_D65 and
+"""Calibrates the ColorChecker bound of tests/backends/test_rgb_backends.py: renders macbeth_chart_D65 and
 macbeth_chart_D50 through Cycles and LuxCore at the test's settings (scale 0.25: 155x105, 64 spp,
 4 passes) with several seeds and reports, per patch, |dE00 measured - dE00 predicted by the
 reduction rule| (the rule's own error is known without a renderer: what is left is noise and
@@ -71,7 +71,7 @@ def main(argv=None):
         with open(Path(__file__).resolve().parent / "CALIBRATION.md", "a") as fh:
             fh.write("\n## RGB backends: ColorChecker CIEDE2000 against the reduction rule's prediction\n\n"
                      "`benchmarks/calibrate_rgb_colorchecker.py` renders both charts through Cycles and LuxCore at "
-                     f"the settings of `tests/test_rgb_backends.py` (scale {SCALE}, {SPP} spp, {PASSES} passes), "
+                     f"the settings of `tests/backends/test_rgb_backends.py` (scale {SCALE}, {SPP} spp, {PASSES} passes), "
                      f"{args.seeds} seeds each, and compares every patch's dE00 against the spectral truth with "
                      "the dE00 the rule predicts without a renderer (`exporters/rgb_reduction.predicted_error`). "
                      "What remains is noise (and anything a renderer does beyond the rule).\n\n"

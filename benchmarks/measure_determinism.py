@@ -3,7 +3,7 @@
     .venv/bin/python benchmarks/measure_determinism.py [--repeats 3] [--spp 16] [--size 32]
 
 Renders one small canonical scene (golden/ir/ggx_copper_50, and the RGB backends' own plane of
-tests/test_rgb_backends.py's kind: the golden scene exported for them) REPEATS times with the same
+tests/backends/test_rgb_backends.py's kind: the golden scene exported for them) REPEATS times with the same
 seed and passes through each backend this machine has (Mitsuba scalar_spectral, llvm_ad_spectral,
 ART, Cycles, LuxCore), and prints, per backend, whether the mean image and the per-pixel standard
 error are bit-identical between the repeats (and the largest difference when not). A backend whose

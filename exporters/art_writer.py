@@ -29,7 +29,7 @@ Sellmeier) and constants; and its outside medium is vacuum. Named conductors are
 IR's own eta/k tables (Mitsuba's data, exporters/data), not ART's material presets, so both
 renderers render the same metal.
 
-Test hook (tests/test_art.py, docs/developing.md): ``SPECTRAL_BENCH_TEST_ART_ILLUMINANT_SCALE=F``
+Test hook (tests/backends/test_art.py, docs/developing.md): ``SPECTRAL_BENCH_TEST_ART_ILLUMINANT_SCALE=F``
 in the environment multiplies every emitter's and the environment's brightness by F (a planted
 error of the ART route, which the ART render tests must detect), and the .arm says so in a
 comment. Unset, nothing changes.
@@ -258,7 +258,7 @@ class _Writer:
         pol = sc["camera"].get("polarizer")
         if pol:
             # ART's filter angle: transmission axis, 0 = horizontal, counter-clockwise as seen
-            # from the camera (the IR's convention; tests/test_art.py checks it when ART is present)
+            # from the camera (the IR's convention; tests/backends/test_art.py checks it when ART is present)
             acts.append(f"[ LINEAR_POLARISATION_FILTER angle: {_num(pol['angle'])} DEGREES strength: 1.0 ]")
         # always ART's spectral EXR (its 46 bands, S0..S3 with -p): the backend integrates it with
         # the CIE 1931 CMFs to linear sRGB as the IR defines colour. ART's own sRGB output maps

@@ -5,7 +5,7 @@ and calls these where a material, light or world has no spectral annotation (an 
 wins). Every conversion that is not exact, and everything that cannot be carried over, is a
 warning ``(object, field, message)``: nothing is lost silently. docs/scene-format.md, section 11,
 states every formula; the radiometric ones were measured with Cycles (bpy 5.0.1) and are checked
-by tests/test_blender_conversion.py.
+by tests/exporters/test_blender_conversion.py.
 
 Colour: Blender's colours are linear Rec.709/sRGB (the IR's film space, section 9).
 - A reflectance colour is uplifted to a smooth spectrum with Jakob and Hanika 2019 (colour-science's

@@ -149,7 +149,7 @@ def xyz(values_at_cmf_wavelengths, obs=GROUND_TRUTH):
 def xyz_rows(values_at_cmf_wavelengths, obs=GROUND_TRUTH):
     """``xyz`` of every row of an N x wavelengths array at once (N x 3): the same trapezoid rule
     along the last axis, the same numbers as calling ``xyz`` per row (checked bit for bit in
-    tests/test_fixed_cost.py), without a Python call per row (a probe's colour table has hundreds)."""
+    tests/jobs/test_fixed_cost.py), without a Python call per row (a probe's colour table has hundreds)."""
     wl, xb, yb, zb, norm = observer(obs)
     v = np.asarray(values_at_cmf_wavelengths, dtype=np.float64)
     return np.stack([np.trapz(v * xb, wl, axis=-1), np.trapz(v * yb, wl, axis=-1), np.trapz(v * zb, wl, axis=-1)],

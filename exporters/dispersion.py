@@ -33,7 +33,7 @@ FRAUNHOFER_NM = {"F": 486.1327, "d": 587.5618, "C": 656.2725}
 # Sellmeier coefficients (B_i, C_i in um^2) of named glasses, from the manufacturers' data:
 # - N-BK7, N-SF11: SCHOTT optical glass data sheets (SCHOTT AG, "Optical Glass - Data Sheets",
 #   2017-01-20): N-BK7 n_d 1.51680, n_F 1.52238, n_C 1.51432, v_d 64.17; N-SF11 n_d 1.78472,
-#   v_d 25.68 (tests/test_dispersion.py checks N-BK7 against these published values).
+#   v_d 25.68 (tests/probes/test_dispersion.py checks N-BK7 against these published values).
 # - fused silica: I. H. Malitson, "Interspecimen Comparison of the Refractive Index of Fused
 #   Silica", J. Opt. Soc. Am. 55(10), 1205-1209 (1965), eq. (1) at 20 C; Malitson gives the
 #   resonance wavelengths (0.0684043, 0.1162414, 9.896161 um), whose squares are the C_i.

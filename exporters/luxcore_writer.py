@@ -25,7 +25,7 @@ Materials (LuxCore 2.x names, src/slg/scene/parsematerials.cpp):
 - Delta lights: ``point`` (gain 4 pi: LuxCore's point intensity is gain x color / (4 pi)), ``spot``
   (coneangle = cutoff, conedeltaangle = cutoff - beam_width; intensity gain x color; its falloff
   is LuxCore's, an approximation unless beam = cutoff) and ``sharpdistant`` (irradiance gain x
-  color): all measured on a diffuse plane against the closed form (tests/test_blender_conversion.py;
+  color): all measured on a diffuse plane against the closed form (tests/exporters/test_blender_conversion.py;
   LuxCore's point and spot read 1.0e-5 and 1.6e-5 high, its ray offsets).
 
 Render settings (render.cfg): PATHCPU with the RANDOM sampler (independent, uniformly jittered

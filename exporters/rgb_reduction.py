@@ -33,7 +33,7 @@ rgb(rho), which is rgb(rho * L) by construction. Everywhere else an RGB renderer
 rgb(L) * rgb(rho) where the truth is rgb(L * rho): the error depends on how far L is from D65
 and on how the spectra vary inside each channel. ``predicted_error`` computes it for a single
 reflection (no renderer involved); for the ColorChecker under D50 it is 0.02..2.6 dE00 per patch,
-0.75 on average (orange 2.57, orange-yellow 2.43; benchmarks/RGB.md, tests/test_rgb_backends.py).
+0.75 on average (orange 2.57, orange-yellow 2.43; benchmarks/RGB.md, tests/backends/test_rgb_backends.py).
 Multiple bounces compound it. Gamut clipping adds error for out-of-gamut reflectances: the
 ColorChecker cyan patch is R = -0.033 in sRGB under D65, clipped to 0, 2.43 dE00 even under D65.
 """

@@ -3,8 +3,8 @@
 Self-contained: imports numpy and scipy only, so it can be copied out of the project and used
 alone (the project's probes call it: batch/verdict/optics.py, airy.py; exporters/dispersion.py,
 fluorescence.py). The C++17 translation is ``snippets/`` (header-only, no dependencies); both are
-tested against published values in tests/test_reference_code.py and against each other in
-tests/test_snippets.py. The scene format that uses these models: docs/scene-format.md.
+tested against published values in tests/probes/test_reference_code.py and against each other in
+tests/probes/test_snippets.py. The scene format that uses these models: docs/scene-format.md.
 
 Every function broadcasts over numpy arrays. Conventions:
 

@@ -5,7 +5,7 @@
 Once built, scenes.blend is the source of truth a user edits in Blender; this script records
 how it was first made (geometry, light, camera and sample counts after the 2020 thesis,
 section 3.3.1; our own scenes). golden/ir/*.json shows every change as a readable diff
-(tests/test_blender_ir.py fails until they are regenerated with scripts/update_golden.py).
+(tests/exporters/test_blender_ir.py fails until they are regenerated with scripts/update_golden.py).
 """
 import math
 import sys

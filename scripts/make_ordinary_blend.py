@@ -3,7 +3,7 @@ annotation: scene "ordinary" (four Principled BSDF spheres of different base col
 metallic gold, on a Principled floor; a 100 W point light, a 300 W area light, a world colour)
 scene "zoo" (one of each conversion and loss the export warns about), and small plane scenes whose every light has a closed form (a Diffuse BSDF plane seen straight
 down through a 1-degree camera: under a world colour, a point, spot, sun, area and disk light,
-and a blackbody point light). tests/test_blender_conversion.py exports and renders them.
+and a blackbody point light). tests/exporters/test_blender_conversion.py exports and renders them.
 
     python scripts/make_ordinary_blend.py OUT.blend      (or: blender -b -P this -- OUT.blend)
 """

@@ -16,7 +16,7 @@ if ! ls /usr/lib/*/libLLVM-19.so >/dev/null 2>&1; then
     echo "setup: libLLVM-19 not found and not root; Mitsuba will use its scalar variants" >&2
   fi
 fi
-# headless Chromium checks the HTML report in the tests (tests/test_report.py skips visibly without it)
+# headless Chromium checks the HTML report in the tests (tests/report/test_report.py skips visibly without it)
 if ! command -v chromium >/dev/null && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
   echo "setup: installing chromium (Debian) for the report test" >&2
   (apt-get install -y -qq chromium >/dev/null 2>&1 || { apt-get update -qq >/dev/null && apt-get install -y -qq chromium >/dev/null; }) \

@@ -5,7 +5,7 @@ both renders' noise; and the band discretisation error expected from the scene's
     .venv/bin/python scripts/spectral_exr_check.py [--scene ggx_copper_50] [--size 64] [--spp 256]
         [--passes 4] [--band-nm 10]
 
-Prints a markdown report (benchmarks/SPECTRAL_EXR.md records one). tests/test_spectral_exr.py runs
+Prints a markdown report (benchmarks/SPECTRAL_EXR.md records one). tests/backends/test_spectral_exr.py runs
 agreement() at a small size.
 """
 import argparse

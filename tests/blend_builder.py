@@ -12,8 +12,8 @@ SPEC.json is a list of scenes, each
                  "settings": {bpy light attribute: value}, "blackbody": null | kelvin}],
      "world": null | {"colour": [r, g, b], "strength": float, "image": null | PATH | "packed",
                       "blackbody": null | kelvin}}
-where PATH is a file path kept as given (missing, a folder, ...). Used by tests/test_blend_values.py
-and the .blend fuzzing of tests/test_fuzz_scenes.py (tests/scene_fuzz.py ``blend_scenes``).
+where PATH is a file path kept as given (missing, a folder, ...). Used by tests/exporters/test_blend_values.py
+and the .blend fuzzing of tests/hostile/test_fuzz_scenes.py (tests/scene_fuzz.py ``blend_scenes``).
 """
 import json
 import math

@@ -10,6 +10,14 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+# The tests are grouped by the part of the house they test (tests/<room>/test_*.py, issue 45 item 4);
+# this folder holds what they share: this file's fixtures and the helper modules beside it
+# (plant_renderer, scene_fuzz, run_fuzz, exr_craft, blend_builder, ...). A test module may import
+# another room's (a fixture or a constant it shares): every room is on the path.
+ROOMS = sorted(p.name for p in Path(__file__).resolve().parent.iterdir()
+               if p.is_dir() and any(p.glob("test_*.py")))
+for _room in ROOMS:
+    sys.path.insert(1, str(Path(__file__).resolve().parent / _room))
 import pkg_bootstrap  # noqa: E402
 
 pkg_bootstrap.package()
@@ -40,19 +48,19 @@ ALL_SCENES = sorted(REFLECTANCE + SPECTRAL_ACCURACY + POLARIZATION + IRIDESCENCE
 # be counted here (and in benchmarks/TESTS.md) and judge at RANDOM_TEST_ALPHA.
 SUITE_ALPHA = 1e-3
 RANDOM_JUDGEMENTS = {  # test (file::function) -> how many families of tests its random renders are judged by
-    # LuxCore (tests/test_rgb_backends.py, tests/test_warm_rgb.py)
-    "test_rgb_backends.py::test_units_agree_with_the_closed_form_and_with_mitsuba": 2,  # closed form, against Mitsuba
-    "test_rgb_backends.py::test_render_is_judged_on_its_own_noise[luxcore]": 1,  # the block test
-    "test_rgb_backends.py::test_pixel_filter_is_a_one_pixel_box_and_the_image_is_upright[luxcore]": 1,  # half-covered edge
-    "test_rgb_backends.py::test_colorchecker_renders_the_rule_exactly_within_noise[luxcore]": 2,  # D65, D50 charts
-    "test_rgb_backends.py::test_colorchecker_d65_is_within_its_bound_and_d50_shows_the_rgb_error[luxcore]": 1,  # calibrated bound
-    "test_warm_rgb.py::test_one_warm_luxcore_worker_renders_scene_after_scene_as_fresh_children": 3,  # A, B, A again
-    # ART (tests/test_art.py): the module's four judged runs, shared by the tests that read them: each
+    # LuxCore (tests/backends/test_rgb_backends.py, tests/backends/test_warm_rgb.py)
+    "backends/test_rgb_backends.py::test_units_agree_with_the_closed_form_and_with_mitsuba": 2,  # closed form, against Mitsuba
+    "backends/test_rgb_backends.py::test_render_is_judged_on_its_own_noise[luxcore]": 1,  # the block test
+    "backends/test_rgb_backends.py::test_pixel_filter_is_a_one_pixel_box_and_the_image_is_upright[luxcore]": 1,  # half-covered edge
+    "backends/test_rgb_backends.py::test_colorchecker_renders_the_rule_exactly_within_noise[luxcore]": 2,  # D65, D50 charts
+    "backends/test_rgb_backends.py::test_colorchecker_d65_is_within_its_bound_and_d50_shows_the_rgb_error[luxcore]": 1,  # calibrated bound
+    "backends/test_warm_rgb.py::test_one_warm_luxcore_worker_renders_scene_after_scene_as_fresh_children": 3,  # A, B, A again
+    # ART (tests/backends/test_art.py): the module's four judged runs, shared by the tests that read them: each
     # run's noise test and its probe families (fluorescent_sphere_lone: fluorescence, bands;
     # polarizing_plane_0: Brewster, Stokes; macbeth_chart_D65: lambert, bands; polarizing_spheres:
     # Stokes), and the four Brewster renders (one probe family each)
-    "test_art.py::art_runs (test_art_renders_the_five_scenes_and_judges_them, test_art_chart_keeps_out_of_gamut_colour)": 11,
-    "test_art.py::test_art_brewster_and_polariser_convention": 4,
+    "backends/test_art.py::art_runs (test_art_renders_the_five_scenes_and_judges_them, test_art_chart_keeps_out_of_gamut_colour)": 11,
+    "backends/test_art.py::test_art_brewster_and_polariser_convention": 4,
 }
 N_RANDOM_TESTS = sum(RANDOM_JUDGEMENTS.values())
 RANDOM_TEST_ALPHA = SUITE_ALPHA / N_RANDOM_TESTS  # each random family's false-alarm rate (Bonferroni)
@@ -101,7 +109,7 @@ def write_hand_made_metrics(out, data):
 
 def runner_metrics_files(root):
     """([metrics.json the runner wrote under root], [those left out]): a file the runner wrote
-    carries schema_version (tests/test_records.py checks that it always does); a file without it
+    carries schema_version (tests/report/test_records.py checks that it always does); a file without it
     is a version-1 or hand-made input that a test wrote itself, and one marked HAND_MADE is
     hand-made on purpose."""
     found, left_out = [], []

@@ -5,8 +5,8 @@ user a traceback.
 
 Panel.draw() cannot run in the bpy module with a real layout (no window), but it is a plain
 function of (self, context): it is called with a stand-in ``self`` holding this layout and a
-context stand-in holding real bpy data. Used by tests/test_blender_ui.py and
-tests/test_extension.py (inside a child process with bpy).
+context stand-in holding real bpy data. Used by tests/extension/test_blender_ui.py and
+tests/extension/test_extension.py (inside a child process with bpy).
 """
 import bpy
 

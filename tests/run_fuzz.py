@@ -1,4 +1,4 @@
-"""Hostile run folders for property-based tests of batch/compare_runs.py (tests/test_fuzz_runs.py).
+"""Hostile run folders for property-based tests of batch/compare_runs.py (tests/hostile/test_fuzz_runs.py).
 
 ``mutations()`` draws a few changes to a copy of a real run folder (its metrics.json and its
 files): fields set to wrong types, huge or non-finite numbers, path walks and absolute paths,

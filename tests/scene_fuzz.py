@@ -1,4 +1,4 @@
-"""Hostile scenes for property-based tests (tests/test_fuzz_scenes.py) and the long fuzzing run
+"""Hostile scenes for property-based tests (tests/hostile/test_fuzz_scenes.py) and the long fuzzing run
 (benchmarks/fuzz_scenes.py).
 
 Two sources of scenes:
@@ -110,7 +110,7 @@ def mutated_scenes(draw):
 def schema_scenes():
     """The schema's scenes, the strategy built when first drawn from (st.deferred): building it
     (hypothesis-jsonschema's from_schema) takes about 0.5 s, which every pytest-xdist worker paid
-    while collecting tests/test_fuzz_scenes.py, where it is an argument of @given."""
+    while collecting tests/hostile/test_fuzz_scenes.py, where it is an argument of @given."""
     def build():
         from hypothesis_jsonschema import from_schema
         return from_schema(validate.schema())

@@ -53,7 +53,7 @@ class Interrupted(KeyboardInterrupt):
 
 
 def _test_stop_after(count):
-    """Test hook (tests/test_engines.py): with SPECTRAL_BENCH_TEST_SIGINT_AFTER=N in the environment,
+    """Test hook (tests/jobs/test_engines.py): with SPECTRAL_BENCH_TEST_SIGINT_AFTER=N in the environment,
     the runner sends itself SIGINT, as Ctrl-C does, once N results are handed on: an interrupt at a
     defined point instead of a signal racing the renders. Unset (always, outside that test): nothing."""
     if str(count) == os.environ.get("SPECTRAL_BENCH_TEST_SIGINT_AFTER"):

@@ -2,7 +2,7 @@
 environment, the rendered colour's CIEDE2000 against the spectral truth rho(l) * L(l), next to
 what the reduction rule (exporters/rgb_reduction.py) predicts without any renderer, and the
 pixels' residuals against the rule's own colour (to judge on the render's noise that the
-renderer implements the rule). Used by tests/test_rgb_backends.py,
+renderer implements the rule). Used by tests/backends/test_rgb_backends.py,
 benchmarks/calibrate_rgb_colorchecker.py and benchmarks/bench_rgb_backends.py.
 """
 import numpy as np

@@ -171,7 +171,7 @@ def detectable_scale(ztest, var=None, power=POWER):
         # the statistic as normal around its noncentrality, against the test's own (Student t)
         # critical value: the Satterthwaite degrees of freedom estimated from few passes are biased
         # low, and a noncentral t with them puts too much of its tail beyond the critical value
-        # (measured: 78 % instead of 90 % with 4 passes; tests/test_baseline.py)
+        # (measured: 78 % instead of 90 % with 4 passes; tests/verdict/test_baseline.py)
         p = block_power(s * sens, crit)
         return 1.0 - float(np.exp(np.sum(np.log1p(-np.minimum(p, 1 - 1e-16)))))
 

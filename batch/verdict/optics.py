@@ -1,6 +1,6 @@
 """Closed-form optics for the probes (no renderer involved): the project's names for the
 reference implementations in reference_code/appearance.py, which documents every formula and its
-source, and which is tested against published values (tests/test_reference_code.py).
+source, and which is tested against published values (tests/probes/test_reference_code.py).
 
 - fresnel_dielectric(cos_i, eta) -> (Rs, Rp); fresnel_conductor(cos_i, eta, k) -> unpolarised R
   (Born & Wolf, Principles of Optics, 7th ed., 1.5.2 and 14.2; Hecht, Optics, 5th ed., eq. 4.42-4.43).

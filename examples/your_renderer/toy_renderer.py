@@ -14,9 +14,9 @@ given, and writes the EXR the benchmark reads back:
 The rendering itself is Mitsuba 3 (the ``mitsuba`` Python package) standing in for a renderer of
 your own: replace ``render_rgb`` / ``render_bands`` with your renderer and keep the rest.
 ``--gain`` multiplies the image: a way to see the benchmark catch a renderer that is 1 % too
-bright (tests/test_declared_renderer.py does exactly that). ``--band-swap NM`` makes the spectral
+bright (tests/backends/test_declared_renderer.py does exactly that). ``--band-swap NM`` makes the spectral
 output 2 % brighter in the band holding NM and 2 % darker in the next: a metamer, the same R, G, B
-within noise, which only the benchmark's band checks see (tests/test_bands.py).
+within noise, which only the benchmark's band checks see (tests/verdict/test_bands.py).
 
     python toy_renderer.py scene.xml --out pass.exr --spp 64 --seed 0 [--format spectral] [--gain 1.0]
                            [--band-swap NM]

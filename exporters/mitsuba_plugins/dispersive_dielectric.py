@@ -39,7 +39,7 @@ lane drawn, 0 on the others; also unbiased): measured on the same samples, N-SF1
 0.05-0.5, from both sides, each lane's variance is 8-25x lower with the mixture
 (benchmarks/plugin_lane_estimators.py). MIS with
 emitter sampling uses the same mixture density, so each lane's MIS weights still sum to one.
-tests/test_dispersion.py checks with mi.chi2 that the sampler follows ``pdf``.
+tests/probes/test_dispersion.py checks with mi.chi2 that the sampler follows ``pdf``.
 """
 import drjit as dr
 import mitsuba as mi

@@ -28,7 +28,7 @@ bare conductor exactly, and film index -> exterior index gives r = r13 e^{-i phi
 reflectance and the same s/p phase difference. In *_polarized variants the BSDF returns the Mueller
 matrix of the two complex amplitudes (mueller.h's specular_reflection: a = (Rs + Rp)/2,
 b = (Rs - Rp)/2, c + i d = r_s conj(r_p)), rotated into Mitsuba's Stokes bases exactly as its
-conductor and roughconductor do. Tested in tests/test_iridescence.py against Mitsuba's conductor
+conductor and roughconductor do. Tested in tests/probes/test_iridescence.py against Mitsuba's conductor
 (thickness 0) and against an independent numpy Airy summation (batch/verdict/airy.py).
 
 Parameters (XML):

@@ -4,7 +4,7 @@ a .blend and rendered on CPU from that .blend, one pass per request, by a warm b
 there) kept across jobs (batch/backends/warm.py: issue 23, bpy imported once per run, not three
 times per job; a worker that fails, dies or overruns is killed and fails only its pass or job).
 Each request starts from a clean Blender state (a build from factory settings, a render by
-opening its .blend); tests/test_warm_rgb.py checks that a warm worker renders what fresh children
+opening its .blend); tests/backends/test_warm_rgb.py checks that a warm worker renders what fresh children
 render. The ``build`` and ``render`` subcommands re-run one step by hand.
 
 Cycles is an RGB renderer: it has no spectra, polarisation, fluorescence or dispersion, and its

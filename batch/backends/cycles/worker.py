@@ -10,7 +10,7 @@ The .blend holds everything a user needs to re-render it in Blender (Cycles, CPU
 reduced scene (exporters/rgb_scene.py) maps to Cycles (bpy 5.0.1; Cycles source
 intern/cycles/kernel/svm/closure.h for the roughness conventions):
 - Film: pixel filter BOX of width 1 (one pixel: pixels independent, a reference downsamples
-  exactly; ``tests/test_rgb_backends.py`` checks it on an edge), sampling pattern Tabulated Sobol
+  exactly; ``tests/backends/test_rgb_backends.py`` checks it on an edge), sampling pattern Tabulated Sobol
   (Cycles' "Classic"; the default blue noise correlates neighbouring pixels on purpose), a new
   seed per pass, no adaptive sampling, no denoiser, no clamping (direct and indirect 0), no
   Filter Glossy, caustics on, light threshold 0, view transform Standard, look None, exposure 0,

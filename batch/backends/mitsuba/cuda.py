@@ -4,7 +4,7 @@ The probe mirrors batch/backends/mitsuba/llvm.py: a child process sets ``cuda_ad
 scene at 1 spp, so a missing driver, a GPU Dr.Jit cannot use or a crash in the CUDA back end costs
 a failed probe, never the runner. The answer (usable, message) is cached for the process.
 
-Test hook (tests/test_gpu.py, docs/developing.md): ``SPECTRAL_BENCH_TEST_CUDA=1`` in the
+Test hook (tests/backends/test_gpu.py, docs/developing.md): ``SPECTRAL_BENCH_TEST_CUDA=1`` in the
 environment makes :func:`find` answer "usable" without probing (so the variant selection can be
 tested on a machine without a GPU; a render with the chosen cuda_ad_* variant would then fail);
 ``SPECTRAL_BENCH_TEST_CUDA=0`` answers "not usable" (the refusal of ``--device gpu`` on a machine

@@ -49,7 +49,7 @@ def _compare_mutated(real_run, changes, use_default_out):
         folders = {"old": root / "old", "new": root / "new"}
         for f in folders.values():
             shutil.copytree(run, f, symlinks=True)
-            (f / HAND_MADE).write_text("mutated by tests/test_fuzz_runs.py\n")
+            (f / HAND_MADE).write_text("mutated by tests/hostile/test_fuzz_runs.py\n")
         shutil.copytree(outside, root / "outside", symlinks=True)
         for change in changes:
             run_fuzz.apply(change, folders, root / "outside")

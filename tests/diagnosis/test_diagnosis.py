@@ -9,7 +9,7 @@ far below each planted effect, so a render too small to see them fails here loud
 The renders are shared by every test of the module (one fixture: the copper scene with seven
 planted renderers in one batch run, and one run for each of the three scenes the polarisation
 and observer plants need), at a quarter of the resolution. The fitting itself on synthetic
-images: tests/test_diagnosis_fit.py.
+images: tests/diagnosis/test_diagnosis_fit.py.
 """
 import json
 import math
@@ -20,7 +20,7 @@ from xml.etree import ElementTree as ET
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 import pkg_bootstrap  # noqa: E402
 

@@ -2,7 +2,7 @@
 (batch/compare_runs.py) and the Results panel's baseline (issue 24, items 1, 2, 4, 5).
 
 Real renders, real EXRs, real subprocesses. The renders use fixed seeds, so every outcome is
-reproducible (the same job gives the same image: tests/test_engines.py)."""
+reproducible (the same job gives the same image: tests/jobs/test_engines.py)."""
 import json
 import re
 import subprocess

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 RUN = ROOT / "batch" / "run.py"
 MITSUBA = Path(sys.executable).parent / "mitsuba"
 sys.path.insert(0, str(ROOT))

@@ -2,7 +2,7 @@
 
 The renders are real (the example renderer of examples/your_renderer/, its 1 % brighter twin and
 the real command line); the false-alarm guarantee of the repeated looks is checked by simulation on
-the stored noise model of a committed reference (as tests/test_power.py does), not by rendering."""
+the stored noise model of a committed reference (as tests/verdict/test_power.py does), not by rendering."""
 
 import numpy as np
 import pytest

@@ -369,7 +369,7 @@ SEES = 0.01  # the uniform error each scene's run must see (its own detectable a
 @pytest.fixture(scope="module")
 def batch_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("iridescence") / "out"
-    # through the references' own colour route (the CMF film), as tests/test_reflectance.py
+    # through the references' own colour route (the CMF film), as tests/probes/test_reflectance.py
     proc = run_batch("-r", "mitsuba", "--film", "cmf", "-c", "iridescence", "--no-flip", "--spp", CASE_SPP, "-o", out)
     return proc, out, {r["scene"]: r for r in metrics(out)["runs"]}
 

@@ -195,7 +195,7 @@ def test_reading_a_blend_registers_only_the_annotation_properties():
     """batch/blend_input.py registers what the extraction reads, nothing of the UI: no operator,
     panel or preference of the extension exists after reading scenes.blend headless."""
     from pathlib import Path
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     code = (f"import sys, json; sys.path.insert(0, {str(root)!r}); import pkg_bootstrap; pkg_bootstrap.package(); "
             "import bpy; from spectral_bench.batch import blend_input; "
             f"n = len(blend_input.load_blend({str(root / 'scenes.blend')!r})); "

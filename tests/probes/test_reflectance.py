@@ -44,7 +44,7 @@ def test_every_reflectance_scene_agrees_with_its_reference(batch_run):
     for name, run in runs.items():
         assert run["status"] in ("ok", "known"), (name, run["reason"], run.get("test"))
         # Mitsuba's own film against the CMF references: passes, or fails exactly as its recorded
-        # observer says (the references' mitsuba3 layer, tests/test_observer_layers.py)
+        # observer says (the references' mitsuba3 layer, tests/verdict/test_observer_layers.py)
         assert run["test"]["pass"] or "mitsuba-cie-y-normalisation" in run["known"], (name, run["test"])
         assert run["test"]["noise"] == "own" and run["passes"] == 2
         assert run["resolution"] == [512, 512] and run["spp"] == SPP

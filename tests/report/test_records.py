@@ -19,7 +19,7 @@ import pytest
 
 from conftest import ROOT, run_batch, runner_metrics_files, write_hand_made_metrics
 
-DATA = Path(__file__).resolve().parent / "data" / "metrics_v1"
+DATA = Path(__file__).resolve().parents[1] / "data" / "metrics_v1"
 
 
 def _records():

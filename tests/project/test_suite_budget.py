@@ -36,7 +36,7 @@ def test_every_counted_judgement_names_a_test_that_judges_at_the_suites_share(ke
 
 def test_every_module_judging_at_the_suites_share_is_counted():
     counted = {key.split("::", 1)[0] for key in RANDOM_JUDGEMENTS}
-    users = {p.name for p in (ROOT / "tests").glob("test_*.py")
+    users = {p.relative_to(ROOT / "tests").as_posix() for p in (ROOT / "tests").glob("*/test_*.py")
              if p.name != "test_suite_budget.py" and re.search(r"\bRANDOM_TEST_ALPHA\b", p.read_text(encoding="utf-8"))}
     assert users <= counted, f"judging at RANDOM_TEST_ALPHA but not counted in RANDOM_JUDGEMENTS: {sorted(users - counted)}"
 

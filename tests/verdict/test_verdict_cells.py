@@ -10,7 +10,7 @@ the failing one fails by its scale test while its block test passes (item 8: eve
 names the scale test with its own figures first). A third build, 0.3 % brighter, is a real change
 that only the two-sample scale test sees: still CHANGED, exit 1.
 
-The renders use fixed seeds (the same job gives the same image: tests/test_engines.py); the seeds
+The renders use fixed seeds (the same job gives the same image: tests/jobs/test_engines.py); the seeds
 of the second run are tried in turn until its status differs from the first's, and every premise
 (the flip, which part failed) is asserted, so the tests cannot pass on a case they were not made
 for. About 30 s."""

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-HERE = Path(__file__).resolve().parent
+HERE = Path(__file__).resolve().parents[1]  # tests/: plant_renderer.py
 sys.path.insert(0, str(HERE))
 import plant_renderer  # noqa: E402
 

@@ -3,14 +3,14 @@ reference, a render drawn from it with Gaussian noise of a known standard error 
 from its passes), one error planted. Each planted model must be ranked first with its parameter
 within two standard errors, a render with an error outside the catalogue must get "no model
 explains it", and noise alone gives no model that improves on none by much. The real renders are
-tests/test_diagnosis.py's."""
+tests/diagnosis/test_diagnosis.py's."""
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 import pkg_bootstrap  # noqa: E402
 
