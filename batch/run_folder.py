@@ -202,8 +202,8 @@ class Job:
         if kind in DERIVED and self.rel("render") is not None and self.rel("reference") is not None:
             target = self.folder / self.dir / JOB_FILES[kind]
             return _write_difference(target, self.path("render"), self.path("reference"), kind) if make else target
-        if kind in STOKES and self.has_stokes():
-            target = self.folder / self.dir / f"stokes_{kind}.exr"
+        if kind in STOKES and self.rel("render") is not None and (make or self.has_stokes()):
+            target = self.folder / self.dir / f"stokes_{kind}.exr"  # made when the render has the component
             return _write_stokes(target, self.path("render"), kind) if make else target
         return None
 
