@@ -336,7 +336,7 @@ def poll_run(context):
     if finished:
         if job.cancelled:
             word = "cancelled"
-            if run_folder.load(job.out_dir) is not None and not (job.out_dir / "report.html").exists():
+            if run_folder.load(job.out_dir) is not None and not (job.out_dir / run_folder.REPORT).exists():
                 report_html.write(job.out_dir)  # the report of what finished
         else:
             word = FINISHED_WORDS.get(job.returncode(), f"stopped (exit {job.returncode()})")
@@ -360,8 +360,7 @@ def cancel_run(context):
 
 
 def report_path(out_dir):
-    path = Path(bpy.path.abspath(out_dir)) / "report.html" if out_dir else None
-    return path if path is not None and path.is_file() else None
+    return run_folder.report_page(bpy.path.abspath(out_dir)) if out_dir else None
 
 
 # -- results --------------------------------------------------------------------------------------

@@ -17,7 +17,8 @@ API
 - reading metrics.json: ``read`` (strict: compare_runs, the baseline; NotARun names the problem),
   ``read_lenient`` (the report: any version shown as far as it can be), ``load`` (the panel: None
   when there is nothing to show), ``last_status``, ``entry``,
-  ``reference_source`` (the reference file a job was judged against, absolute, for display).
+  ``reference_source`` (the reference file a job was judged against, absolute, for display),
+  ``summary_text``, ``report_page``.
 - the rule: ``inside``, ``inside_rel``, ``local_url`` (a page's relative link), ``safe_names``.
 - one job's files: ``Job(folder, entry)`` with ``dir`` (its folder, relative), ``rel``/``path``/
   ``url`` of a kind (JOB_FILES: render, reference, zscore, flip, block_stderr, probe_residual,
@@ -44,6 +45,8 @@ from . import records
 
 FILE_NAME = records.FILE_NAME
 RESULTS = "results"             # <scene>/results/<backend>/: a job's folder (batch/jobs/plan.py)
+SUMMARY = "summary.md"           # batch/report/summary.py writes it, the page quotes its sections
+REPORT = "report.html"           # batch/report/html.py writes it, the panel opens it
 COMPARE_DIR = "compare"          # batch/compare_runs.py's default output folder inside the newer run
 COMPARE_FILE = "compare.json"
 ZMAP = "baseline_zscore.exr"     # the baseline's two-sample z-map beside a render (batch/verdict/baseline.py)
@@ -127,6 +130,17 @@ def reference_source(folder, entry):
     ref = entry.get("reference") if isinstance(entry, dict) else None
     path = records.absolute(ref.get("path"), folder) if isinstance(ref, dict) else None
     return path if isinstance(path, str) and path else None
+
+
+def summary_text(folder):
+    """The run's summary.md (as text, undecodable bytes replaced), or "" when it has none."""
+    path = inside(folder, SUMMARY)
+    return path.read_text(encoding="utf-8", errors="replace") if path is not None else ""
+
+
+def report_page(folder):
+    """The run's report.html if it is a file inside the folder, else None."""
+    return inside(folder, REPORT)
 
 
 # -- the rule: inside the folder, no link out ----------------------------------------------------------

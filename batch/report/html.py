@@ -705,8 +705,7 @@ def render(out_dir):
     shown = sorted(viewers, key=lambda i: (ORDER.get(viewers[i]["css"], 9), viewers[i]["scene"], viewers[i]["backend"]))
     listed, not_run = grouping.not_run_everywhere(runs)
     listed_ids = {id(r) for r in listed}
-    summary_md = out / "summary.md"
-    summary_text = summary_md.read_text(encoding="utf-8", errors="replace") if summary_md.is_file() else ""
+    summary_text = run_folder.summary_text(out)
     charts = []
     for c in sorted({_text(s.get("chart")) for s in sweeps if s.get("chart")}):
         src = run_folder.local_url(out, c)
@@ -723,6 +722,6 @@ def render(out_dir):
 
 
 def write(out_dir):
-    path = Path(out_dir) / "report.html"
+    path = Path(out_dir) / run_folder.REPORT
     path.write_text(render(out_dir), encoding="utf-8")
     return path
