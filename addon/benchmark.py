@@ -367,7 +367,7 @@ def report_path(out_dir):
 def result_rows(out_dir, baseline_dir=None):
     """[(scene, backend, run entry)] of an outputs folder: failures first, passes last; with
     baseline records (a chosen baseline folder, or the run's own --baseline), changed jobs first."""
-    status = run_folder.last_status(out_dir) if out_dir else {}
+    status = run_folder.last_status(out_dir, resolved=True) if out_dir else {}  # shown: paths absolute
     rows = [(scene, backend, run) for scene, per in status.items() for backend, run in per.items()]
     found = baseline_records(out_dir, baseline_dir)
     from ..batch.verdict import baseline
@@ -409,10 +409,9 @@ def status_icon(status):
 def image_kinds(out_dir, scene, backend, run=None, found=None):
     """Image kinds present for one result (batch/run_folder.py ``Job.kinds``): render, reference,
     differences, FLIP, z-score, and for Stokes output S0..S3; with a baseline record (``found``),
-    the baseline's render and the two-sample z-map. ``run``: the job's entry as last_status gives
-    it (else the latest one of that scene and backend is read)."""
-    job = run_folder.Job(out_dir, run) if run is not None else run_folder.job(out_dir, scene, backend)
-    kinds = job.kinds()
+    the baseline's render and the two-sample z-map. The files come from the job's record as
+    metrics.json holds it (``run``, the row's copy with paths made absolute for showing, is not used)."""
+    kinds = run_folder.job(out_dir, scene, backend).kinds()
     if found is not None:
         kinds += [k for k in run_folder.BASELINE_KINDS if run_folder.baseline_image(found, k)]
     return kinds

@@ -304,7 +304,7 @@ class SPECTRAL_BENCH_PT_benchmark_results(_Base, bpy.types.Panel):
                 box.label(text=f"reference problem: {text}"[:200], icon="ERROR")
             ref = run.get("reference") or {}
             if ref.get("path"):
-                box.label(text=f"reference ({reference_sources.origin_of(run_folder.reference_source(out_dir, run), search)}): "
+                box.label(text=f"reference ({reference_sources.origin_of(ref['path'], search)}): "
                                f"{reference_sources.describe(ref)}", icon="IMAGE_REFERENCE")
             m = run.get("metrics") or {}
             if m.get("rmse") is not None:

@@ -17,7 +17,6 @@ API
 - reading metrics.json: ``read`` (strict: compare_runs, the baseline; NotARun names the problem),
   ``read_lenient`` (the report: any version shown as far as it can be), ``load`` (the panel: None
   when there is nothing to show), ``last_status``, ``entry``,
-  ``reference_source`` (the reference file a job was judged against, absolute, for display),
   ``summary_text``, ``report_page``.
 - the rule: ``inside``, ``inside_rel``, ``local_url`` (a page's relative link), ``safe_names``.
 - one job's files: ``Job(folder, entry)`` with ``dir`` (its folder, relative), ``rel``/``path``/
@@ -98,21 +97,42 @@ def read_lenient(folder):
     return records.read(folder, strict=False)
 
 
+_LOADED = {}  # metrics.json (absolute) -> ((inode, mtime_ns, size), Run or None): the panel redraws often
+
+
 def load(folder):
     """The panel's metrics.json (lenient: any version shown as far as it can be; paths as the file
-    holds them, relative to the folder), or None if there is none (yet) or it cannot be read."""
-    if not metrics_file(folder).is_file():
-        return None
+    holds them, relative to the folder), or None if there is none (yet) or it cannot be read. Read
+    again only when the file changes (the runner replaces it whole: a new inode); the Run returned
+    is shared: read it, do not change it."""
+    path = metrics_file(folder).absolute()
     try:
-        return records.read(metrics_file(folder), strict=False)
+        st = os.stat(path)
+    except OSError:
+        return None
+    if not stat.S_ISREG(st.st_mode):
+        return None
+    key = (st.st_ino, st.st_mtime_ns, st.st_size)
+    hit = _LOADED.get(path)
+    if hit is not None and hit[0] == key:
+        return hit[1]
+    try:
+        data = records.read(path, strict=False)
     except records.RecordError:
-        return None  # not a metrics.json the panel can show (the report and resume name the problem)
+        data = None  # not a metrics.json the panel can show (the report and resume name the problem)
+    if len(_LOADED) > 16:
+        _LOADED.clear()
+    _LOADED[path] = (key, data)
+    return data
 
 
-def last_status(folder, data=None):
-    """{scene: {backend: run entry}} of a run folder (latest entry wins; paths relative to the
-    folder; ``data``: its metrics.json when already read)."""
+def last_status(folder, data=None, resolved=False):
+    """{scene: {backend: run entry}} of a run folder (latest entry wins; ``data``: its metrics.json
+    when already read). Paths relative to the folder, as the file holds them (what ``Job`` takes);
+    with ``resolved``, absolute (a copy, for showing: reference files, reference problems)."""
     data = load(folder) if data is None else data
+    if resolved and data is not None:
+        data = data.resolved()
     status = {}
     for run in data.entries("runs") if data is not None else []:
         status.setdefault(str(run.get("scene")), {})[str(run.get("backend"))] = run
@@ -122,14 +142,6 @@ def last_status(folder, data=None):
 def entry(folder, scene, backend):
     """The latest run entry of ``scene`` and ``backend``, or None."""
     return last_status(folder).get(str(scene), {}).get(str(backend))
-
-
-def reference_source(folder, entry):
-    """The absolute path of the reference file a run entry was judged against (``reference.path``:
-    a file of a references folder, usually outside the run folder; shown, never opened here), or None."""
-    ref = entry.get("reference") if isinstance(entry, dict) else None
-    path = records.absolute(ref.get("path"), folder) if isinstance(ref, dict) else None
-    return path if isinstance(path, str) and path else None
 
 
 def summary_text(folder):
