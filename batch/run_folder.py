@@ -19,8 +19,8 @@ API
   when there is nothing to show), ``last_status``, ``entry``,
   ``summary_text``, ``report_page``.
 - the rule: ``inside``, ``inside_rel``, ``local_url`` (a page's relative link), ``safe_names``.
-- one job's files: ``Job(folder, entry)`` with ``dir`` (its folder, relative), ``rel``/``path``/
-  ``url`` of a kind (JOB_FILES: render, reference, zscore, flip, block_stderr, probe_residual,
+- one job's files: ``Job(folder, entry)`` with ``dir`` (its folder, relative), ``rel``/``path`` of
+  a kind (JOB_FILES: render, reference, zscore, flip, block_stderr, probe_residual,
   diff_abs, diff_rel, S0..S3), ``beside`` (a file the report writes in the job's folder),
   ``preview`` (a spectral job's preview), ``diagnosis_image``, ``kinds`` (what the panel lists);
   ``job(folder, scene, backend)``: the Job of the latest record of that scene and backend;
@@ -232,11 +232,6 @@ class Job:
             target = self.folder / self.dir / f"stokes_{kind}.exr"  # made when the render has the component
             return _write_stokes(target, self.path("render"), kind) if make else target
         return None
-
-    def url(self, kind):
-        """A relative, percent-encoded URL of one of the job's images (the report's links), or None."""
-        rel = self.rel(kind)
-        return local_url(self.folder, rel) if rel is not None else None
 
     def has_stokes(self):
         channels = self.entry.get("channels")

@@ -617,7 +617,8 @@ def _why(out, run):
         full = "fully explains" if m.get("fully_explains") is True else "does not fully explain"
         lines.append(f"{line} ({full}; {_text(m.get('evidence'))}): {_text(m.get('explanation'))}"
                      + (f" [{_text(m['note'])}]" if m.get("note") else ""))
-    url = run_folder.local_url(out, diag["image"]) if isinstance(diag.get("image"), str) else None
+    image = run_folder.Job(out, run).diagnosis_image()
+    url = run_folder.local_url(out, image) if image is not None else None
     return {"text": _text(diag.get("text")), "models": lines, "toml": _text(diag.get("known_deviation") or ""),
             "image": url or ""}
 
