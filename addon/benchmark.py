@@ -12,8 +12,6 @@ outputs folder: the panel reads runs started from the command line the same way.
 """
 import collections
 import datetime as dt
-import os
-import stat
 import tempfile
 import time
 from pathlib import Path
@@ -21,11 +19,10 @@ from pathlib import Path
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
-from ..batch import backends, exr
+from ..batch import backends, run_folder
 from ..batch.backends import command
 from ..batch.jobs import background as background_job
 from ..batch.report import html as report_html
-from ..batch.report import results
 from ..batch.verdict import status as verdict_status
 from ..exporters import extract_blender, ir_json, validate
 from ..exporters import names as ir_names
@@ -40,7 +37,7 @@ SCENE_SOURCES = [
 ]
 STATUS_ICONS = {"ok": "CHECKMARK", "failed": "ERROR", "unjudged": "QUESTION", "known": "INFO", "fixed": "CHECKMARK",
                 "skipped": "CANCEL", "unsupported": "CANCEL"}
-STOKES = ("S0", "S1", "S2", "S3")
+STOKES = run_folder.STOKES
 # the batch runner's exit status (batch/verdict/status.py) as the panel says it
 FINISHED_WORDS = {0: "passed", 1: "failed", 2: "refused (a bad option or a folder in use: see the log)",
                   3: "finished, some renders unjudged", 4: "nothing ran (every job skipped or unsupported)",
@@ -339,11 +336,11 @@ def poll_run(context):
     if finished:
         if job.cancelled:
             word = "cancelled"
-            if results.load(job.out_dir) is not None and not (job.out_dir / "report.html").exists():
+            if run_folder.load(job.out_dir) is not None and not (job.out_dir / run_folder.REPORT).exists():
                 report_html.write(job.out_dir)  # the report of what finished
         else:
             word = FINISHED_WORDS.get(job.returncode(), f"stopped (exit {job.returncode()})")
-        data = results.load(job.out_dir)
+        data = run_folder.load(job.out_dir)
         counts = collections.Counter(r.get("status") for r in (data.entries("runs") if data is not None else []))
         tally = ", ".join(f"{counts[k]} {k}" for k in STATUS_ICONS if counts[k])
         s.status = f"{word}: {done}/{total} jobs" + (f" ({tally})" if tally else "")
@@ -363,15 +360,14 @@ def cancel_run(context):
 
 
 def report_path(out_dir):
-    path = Path(bpy.path.abspath(out_dir)) / "report.html" if out_dir else None
-    return path if path is not None and path.is_file() else None
+    return run_folder.report_page(bpy.path.abspath(out_dir)) if out_dir else None
 
 
 # -- results --------------------------------------------------------------------------------------
 def result_rows(out_dir, baseline_dir=None):
     """[(scene, backend, run entry)] of an outputs folder: failures first, passes last; with
     baseline records (a chosen baseline folder, or the run's own --baseline), changed jobs first."""
-    status = results.last_status(out_dir) if out_dir else {}
+    status = run_folder.last_status(out_dir, resolved=True) if out_dir else {}  # shown: paths absolute
     rows = [(scene, backend, run) for scene, per in status.items() for backend, run in per.items()]
     found = baseline_records(out_dir, baseline_dir)
     from ..batch.verdict import baseline
@@ -381,18 +377,17 @@ def result_rows(out_dir, baseline_dir=None):
 
 # -- a baseline: a previous run to compare with (batch/verdict/baseline.py, batch/compare_runs.py) --
 def baseline_records(out_dir, baseline_dir=None):
-    """{(scene, backend): (record, z-map folder, baseline folder)}: batch/verdict/baseline.py records."""
-    from ..batch.verdict import baseline
+    """{(scene, backend): (record, z-map folder, baseline folder)}: batch/run_folder.py baseline_records."""
     if not out_dir:
         return {}
     base = bpy.path.abspath(baseline_dir) if baseline_dir else None
-    return baseline.records(out_dir, results.load(out_dir) or {}, base)
+    return run_folder.baseline_records(out_dir, run_folder.load(out_dir) or {}, base)
 
 
 def compare_with_baseline(out_dir, baseline_dir):
     """Compare the results folder with the baseline folder (batch/compare_runs.py, written to
     OUT/compare, or the first free OUT/compare-N: an earlier comparison is never deleted); returns the
-    comparison. Raises baseline.BaselineError for a folder that is not a run, compare_runs.OutputRefused
+    comparison. Raises run_folder.NotARun for a folder that is not a run, compare_runs.OutputRefused
     for a results folder that is the baseline or inside it."""
     from ..batch import compare_runs
     out_dir, base = Path(bpy.path.abspath(out_dir)), Path(bpy.path.abspath(baseline_dir))
@@ -412,62 +407,24 @@ def status_icon(status):
 
 
 def image_kinds(out_dir, scene, backend, run=None, found=None):
-    """Image kinds present for one result: render, reference, differences, FLIP, z-score, and for
-    Stokes output S0..S3; with a baseline record (``found``), the baseline's render and the
-    two-sample z-map."""
-    kinds = [k for k in results.IMAGE_KINDS if results.image_path(out_dir, scene, backend, k)]
-    channels = (run or {}).get("channels") or []
-    if results.image_path(out_dir, scene, backend, "render") and all(f"{k}.R" in channels for k in STOKES):
-        kinds += list(STOKES)
+    """Image kinds present for one result (batch/run_folder.py ``Job.kinds``): render, reference,
+    differences, FLIP, z-score, and for Stokes output S0..S3; with a baseline record (``found``),
+    the baseline's render and the two-sample z-map. The files come from the job's record as
+    metrics.json holds it (``run``, the row's copy with paths made absolute for showing, is not used)."""
+    kinds = run_folder.job(out_dir, scene, backend).kinds()
     if found is not None:
-        from ..batch.verdict import baseline
-        kinds += [k for k in baseline.IMAGE_KINDS if baseline.image_path(found, k)]
+        kinds += [k for k in run_folder.BASELINE_KINDS if run_folder.baseline_image(found, k)]
     return kinds
 
 
-def stokes_path(out_dir, scene, backend, component):
-    """An RGB EXR of one Stokes component of the render (written once beside it)."""
-    render = results.image_path(out_dir, scene, backend, "render")
-    if render is None:
-        return None
-    path = render.parent / f"stokes_{component}.exr"
-    if not path.is_file() or path.is_symlink():
-        try:
-            rgb = exr.read_rgb(render, prefix=f"{component}.")
-        except ValueError:
-            return None
-        exr.replace_file(path, lambda tmp: exr.write(tmp, rgb))
-    return path
-
-
-def plain_rgb(path):
-    """``path`` itself if it holds only R, G, B (and A); else an RGB copy beside it. Blender reads an
-    EXR whose channels have dotted names (stderr.R, S0.R: a render with passes or Stokes output) as
-    a multilayer image whose pixels a script cannot read and an Image Editor shows by layer."""
-    names = set(exr.read(path))
-    if names <= {"R", "G", "B", "A"}:
-        return path
-    rgb = path.with_name(f"{path.stem}_rgb.exr")
-    try:
-        fresh = stat.S_ISREG(os.lstat(rgb).st_mode) and os.lstat(rgb).st_mtime >= path.stat().st_mtime
-    except OSError:
-        fresh = False
-    if not fresh:  # a new file renamed over the name: never written through a link there
-        exr.replace_file(rgb, lambda tmp: exr.write(tmp, exr.read_rgb(path)))
-    return rgb
-
-
 def load_result_image(out_dir, scene, backend, kind, baseline_dir=None):
-    """Load one result EXR as an Image datablock (reusing one already loaded from that file)."""
-    if kind in STOKES:
-        path = stokes_path(out_dir, scene, backend, kind)
-    elif kind.startswith("baseline_"):
-        from ..batch.verdict import baseline
-        path = baseline.image_path(baseline_records(out_dir, baseline_dir).get((scene, backend)), kind)
-        path = plain_rgb(path) if path is not None else None
+    """Load one result EXR as an Image datablock (reusing one already loaded from that file): its
+    path and RGB copy from batch/run_folder.py (differences and Stokes components written when asked for)."""
+    if kind in run_folder.BASELINE_KINDS:
+        path = run_folder.baseline_image(baseline_records(out_dir, baseline_dir).get((scene, backend)), kind)
     else:
-        path = results.image_path(out_dir, scene, backend, kind, make=True)  # differences: written when asked for
-        path = plain_rgb(path) if path is not None else None
+        path = run_folder.job(out_dir, scene, backend).path(kind, make=True)
+    path = run_folder.plain_rgb(path) if path is not None and kind not in STOKES else path
     if path is None:
         raise FileNotFoundError(f"no {kind} image for {scene} / {backend} in {out_dir}")
     image = bpy.data.images.load(str(path), check_existing=True)

@@ -12,7 +12,7 @@ from bpy.props import BoolProperty, EnumProperty, IntProperty, StringProperty
 from bpy_extras.io_utils import ExportHelper, ImportHelper
 
 from ..batch import blend_input
-from ..batch.report import results
+from ..batch import run_folder
 from ..exporters import art_writer, extract_blender, ir_json, mitsuba_writer, validate
 from . import benchmark, canonical, preferences
 
@@ -390,7 +390,7 @@ class SPECTRAL_BENCH_OT_load_result(bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}
     scene: StringProperty()
     backend: StringProperty(default="mitsuba")
-    kind: EnumProperty(items=[(k, k.replace("_", " ").title(), "") for k in results.IMAGE_KINDS]
+    kind: EnumProperty(items=[(k, k.replace("_", " ").title(), "") for k in run_folder.IMAGE_KINDS]
                        + [(k, k, f"Stokes component {k} of the render") for k in benchmark.STOKES]
                        + [("baseline_render", "Baseline Render", "The baseline run's render of this job"),
                           ("baseline_zscore", "Baseline Zscore", "Per-block z of this render against the baseline's, "
@@ -417,14 +417,13 @@ class SPECTRAL_BENCH_OT_compare_baseline(bpy.types.Operator):
 
     def execute(self, context):
         from ..batch import compare_runs
-        from ..batch.verdict import baseline
         s = benchmark.settings(context)
         if not s.output_dir or not s.baseline_dir:
             self.report({"ERROR"}, "choose a results folder and a baseline folder first")
             return {"CANCELLED"}
         try:
             result = benchmark.compare_with_baseline(s.output_dir, s.baseline_dir)
-        except (baseline.BaselineError, compare_runs.OutputRefused, OSError) as exc:
+        except (run_folder.NotARun, compare_runs.OutputRefused, OSError) as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
         changed = sum(1 for j in result["jobs"] if j["changed"])
@@ -442,7 +441,7 @@ class SPECTRAL_BENCH_OT_load_chart(bpy.types.Operator):
 
     def execute(self, context):
         out_dir = bpy.path.abspath(benchmark.settings(context).output_dir)
-        path = results.chart_path(out_dir, self.scene)
+        path = run_folder.chart_path(out_dir, self.scene)
         if path is None:
             self.report({"ERROR"}, f"no sweep chart for {self.scene} in {out_dir}")
             return {"CANCELLED"}

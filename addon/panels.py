@@ -1,11 +1,12 @@
 """Panels: annotations (Material, Light, World, Camera, Object, Scene) with inline validation,
 and the benchmark panel with its References and Results sub-panels (Properties > Scene). Draw code
-only: the logic is in validation.py, benchmark.py, reference_sources.py and batch/report/results.py.
+only: the logic is in validation.py, benchmark.py, reference_sources.py, batch/report/results.py and batch/run_folder.py.
 tests/extension/test_blender_ui.py runs every panel's draw() against a recording layout that checks each
 drawn property, operator and icon exists."""
 import bpy
 
 from ..batch import records
+from ..batch import run_folder
 from ..batch.report import results, spectra
 from . import benchmark, preferences, reference_sources, validation
 
@@ -317,7 +318,7 @@ class SPECTRAL_BENCH_PT_benchmark_results(_Base, bpy.types.Panel):
                 err = "" if p.get("error") is None else f"{p['error']:.3g} {p.get('unit') or ''}"
                 mark = {True: "CHECKMARK", False: "ERROR"}.get(p.get("pass"), "QUESTION")
                 box.label(text=f"{p['name']}: {err}", icon=mark)
-            if results.chart_path(out_dir, scene):
+            if run_folder.chart_path(out_dir, scene):
                 box.operator("spectral_bench.load_chart", text="Error against time").scene = scene
             flow = box.grid_flow(columns=4, align=True)
             for kind in benchmark.image_kinds(out_dir, scene, backend, run, base):

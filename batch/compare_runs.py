@@ -47,6 +47,7 @@ if __name__ == "__main__" and __package__ in (None, ""):  # run as a script: thi
     from spectral_bench.batch import compare_runs  # noqa: E402
     sys.exit(compare_runs.main())
 
+from . import run_folder  # noqa: E402
 from .verdict import baseline  # noqa: E402
 
 EXIT_SAME, EXIT_CHANGED, EXIT_USAGE, EXIT_UNJUDGED = 0, 1, 2, 3
@@ -132,11 +133,11 @@ def _verdict(passed):
 
 
 def compare(old_folder, new_folder, out_dir, settings=None):
-    """The comparison as plain data (also written as compare.json). Raises baseline.BaselineError
+    """The comparison as plain data (also written as compare.json). Raises run_folder.NotARun
     for a folder that is missing or not a run."""
     old_folder, new_folder, out_dir = Path(old_folder), Path(new_folder), Path(out_dir)
     base = baseline.Run(old_folder, given=str(old_folder))
-    new_data = baseline.read_metrics(new_folder)
+    new_data = run_folder.read(new_folder)
     opts = new_data.get("options") if isinstance(new_data.get("options"), dict) else {}
     s = {"alpha": opts.get("alpha") if _num(opts.get("alpha")) else 0.01,
          "min_samples": opts.get("min_samples") if _num(opts.get("min_samples")) else None,
@@ -154,8 +155,7 @@ def compare(old_folder, new_folder, out_dir, settings=None):
             continue
         # each job's z-map in a folder of its own (two records naming one render folder: the second
         # one's goes below _duplicate/<n>/, never over the first's)
-        image = e.get("image") if isinstance(e.get("image"), str) else ""
-        folder = str(baseline._rel_parent(image)) if baseline.inside(new_folder, image) else None
+        folder = run_folder.job_dir(new_folder, e)
         prefix = f"_duplicate/{len(zmap_folders)}" if folder is not None and folder in zmap_folders else ""
         zmap_folders.add(folder)
         try:
@@ -210,7 +210,7 @@ def rows(result):
                     "what": "; ".join(j["changes"] + [f"NOT JUDGED: {u}" for u in j.get("unjudged") or []])
                     or j.get("unstable") or "nothing beyond noise", "image": image,
                     "how_much": baseline.how_much(b), "zmap": b.get("zmap") or "",
-                    "zmap_png": (str(Path(b["zmap"]).with_name(baseline.ZMAP_PNG)) if b.get("zmap") else ""),
+                    "zmap_png": run_folder.zmap_png(b.get("zmap")),
                     "metrics": deltas, "time": _time_text(j.get("time"))})
     return out
 
@@ -256,7 +256,7 @@ def html_page(result, out_dir):
     from .report import html
     rs = rows(result)
     for r in rs:
-        r["zmap_src"] = html._local_url(Path(out_dir), r["zmap_png"]) if r["zmap_png"] else None
+        r["zmap_src"] = run_folder.local_url(Path(out_dir), r["zmap_png"]) if r["zmap_png"] else None
         r["word"] = verdict_word(r)
     return html._env.get_template("compare.html").render(
         old=result["old"], new=result["new"], rows=rs, new_jobs=result["new_jobs"], missing=result["missing_jobs"],
@@ -339,12 +339,12 @@ def write(result, out_dir):
 def run(old, new, out=None, settings=None):
     """Compare the runs in ``old`` and ``new`` into ``out`` (default NEW/compare, or the first free
     NEW/compare-N) and write the three files: (result, output folder, markdown). Raises
-    baseline.BaselineError for a folder that is not a run, OutputRefused for an output folder
+    run_folder.NotARun for a folder that is not a run, OutputRefused for an output folder
     refused (both exit 2), OSError for one that cannot be written."""
     for folder in (old, new):
-        baseline.read_metrics(folder)
+        run_folder.read(folder)
     default = out is None
-    out_dir = Path(new) / baseline.COMPARE_DIR if default else Path(out)
+    out_dir = Path(new) / run_folder.COMPARE_DIR if default else Path(out)
     check_output(out_dir, old, new, default)
     out_dir = make_output(out_dir, fresh=default)
     result = compare(old, new, out_dir, settings)
@@ -373,7 +373,7 @@ def main(argv=None):
     settings = {"alpha": args.alpha, "min_samples": args.min_samples, "block": args.block}
     try:
         result, out_dir, text = run(args.old, args.new, args.out, settings)
-    except (baseline.BaselineError, OutputRefused) as exc:
+    except (run_folder.NotARun, OutputRefused) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except OSError as exc:

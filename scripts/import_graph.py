@@ -29,7 +29,7 @@ LAYERS = [
     ["batch.studies"],                                       # sweep, stability: what the runner asks of them
     ["batch.report"],
     ["batch.verdict", "batch.backends"],
-    ["batch:base"],                                          # exr, records, previews, spectral_exr, scene inputs
+    ["batch:base"],                                          # exr, records, run_folder, previews, spectral_exr, scene inputs
     ["exporters"],
 ]
 ENTRIES = {"run", "cli", "compare_runs", "make_references"}

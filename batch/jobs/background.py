@@ -10,7 +10,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from ..report import results
+from .. import run_folder
 
 RUN_PY = Path(__file__).resolve().parents[1] / "run.py"
 
@@ -32,7 +32,7 @@ class BackgroundRun:
         return self
 
     def done_jobs(self):
-        data = results.load(self.out_dir)
+        data = run_folder.load(self.out_dir)
         return len(data.entries("runs")) if data is not None else 0
 
     def running(self):

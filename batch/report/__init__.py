@@ -1,1 +1,2 @@
-"""What a run shows: summary.md, report.html, previews, and reading an outputs folder back."""
+"""What a run shows: summary.md, report.html, JUnit, and a run entry in words (results.py); an outputs
+folder is read back through batch/run_folder.py."""

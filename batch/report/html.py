@@ -24,13 +24,12 @@ import re
 import shlex
 import tempfile
 import zlib
-from pathlib import Path, PurePosixPath, PureWindowsPath
-from urllib.parse import quote
+from pathlib import Path
 
 import jinja2
 import numpy as np
 
-from .. import exr, previews, records
+from .. import exr, previews, records, run_folder
 from ..verdict.status import ORDER
 from . import grouping, results, spectra
 
@@ -81,12 +80,6 @@ def _verdict(passed, otherwise):
 
 def _css(status):
     return status if isinstance(status, str) and status in ORDER else ""
-
-
-def _local_url(out, rel):
-    """``rel`` as a relative, percent-encoded URL if it names a file inside ``out``; else None."""
-    parts = records.inside_parts(out, rel)
-    return "/".join(quote(p, safe="") for p in parts) if parts else None
 
 
 def _reference_problems(run):
@@ -198,32 +191,34 @@ def _wrote(target, sources, sources_key):
         _WRITTEN[os.path.abspath(target)] = (sources_key, _stat_key(target))
 
 
-def _job_data(folder):
+def _job_data(job):
     """view.js of a render's folder (written unless this process wrote it from its EXRs as they are): the render's
     channels, the z map with the standard error it divides by (block_stderr.exr; a run from before
     it: the render's per-pixel standard error), the FLIP map and the probes' images
     (``_probe_layers``). Returns the channel names, or None when there is no readable render."""
-    render, z, flip, js = (folder / n for n in ("render.exr", "zscore.exr", "flip.exr", DATA_JS))
-    block_se = folder / previews.BLOCK_STDERR
-    if not render.is_file():
+    render = job.path("render")
+    if render is None:
         return None
-    sources = (render, z, flip, block_se, folder / previews.PROBE_RESIDUAL)
+    z, flip, block_se, probe = (job.folder / job.beside(run_folder.JOB_FILES[k])
+                                for k in ("zscore", "flip", "block_stderr", "probe_residual"))
+    js = job.folder / job.beside(DATA_JS)
+    sources = (render, z, flip, block_se, probe)
     try:
         before = _sources_key(sources)
         names, img, se = exr.read_image_and_stderr(render)
         if _fresh(js, sources):
             return names
         layers = {"render": (names, [img[..., i] for i in range(len(names))], 10)}
-        layers.update(_probe_layers(folder))  # overlays (issue 21 item 4): the GGX probe's residual map
-        if block_se.is_file():
+        layers.update(_probe_layers(job.path("probe_residual")))  # overlays (issue 21 item 4): the GGX probe's residual map
+        if job.rel("block_stderr") is not None:
             bs = exr.read_rgb(block_se)
             layers["blockse"] = (["R", "G", "B"], [bs[..., i] for i in range(3)], 10)
         elif se is not None:
             layers["stderr"] = (names, [se[..., i] for i in range(len(names))], exr.SE_BITS)  # a run from before block_stderr.exr
-        if z.is_file():
+        if job.rel("zscore") is not None:
             zr = exr.read_rgb(z)
             layers["z"] = (["R", "G", "B"], [zr[..., i] for i in range(3)], 10)
-        if flip.is_file():
+        if job.rel("flip") is not None:
             layers["flip"] = (["Y"], [exr.read_rgb(flip)[..., 0]], 10)
         _write_data(js, img.shape[1], img.shape[0], layers)
         _wrote(js, sources, before)
@@ -232,12 +227,11 @@ def _job_data(folder):
         return None
 
 
-def _probe_layers(folder):
+def _probe_layers(path):
     """The view.js layers of a render's probe images: ``probe`` from probe_residual.exr (batch/
     previews.py ``write_probe_residual``: the GGX probe's expected image and block z, NaN off its
-    plates), whose channels keep their EXR names. {} when the render has none."""
-    path = folder / previews.PROBE_RESIDUAL
-    if not path.is_file():
+    plates; ``path``: run_folder's, or None), whose channels keep their EXR names. {} when the render has none."""
+    if path is None:
         return {}
     try:
         ch = exr.read(path)
@@ -282,18 +276,18 @@ def _spectral_data(preview):
         return None
 
 
-def _spectra(out, run, folder):
+def _spectra(job):
     """A spectral job's part of the page (issue 33): its band record's plots (batch/report/
     spectra.py), each failing region's worst band, and the band slider's data (spectral_preview.js,
     loaded when the section is opened) with one {nm, lo, hi} per plane. None without a record."""
-    rec = spectra.record(run)
+    rec = spectra.record(job.entry)
     if not rec:
         return None
     src, bands = "", []
-    url = _local_url(out, folder / rec["preview"]) if rec["preview"] and "/" not in rec["preview"] and "\\" not in rec["preview"] else None
-    wls = _spectral_data(out / Path(*folder.parts) / rec["preview"]) if url else None
+    preview = job.preview()
+    wls = _spectral_data(job.folder / preview) if preview is not None else None
     if wls:
-        src = _local_url(out, folder / SPECTRAL_JS) or ""
+        src = run_folder.local_url(job.folder, job.beside(SPECTRAL_JS)) or ""
         by_centre = dict(zip(rec["centres"], rec["edges"]))
         for nm in wls:
             lo, hi = by_centre.get(nm, (None, None))
@@ -303,22 +297,24 @@ def _spectra(out, run, folder):
             + (f", {rec['source']}" if rec["source"] else "") + f"), {len(rec['regions'])} probe regions, {failing} failing"
             + (f"; a band fails where |z| > {rec['z_crit']:.3g} (p < {rec['threshold']:.3g}, alpha "
                f"{_fmt(rec['alpha'])} Sidak over bands and regions)" if rec["z_crit"] else ""))
-    return {"head": head, "plots": _plots_data(out, folder, spectra.plots(rec)), "src": src, "bands": json.dumps(bands),
-            "worst": spectra.worst_lines(run)}
+    return {"head": head, "plots": _plots_data(job, spectra.plots(rec)), "src": src, "bands": json.dumps(bands),
+            "worst": spectra.worst_lines(job.entry)}
 
 
-def _plots_data(out, folder, plots):
+def _plots_data(job, plots):
     """spectral_plots.js in the job's folder: spectralBench.markup(document.currentScript, "<svg
     ..."), the regions' plots as templates/spectra_plots.html renders them (autoescaped), so that a
     page of many jobs carries none of them until a section is opened. Its URL, or "" when it
     cannot be written."""
-    path = out / Path(*folder.parts) / PLOTS_JS
+    if job.beside(PLOTS_JS) is None:
+        return ""
+    path = job.folder / job.beside(PLOTS_JS)
     markup = _env.get_template("spectra_plots.html").render(plots=plots)
     try:
         _write_atomically(path, b"spectralBench.markup(document.currentScript, " + json.dumps(markup).encode("ascii") + b");\n")
     except OSError:
         return ""
-    return _local_url(out, folder / PLOTS_JS) or ""
+    return run_folder.local_url(job.folder, job.beside(PLOTS_JS)) or ""
 
 
 def _num(x):
@@ -389,15 +385,16 @@ def _extras(run):
     return out
 
 
-def _tev(run, folder, ref, out=None):
+TEV_KINDS = ("render", "reference", "zscore", "block_stderr", "flip", "probe_residual")
+
+
+def _tev(job):
     """A tev command line (run from the output folder) for a render that failed: the render, the
     reference, the z map, the standard error z divides by, FLIP and the probe's images (those
-    present when ``out`` is given)."""
-    if _text(run.get("status")) not in ("failed", "known"):
+    present: batch/run_folder.py)."""
+    if _text(job.entry.get("status")) not in ("failed", "known"):
         return None
-    names = ("zscore.exr", previews.BLOCK_STDERR, "flip.exr", previews.PROBE_RESIDUAL)
-    files = [str(folder / "render.exr")] + ([str(ref)] if ref else []) + [
-        str(folder / n) for n in names if out is None or _local_url(out, folder / n)]
+    files = [str(job.rel(k)) for k in TEV_KINDS if job.rel(k) is not None]
     return "tev " + " ".join(shlex.quote(f) for f in files)
 
 
@@ -409,9 +406,9 @@ def _regions(out, run, w, h):
     scene_name = _text(run.get("scene"))
     if not SAFE_ID.fullmatch(scene_name):
         return []
-    ir = out / scene_name / "json" / f"{scene_name}.json"
+    ir = run_folder.scene_ir(out, scene_name)
     probes = {_text(p.get("name")): p for p in _list(run.get("probes")) if isinstance(p, dict)}
-    if not ir.is_file() or not probes:
+    if ir is None or not probes:
         return []
     try:
         from ..verdict import raycast
@@ -508,10 +505,10 @@ def _prism_line(run):
     return None
 
 
-def _probe_views(out, folder):
+def _probe_views(job):
     """The views of a render's probe images: "probe residual" (render - the GGX probe's expected
     image, per pixel) and "probe z" (its blocks' z) when probe_residual.exr is there."""
-    return ["probe residual", "probe z"] if _local_url(out, folder / previews.PROBE_RESIDUAL) else []
+    return ["probe residual", "probe z"] if job.rel("probe_residual") is not None else []
 
 
 def _baseline(out, run):
@@ -538,8 +535,8 @@ def _baseline(out, run):
     links = []
     zmap = base.get("zmap")
     if isinstance(zmap, str) and zmap:
-        for label, rel in (("z-map (EXR)", zmap), ("z-map (PNG)", str(PurePosixPath(zmap).with_name(baseline.ZMAP_PNG)))):
-            url = _local_url(out, rel)
+        for label, rel in (("z-map (EXR)", zmap), ("z-map (PNG)", run_folder.zmap_png(zmap))):
+            url = run_folder.local_url(out, rel)
             if url:
                 links.append({"label": label, "src": url})
     status = base.get("status") if base.get("status") in baseline.STATUSES else ""  # a CSS class: known words only
@@ -566,26 +563,19 @@ def _known_lines(run, deviations):
 
 
 def _viewer(out, run, deviations=None):
-    image = run.get("image")
-    if not isinstance(image, str) or not image:
+    job = run_folder.Job(out, run)
+    if job.rel("render") is None:
         return None
-    src = _local_url(out, image)
-    if not src:
-        return None
-    folder = PureWindowsPath(image).parent if "\\" in image else PurePosixPath(image).parent
-    names = _job_data(out / Path(*folder.parts))
-    data = _local_url(out, folder / DATA_JS) if names else None
+    names = _job_data(job)
+    data = run_folder.local_url(out, job.beside(DATA_JS)) if names else None
     if not data:
         return None
-    ref = _dict(run.get("reference")).get("image")
-    if not isinstance(ref, str) and _local_url(out, folder / "reference.exr"):
-        ref = str(PurePosixPath(*folder.parts) / "reference.exr")  # a run from before issue 21: its own copy
-    ref_url = _local_url(out, ref) if isinstance(ref, str) else None
-    ref_js = _reference_data(out / Path(*PurePosixPath(ref).parts)) if ref_url else None
-    ref_data = _local_url(out, PurePosixPath(ref).with_suffix(".js")) if ref_js else None
+    ref = job.rel("reference")  # the scene's shared reference, or a run's own copy from before issue 21
+    ref_js = _reference_data(out / ref) if ref is not None else None
+    ref_data = run_folder.local_url(out, ref.with_suffix(".js")) if ref_js else None
     views = ["render"] + (["reference", "difference"] if ref_data else [])
-    views += [v for v, f in (("z-score", "zscore.exr"), ("FLIP", "flip.exr")) if _local_url(out, folder / f)]
-    views += _probe_views(out, folder)
+    views += [v for v, k in (("z-score", "zscore"), ("FLIP", "flip")) if job.rel(k) is not None]
+    views += _probe_views(job)
     if all(f"S{k}.{c}" in names for k in range(4) for c in "RGB"):
         views += STOKES_VIEWS
     lines = _checks(run)
@@ -598,12 +588,12 @@ def _viewer(out, run, deviations=None):
             "src": data, "ref": ref_data or "", "checks": lines, "extras": _extras(run),
             "reason": _text(run.get("reason")), "known": _known_lines(run, deviations or {}),
             "judged_by": _text(results.judged_by(run)), "self_check": results.checked_against_itself(run),
-            "tev": _tev(run, folder, ref if ref_url else None, out), "regions": json.dumps(regions),
+            "tev": _tev(job), "regions": json.dumps(regions),
             "marks": json.dumps(_prism_marks(run)), "prism": _prism_line(run), "baseline": _baseline(out, run),
             "numbers": [f"{_text(k)}: {_text(records.flip_text(run)) if k == 'flip' else _fmt(v)}"
                         for k, v in _dict(run.get("metrics")).items()],
             "reference_problems": _reference_problems(run), "conversions": _conversions(run), "why": _why(out, run),
-            "spectra": _spectra(out, run, folder)}
+            "spectra": _spectra(job)}
 
 
 def _why(out, run):
@@ -626,7 +616,8 @@ def _why(out, run):
         full = "fully explains" if m.get("fully_explains") is True else "does not fully explain"
         lines.append(f"{line} ({full}; {_text(m.get('evidence'))}): {_text(m.get('explanation'))}"
                      + (f" [{_text(m['note'])}]" if m.get("note") else ""))
-    url = _local_url(out, diag["image"]) if isinstance(diag.get("image"), str) else None
+    image = run_folder.Job(out, run).diagnosis_image()
+    url = run_folder.local_url(out, image) if image is not None else None
     return {"text": _text(diag.get("text")), "models": lines, "toml": _text(diag.get("known_deviation") or ""),
             "image": url or ""}
 
@@ -645,8 +636,7 @@ def _stability(out, stab):
         rows = [r for r in stab if _text(r.get("sweep")) == name]
         strips = []
         for backend in sorted({_text(r.get("backend")) for r in rows if r.get("backend")}):
-            one_name_each = not re.search(r"[/\\]", backend + name)
-            src = _local_url(out, PurePosixPath("stability", backend, f"{name}.png")) if one_name_each else None
+            src = run_folder.local_url(out, run_folder.stability_strip(backend, name))
             if src:
                 strips.append({"backend": backend, "src": src, "alt": f"{name} {backend}"})
         cells = [{"css": _css(r.get("status")), "value": _text(r.get("value", "")), "backend": _text(r.get("backend", "")),
@@ -662,7 +652,7 @@ def _studies(out, rows):
     pairs = []
     for r in (r for r in rows if isinstance(r, dict)):
         images = _dict(r.get("images"))
-        srcs = {k: _local_url(out, images[k]) for k in ("spectral", "rgb", "de00") if isinstance(images.get(k), str)}
+        srcs = {k: run_folder.local_url(out, images[k]) for k in ("spectral", "rgb", "de00") if isinstance(images.get(k), str)}
         d, t = _dict(r.get("de00")), _dict(r.get("test"))
         numbers = (f"CIEDE2000 over {_text(d.get('blocks'))} blocks of {_text(d.get('block'))} px: mean {_fmt(d.get('mean'), '{:.2f}')}, "
                    f"95th percentile {_fmt(d.get('p95'), '{:.2f}')}, max {_fmt(d.get('max'), '{:.2f}')} (noise alone: "
@@ -692,10 +682,9 @@ def _ids(runs, viewers):
 
 
 def load(out):
-    """The run's metrics.json through batch/records.py (upgraded to the current version; paths
-    stay relative to the run folder, as the page links them). Lenient: a file whose version this
-    code does not know is shown as far as it can be."""
-    return records.read(out, strict=False)
+    """The run's metrics.json (batch/run_folder.py ``read_lenient``: paths relative to the run
+    folder, as the page links them; a version this code does not know shown as far as it can be)."""
+    return run_folder.read_lenient(out)
 
 
 def render(out_dir):
@@ -716,11 +705,10 @@ def render(out_dir):
     shown = sorted(viewers, key=lambda i: (ORDER.get(viewers[i]["css"], 9), viewers[i]["scene"], viewers[i]["backend"]))
     listed, not_run = grouping.not_run_everywhere(runs)
     listed_ids = {id(r) for r in listed}
-    summary_md = out / "summary.md"
-    summary_text = summary_md.read_text(encoding="utf-8", errors="replace") if summary_md.is_file() else ""
+    summary_text = run_folder.summary_text(out)
     charts = []
     for c in sorted({_text(s.get("chart")) for s in sweeps if s.get("chart")}):
-        src = _local_url(out, c)
+        src = run_folder.local_url(out, c)
         if src:
             charts.append({"src": src, "alt": c})
     stab = _list(data.get("stability"))
@@ -734,6 +722,6 @@ def render(out_dir):
 
 
 def write(out_dir):
-    path = Path(out_dir) / "report.html"
+    path = Path(out_dir) / run_folder.REPORT
     path.write_text(render(out_dir), encoding="utf-8")
     return path

@@ -44,44 +44,25 @@ Nothing here changes a job's own status or the run's exit status: the baseline v
 the job's verdict (batch/compare_runs.py has an exit status for changes).
 """
 import math
-from pathlib import Path, PurePosixPath, PureWindowsPath
+from pathlib import Path, PurePosixPath
 
 import numpy as np
 
-from .. import exr
+from .. import exr, run_folder
 from ..markdown import cell as _cell
 from ..stat_text import format_z
 # compare, references, stats (scipy) and previews (PIL) are imported where they are used: the
-# Blender panel reads baseline records through this module without them.
+# Blender panel reads baseline.how_much and order without them. Reading a run folder (metrics.json,
+# a job's render, the baseline records and their images) is batch/run_folder.py's.
 
 POWER = 0.9          # power at which ``detectable`` is quoted
-ZMAP = "baseline_zscore.exr"
-ZMAP_PNG = "baseline_zscore.png"
+ZMAP, ZMAP_PNG = run_folder.ZMAP, run_folder.ZMAP_PNG  # written here beside each render, found by the reader
 STATUSES = ("changed", "unjudged", "missing", "same")  # the order changed-first listings use
 
 
-class BaselineError(ValueError):
-    """A baseline folder that is missing or holds no run (a usage error, exit 2), named."""
-
-
-# -- reading a run (the one place metrics.json is read here: the records helper's reader replaces it)
-def read_metrics(folder):
-    """The metrics.json of a finished run in ``folder`` as a dict with a list ``runs``, or
-    BaselineError naming the folder or file and what is wrong."""
-    from .. import records
-    folder = Path(folder)
-    if not folder.is_dir():
-        raise BaselineError(f"{folder}: no such folder")
-    path = folder / "metrics.json"
-    if not path.is_file():
-        raise BaselineError(f"{folder} is not a run: it holds no metrics.json")
-    try:
-        data = records.read(path)  # upgraded to the current schema: paths relative to the run folder
-    except records.RecordError as exc:
-        raise BaselineError(str(exc)) from None
-    if not isinstance(data.get("runs"), list):
-        raise BaselineError(f"{path}: not the metrics.json of a run (an object with a list 'runs')")
-    return data
+# a baseline folder that is missing or holds no run (a usage error, exit 2), named: the name the
+# runner's --baseline and the panel's Compare catch (the reader raises it: batch/run_folder.py ``read``)
+BaselineError = run_folder.NotARun
 
 
 def key_of(entry):
@@ -98,7 +79,7 @@ class Run:
     def __init__(self, folder, given=None):
         self.folder = Path(folder)
         self.given = str(given if given is not None else folder)
-        self.data = read_metrics(self.folder)
+        self.data = run_folder.read(self.folder)
         self.options = self.data.get("options") if isinstance(self.data.get("options"), dict) else {}
         self.jobs = {}
         for e in self.data["runs"]:
@@ -116,19 +97,6 @@ class Run:
         other = sorted(str(m) for (s, b, m) in self.jobs if (s, b) == k[:2])
         return None, (f"no job {k[0]} / {k[1]} {k[2] or ''} in the baseline run {self.given}".replace("  ", " ")
                       + (f" (it has mode {', '.join(other)})" if other else ""))
-
-
-def inside(folder, rel):
-    """``folder``/``rel`` if ``rel`` (from a metrics.json: anyone's text) is a relative path to a
-    file inside ``folder``; else None (batch/records.py ``inside_parts``)."""
-    from .. import records
-    parts = records.inside_parts(folder, rel)
-    return Path(folder) / Path(*parts) if parts else None
-
-
-def _rel_parent(rel):
-    text = str(rel)
-    return (PureWindowsPath(text) if "\\" in text else PurePosixPath(text)).parent
 
 
 # -- power ------------------------------------------------------------------------------------------
@@ -507,7 +475,7 @@ def judge_pair(new_entry, new_folder, old_entry, old_folder, settings, zmap_path
     tc = time_change(old_entry, new_entry, alpha)
     common = {"image": old_entry.get("image") if isinstance(old_entry.get("image"), str) else None,
               "time_ratio": None if tc is None else [tc["ratio"], tc["se"]], "time": tc}
-    new_img, old_img = inside(new_folder, new_entry.get("image")), inside(old_folder, old_entry.get("image"))
+    new_img, old_img = run_folder.Job(new_folder, new_entry).path("render"), run_folder.Job(old_folder, old_entry).path("render")
     for img, entry, which in ((new_img, new_entry, "this run's"), (old_img, old_entry, "the baseline's")):
         if img is None and entry.get("image"):
             return _record(run_label, "unjudged", f"{which} render {str(entry.get('image'))[:200]!r} is not a file "
@@ -595,8 +563,7 @@ def judge_entry(entry, out, base, settings, zmap_root=None, zmap_prefix=""):
     old, why = base.match(entry)
     if old is None:
         return _record(base.given, "missing", why)
-    image = entry.get("image") if isinstance(entry.get("image"), str) else ""
-    folder = _rel_parent(image) if inside(out, image) else PurePosixPath("_baseline", "job")
+    folder = run_folder.job_dir(out, entry) or PurePosixPath("_baseline", "job")
     rel = PurePosixPath(zmap_prefix, *folder.parts, ZMAP) if zmap_prefix else PurePosixPath(*folder.parts, ZMAP)
     root = Path(zmap_root if zmap_root is not None else out)
     try:
@@ -658,115 +625,9 @@ def summary_section(runs):
     return "\n".join(out) + "\n\n## Jobs\n\n"
 
 
-# -- reading baseline records (the Blender panel) ---------------------------------------------------
-COMPARE_DIR = "compare"  # batch/compare_runs.py's default output folder inside the newer run
-IMAGE_KINDS = ("baseline_render", "baseline_zscore")
-
-
-def _same_folder(a, b):
-    try:
-        return Path(a).resolve() == Path(b).resolve()
-    except (OSError, ValueError, TypeError):
-        return False
-
-
-def comparisons(out_dir):
-    """The folders batch/compare_runs.py wrote into the run in ``out_dir`` (OUT/compare, OUT/compare-2,
-    ...: real folders, not links, holding compare.json), newest first."""
-    import os
-    import re
-    import stat
-    found = []
-    try:
-        entries = list(os.scandir(out_dir))
-    except OSError:
-        return []
-    for e in entries:
-        if not re.fullmatch(rf"{COMPARE_DIR}(-[0-9]{{1,4}})?", e.name):
-            continue
-        try:
-            if not stat.S_ISDIR(os.lstat(e.path).st_mode):
-                continue
-            st = os.lstat(Path(e.path) / "compare.json")
-        except OSError:
-            continue
-        if stat.S_ISREG(st.st_mode):
-            found.append((st.st_mtime_ns, e.name))
-    return [Path(out_dir) / name for _, name in sorted(found, reverse=True)]
-
-
-def recorded_baseline(out_dir, run):
-    """The baseline folder a run's --baseline record names (``run``: as the user gave it, relative
-    to where the run was started, which is not known), followed only where it cannot lead anywhere
-    a run folder does not: a relative path without '..' taken beside the run folder (the usual
-    ``--baseline out_prev -o out_new``), that holds a metrics.json. An absolute path or one with
-    '..' (a hand-edited metrics.json can name any folder) is not followed: None (the panel's
-    Baseline field names the folder then)."""
-    text = run if isinstance(run, str) else ""
-    if not text or "\0" in text or PurePosixPath(text).is_absolute() or PureWindowsPath(text).anchor:
-        return None
-    parts = PurePosixPath(text.replace("\\", "/")).parts
-    if not parts or any(p in ("", "..") for p in parts):
-        return None
-    root = Path(out_dir).parent
-    try:
-        folder = (root / Path(*parts)).resolve()
-        if not folder.is_relative_to(root.resolve()) or not (folder / "metrics.json").is_file():
-            return None
-    except (OSError, ValueError):
-        return None
-    return folder
-
-
-def records(out_dir, data, baseline_dir=None):
-    """{(scene, backend): (baseline record, folder its z-map is relative to, baseline folder or None)}
-    for the run in ``out_dir`` (``data``: its metrics.json). With ``baseline_dir`` (the user's
-    choice): the newest comparison that batch/compare_runs.py (or the panel's Compare) wrote to
-    OUT/compare[-N] against that folder, else the records of a run made with --baseline naming
-    that folder; without: the run's own --baseline records, their baseline folder only where
-    ``recorded_baseline`` follows it (else None: no baseline render is shown)."""
-    out = {}
-    out_dir = Path(out_dir)
-    if baseline_dir:
-        import json
-        for folder in comparisons(out_dir):
-            try:
-                comp = json.loads((folder / "compare.json").read_text(encoding="utf-8"))
-            except (OSError, ValueError, RecursionError):
-                continue
-            if not (isinstance(comp, dict) and _same_folder(comp.get("old"), baseline_dir)):
-                continue
-            for j in comp.get("jobs") if isinstance(comp.get("jobs"), list) else []:
-                if isinstance(j, dict) and isinstance(j.get("baseline"), dict):
-                    out[(j.get("scene"), j.get("backend"))] = (j["baseline"], folder, Path(baseline_dir))
-            for j in comp.get("new_jobs") if isinstance(comp.get("new_jobs"), list) else []:
-                if isinstance(j, dict):
-                    out[(j.get("scene"), j.get("backend"))] = (
-                        _record(str(baseline_dir), "missing", "no such job in the baseline run"), out_dir, Path(baseline_dir))
-            return out
-    runs = (data or {}).get("runs") if isinstance(data, dict) else None
-    for e in runs if isinstance(runs, list) else []:
-        rec = e.get("baseline") if isinstance(e, dict) else None
-        if isinstance(rec, dict) and (not baseline_dir or _same_folder(rec.get("run"), baseline_dir)):
-            base = Path(baseline_dir) if baseline_dir else recorded_baseline(out_dir, rec.get("run"))
-            out[(e.get("scene"), e.get("backend"))] = (rec, out_dir, base)
-    return out
-
-
+# -- the panel's order (its records and images: batch/run_folder.py baseline_records, baseline_image) --
 def order(rec):
     """Sort key of a baseline record: changed first (then unjudged, missing, same; none last)."""
     status = rec.get("status") if isinstance(rec, dict) else None
     return STATUSES.index(status) if status in STATUSES else len(STATUSES)
 
-
-def image_path(found, kind):
-    """The baseline's render or the z-map of one record from ``records``, or None (also for a path
-    that would leave its folder)."""
-    if found is None:
-        return None
-    rec, root, base = found
-    if kind == "baseline_render":
-        return inside(base, rec.get("image")) if base is not None else None
-    if kind == "baseline_zscore":
-        return inside(root, rec.get("zmap"))
-    return None

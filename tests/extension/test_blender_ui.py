@@ -389,7 +389,7 @@ def test_cancel_stops_the_run_and_keeps_finished_results(tmp_path):
         import time
         from spectral_bench.addon import benchmark
         from spectral_bench.batch import backends
-        from spectral_bench.batch.report import results
+        from spectral_bench.batch import run_folder
         s = bpy.context.window_manager.spectral_bench_run
         s.scene_source, s.canonical_scene = "CANONICAL", "__ALL__"
         s.backends_off = ",".join(n for n in backends.BACKENDS if n != "mitsuba")
@@ -402,7 +402,7 @@ def test_cancel_stops_the_run_and_keeps_finished_results(tmp_path):
             time.sleep(0.2)
         before = job.done_jobs()
         r = bpy.ops.spectral_bench.cancel_benchmark()
-        after = results.load(s.output_dir)
+        after = run_folder.load(s.output_dir)
         rows = benchmark.result_rows(s.output_dir)
         print(json.dumps({{"before": before, "after": len(after["runs"]), "total": job.total, "r": list(r),
                           "running": job.running(), "status": s.status, "rows": len(rows),

@@ -25,7 +25,7 @@ import pytest
 import exr_craft
 import run_fuzz
 from conftest import HAND_MADE, ROOT, run_batch
-from spectral_bench.batch import exr, spectral_exr
+from spectral_bench.batch import exr, run_folder, spectral_exr
 from spectral_bench.batch.verdict import baseline, references
 from test_baseline import _run_folder
 
@@ -363,7 +363,7 @@ def test_full_disk_keeps_the_old_reference_and_says_so(tmp_path):
 
 # -- the panel: a recorded baseline is followed only beside the run -----------------------------------
 def test_panel_follows_a_recorded_baseline_only_beside_the_run(tmp_path):
-    """baseline.records / image_path (what the Results panel draws and loads): a run's own --baseline
+    """run_folder.baseline_records / baseline_image (what the Results panel draws and loads): a run's own --baseline
     record naming a sibling run shows that run's render; an absolute path elsewhere, a '..' walk or
     a folder that is no run shows none (the z-map, inside the run, still shows)."""
     runs = tmp_path / "runs"
@@ -378,10 +378,10 @@ def test_panel_follows_a_recorded_baseline_only_beside_the_run(tmp_path):
         data = json.loads((cur / "metrics.json").read_text())
         data["runs"][0]["baseline"] = {"run": run, "status": "same", "image": image,
                                        "zmap": "a/results/mitsuba/" + baseline.ZMAP}
-        found = baseline.records(cur, data).get(("a", "mitsuba"))
-        got = baseline.image_path(found, "baseline_render")
+        found = run_folder.baseline_records(cur, data).get(("a", "mitsuba"))
+        got = run_folder.baseline_image(found, "baseline_render")
         assert (got.resolve() if got else None) == (expected.resolve() if expected else None), (run, got)
-        assert baseline.image_path(found, "baseline_zscore") == zmap
+        assert run_folder.baseline_image(found, "baseline_zscore") == zmap
 
 
 def test_images_written_beside_a_render_replace_a_planted_link(tmp_path):

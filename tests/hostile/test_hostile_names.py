@@ -8,7 +8,7 @@ import xml.etree.ElementTree as ET
 import pytest
 
 import scene_fuzz
-from conftest import metrics, run_batch, write_scene
+from conftest import metrics, run_batch, write_hand_made_metrics, write_scene
 from spectral_bench.exporters import art_writer, ir_json, luxcore_writer, mitsuba_writer, names, rgb_scene, validate
 
 INJECTION = "reflectance\n__attribute__((constructor)) static void pwn(void) { system(\"touch pwned\"); }\n//"
@@ -179,19 +179,27 @@ def test_blender_names_become_safe_ids_with_their_label(tmp_path):
 
 
 def test_a_results_folder_from_elsewhere_cannot_point_the_panel_outside_it(tmp_path):
-    """The Results panel reads any outputs folder: a metrics.json naming its scene '../..' gets no
-    image path (nothing outside the folder is read, or written beside it as an RGB copy)."""
-    from spectral_bench.batch.report import results
+    """The Results panel reads any outputs folder (batch/run_folder.py): a metrics.json naming its
+    scene '../..', or a render or chart outside the folder, gets no image path (nothing outside the
+    folder is read, or written beside it as an RGB copy); a path is the record's, never one built
+    from a scene or backend name."""
+    from spectral_bench.batch import run_folder
     outside = tmp_path / "secret" / "results" / "mitsuba"
     outside.mkdir(parents=True)
     (outside / "render.exr").write_bytes(b"not ours")
+    (tmp_path / "secret.png").write_bytes(b"not ours")
     out = tmp_path / "run"
     (out / "ok" / "results" / "mitsuba").mkdir(parents=True)
     (out / "ok" / "results" / "mitsuba" / "render.exr").write_bytes(b"ours")
-    assert results.image_path(out, "../secret", "mitsuba", "render") is None
-    assert results.image_path(out, "ok", "../../secret/results/mitsuba", "render") is None
-    assert results.chart_path(out, "../secret") is None
-    assert results.image_path(out, "ok", "mitsuba", "render") == out / "ok" / "results" / "mitsuba" / "render.exr"
+    runs = [{"scene": "../secret", "backend": "mitsuba", "image": "../secret/results/mitsuba/render.exr"},
+            {"scene": "ok", "backend": "../../secret/results/mitsuba", "image": "../secret/results/mitsuba/render.exr"},
+            {"scene": "ok", "backend": "mitsuba", "image": "ok/results/mitsuba/render.exr"}]
+    sweeps = [{"scene": "../secret", "chart": "../secret.png"}]
+    write_hand_made_metrics(out, {"started": "now", "runs": runs, "sweeps": sweeps})
+    assert run_folder.job(out, "../secret", "mitsuba").path("render") is None
+    assert run_folder.job(out, "ok", "../../secret/results/mitsuba").path("render") is None
+    assert run_folder.chart_path(out, "../secret") is None
+    assert run_folder.job(out, "ok", "mitsuba").path("render") == out / "ok" / "results" / "mitsuba" / "render.exr"
 
 
 @pytest.mark.parametrize("where", ["rectangle", "camera", "affine"])

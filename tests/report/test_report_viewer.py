@@ -10,7 +10,6 @@ written under the test's tmp dir (not committed; look at them).
 A copy of the page gets a script that waits for a viewer's data, moves the mouse over a pixel,
 and writes what the page shows into body[data-result] for --dump-dom to carry back."""
 import json
-from pathlib import PurePosixPath
 import re
 import shutil
 import subprocess
@@ -19,6 +18,7 @@ import numpy as np
 import pytest
 
 from conftest import metrics, run_batch, write_hand_made_metrics
+from spectral_bench.batch import run_folder
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 pytestmark = pytest.mark.skipif(not CHROMIUM, reason="no chromium: report not checked in a browser "
@@ -266,8 +266,12 @@ def test_checks_one_line_each_failures_first_with_the_recorded_observer(tmp_path
     run["detectable"] = {"scale": 0.0031, "alpha": 0.01, "power": 0.9, "method": "noise test", "patch_de00": 0.2}
     assert html._extras(run) == ["could have detected: a uniform radiance scale error of 0.31 % with 0.9 power at "
                                  "alpha 0.01 (noise test); a ColorChecker patch shift of 0.2 dE00"]
-    folder = PurePosixPath("chart/results/mitsuba")
-    assert html._tev(run, folder, "chart/results/reference_4x4.exr") == (
+    folder = tmp_path / "chart" / "results" / "mitsuba"
+    folder.mkdir(parents=True)
+    for name in ("render.exr", "zscore.exr", "block_stderr.exr", "flip.exr", "probe_residual.exr", "../reference_4x4.exr"):
+        (folder / name).write_bytes(b"")
+    run.update(image="chart/results/mitsuba/render.exr", reference={"image": "chart/results/reference_4x4.exr"})
+    assert html._tev(run_folder.Job(tmp_path, run)) == (
         "tev chart/results/mitsuba/render.exr chart/results/reference_4x4.exr chart/results/mitsuba/zscore.exr "
         "chart/results/mitsuba/block_stderr.exr chart/results/mitsuba/flip.exr chart/results/mitsuba/probe_residual.exr")
 
@@ -278,15 +282,15 @@ def test_the_panel_finds_the_shared_reference_and_makes_differences(run, tmp_pat
     the reference is the scene's shared half-float one, the differences are written when asked
     for and equal |render - reference| (and over |reference| + 0.01) to half precision."""
     from spectral_bench.batch import exr
-    from spectral_bench.batch.report import results
     out = tmp_path / "copy"
     shutil.copytree(run, out)
-    ref = results.image_path(out, "macbeth_chart_D65", "mitsuba", "reference")
+    job = run_folder.job(out, "macbeth_chart_D65", "mitsuba")
+    ref = job.path("reference")
     assert ref == out / "macbeth_chart_D65" / "results" / "reference_155x105.exr"
-    diff = results.image_path(out, "macbeth_chart_D65", "mitsuba", "diff_abs")
+    diff = job.path("diff_abs")
     assert diff is not None and not diff.exists()  # listed (it can be made), not written by listing
     for kind in ("diff_abs", "diff_rel"):
-        path = results.image_path(out, "macbeth_chart_D65", "mitsuba", kind, make=True)
+        path = job.path(kind, make=True)
         render, reference = exr.read_rgb(out / "macbeth_chart_D65/results/mitsuba/render.exr"), exr.read_rgb(ref)
         d = np.abs(render.astype(np.float64) - reference)
         want = d if kind == "diff_abs" else d / (np.abs(reference) + 0.01)
