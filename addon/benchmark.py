@@ -17,7 +17,7 @@ import time
 from pathlib import Path
 
 import bpy
-from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
+from bpy.props import EnumProperty, FloatProperty, IntProperty, StringProperty
 
 from ..batch import backends, run_folder
 from ..batch.backends import command
@@ -44,6 +44,13 @@ FINISHED_WORDS = {0: "passed", 1: "failed", 2: "refused (a bad option or a folde
                   130: "interrupted"}  # batch/verdict/status.py
 
 
+# --flip auto|on|off (issue 45: FLIP where a verdict is not ok, by default)
+FLIP_CHOICES = [("AUTO", "Where not ok", "Only for renders whose verdict is not ok (failed, known, fixed, unjudged): an "
+                 "ok render differs from its reference by noise (--flip auto, the default)"),
+                ("ON", "Every render", "For every render judged against a reference (--flip on)"),
+                ("OFF", "Off", "Never (--flip off)")]
+
+
 class RunSettings(bpy.types.PropertyGroup):
     scene_source: EnumProperty(name="Scenes", items=SCENE_SOURCES, default="CANONICAL")
     canonical_scene: EnumProperty(name="Canonical Scene", items=canonical.scene_items,
@@ -62,10 +69,8 @@ class RunSettings(bpy.types.PropertyGroup):
                                      "can be judged against it")
     passes: IntProperty(name="Passes", default=2, min=1, max=64,
                         description="Independent passes per render: two or more give the render's own noise")
-    use_flip: BoolProperty(name="HDR-FLIP", default=True,
-                           description="Compute HDR-FLIP against the reference where a verdict is not ok (the run's "
-                                       "default, --flip auto: an ok render differs from its reference by noise); "
-                                       "off: never (--no-flip)")
+    flip: EnumProperty(name="HDR-FLIP", default="AUTO", items=FLIP_CHOICES,
+                       description="HDR-FLIP against the reference (the runner's --flip)")
     output_parent: StringProperty(name="Outputs Folder", subtype="DIR_PATH", default="",
                                   description="Where outputs-YYYYmmdd-HHMMSS folders go (default: next to the "
                                               ".blend, or the extension's user folder)")
@@ -236,8 +241,8 @@ def run_arguments(s, files, names):
     args += [a for n in names for a in ("-r", n)] + ["--scale", str(s.scale), "--passes", str(s.passes)]
     if s.spp:
         args += ["--spp", str(s.spp)]
-    if not s.use_flip:
-        args.append("--no-flip")
+    if s.flip != "AUTO":  # auto is the runner's default
+        args += ["--flip", s.flip.lower()]
     return args
 
 

@@ -218,7 +218,7 @@ class SPECTRAL_BENCH_PT_benchmark(_Base, bpy.types.Panel):
         col.prop(s, "spp")
         col.prop(s, "scale")
         col.prop(s, "passes")
-        layout.prop(s, "use_flip")
+        layout.prop(s, "flip")
         layout.prop(s, "output_parent")
         row = layout.row()
         row.operator_context = "INVOKE_DEFAULT"

@@ -197,7 +197,7 @@ def test_every_panel_draws_with_real_data(tmp_path):
     """)
     assert all(n > 0 for n in out["drawn"].values()), out["drawn"]  # every panel's poll() let it draw
     assert len(out["drawn"]) >= 9
-    assert {"kind", "scene_source", "canonical_scene", "spp", "scale", "passes", "use_flip", "output_dir"} <= set(out["props"])
+    assert {"kind", "scene_source", "canonical_scene", "spp", "scale", "passes", "flip", "output_dir"} <= set(out["props"])
     # the order of summary.md and report.html (batch/verdict/status.py), a status the view does not
     # know last; every status shown as it is
     from spectral_bench.batch import records
@@ -339,6 +339,7 @@ def test_run_from_blender_then_load_images_and_open_report(tmp_path):
         s.scene_source = "ACTIVE"
         s.backends_off = ",".join(n for n in backends.BACKENDS if n != "mitsuba")  # this test judges Mitsuba
         s.spp, s.scale, s.passes, s.output_parent = 64, 0.125, 2, {str(tmp_path)!r}
+        s.flip = "ON"  # the FLIP image of an ok render too (the default, auto, computes it where not ok)
         try:
             bpy.ops.spectral_bench.open_report()
             missing = None
@@ -394,7 +395,7 @@ def test_cancel_stops_the_run_and_keeps_finished_results(tmp_path):
         s.scene_source, s.canonical_scene = "CANONICAL", "__ALL__"
         s.backends_off = ",".join(n for n in backends.BACKENDS if n != "mitsuba")
         # 0.25: an integer fraction of every canonical scene (0.125 of the 620x420 charts is refused)
-        s.spp, s.scale, s.passes, s.use_flip, s.output_parent = 16, 0.25, 1, False, {str(tmp_path)!r}
+        s.spp, s.scale, s.passes, s.flip, s.output_parent = 16, 0.25, 1, "OFF", {str(tmp_path)!r}
         bpy.ops.spectral_bench.run_benchmark()   # returns at once; the run goes on in the background
         job = benchmark.active_job()
         t0 = time.time()

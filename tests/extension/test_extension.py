@@ -341,7 +341,7 @@ def test_references_folder_preference_persists_and_each_reference_names_its_orig
         bpy.data.scenes.remove(bpy.data.scenes["Scene"])
         s = bpy.context.window_manager.spectral_bench_run
         s.backends_off = ",".join(n for n in backends.BACKENDS if n != "mitsuba")
-        s.scene_source, s.use_flip = "FILE", False
+        s.scene_source, s.flip = "FILE", "OFF"
         s.spp, s.scale, s.passes, s.output_parent = 16, 0.125, 1, {str(tmp_path / "runs")!r}
         r = bpy.ops.spectral_bench.run_benchmark(wait=True)
         import importlib

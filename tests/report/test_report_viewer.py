@@ -37,7 +37,8 @@ def chromium(*args, timeout=120):
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     out = tmp_path_factory.mktemp("viewer") / "out"
-    run_batch("-r", "mitsuba", "-s", "polarizing_spheres", "-s", "macbeth_chart_D65", "--scale", 0.25, "-o", out)
+    run_batch("-r", "mitsuba", "-s", "polarizing_spheres", "-s", "macbeth_chart_D65", "--scale", 0.25, "--flip", "on",
+              "-o", out)  # --flip on: every view, FLIP's too (the default computes it where a verdict is not ok)
     return out
 
 
