@@ -368,7 +368,11 @@ def test_art_renders_the_five_scenes_and_judges_them(art_runs):
         assert run["passes"] == 2 and run["test"]["pass"], (name, run["test"])
         _has_power(run)
     lone = runs["fluorescent_sphere_lone"]
-    assert lone["known"] == [] and all(p["pass"] for p in lone["probes"]), lone["probes"]
+    # every probe passes; a band check at these settings may have too few samples in a band to judge it
+    # (batch/verdict/probes/bands.py: never judged on a noise it cannot estimate), and then says so
+    assert lone["known"] == [] and all(p["pass"] or (p["pass"] is None and p["name"].startswith("bands ")
+                                                      and p.get("unjudged_text")) for p in lone["probes"]), lone["probes"]
+    assert any(p["pass"] for p in lone["probes"] if not p["name"].startswith("bands ")), lone["probes"]
     copper = runs["ggx_copper_50"]
     assert copper["status"] == "unsupported" and "copper_plate_50.bsdf.roughness.distribution" in copper["reason"]
     stokes = exr.read_image(runs["polarizing_spheres"]["image"])[0]

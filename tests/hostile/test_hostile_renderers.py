@@ -122,6 +122,7 @@ def test_a_renderer_flooding_its_output_is_kept_head_and_tail_in_bounded_memory(
         import json, resource, sys
         from pathlib import Path
         sys.path.insert(0, {str(ROOT / "tests")!r})
+        sys.path.insert(0, {str(ROOT / "tests" / "backends")!r})  # test_declared_renderer's room
         import test_declared_renderer as t
         before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
         t.render(Path({str(tmp_path)!r}), "seed", passes_n=1, declared={declared(env, "flood")!r})
