@@ -118,17 +118,17 @@ def _child(trace_path, argv):
 
     send, receive = flip_isolated.FlipWorker.send, flip_isolated.FlipWorker.receive
 
-    def flip_send(self, ref, test, map_path):
+    def flip_send(self, ref, test, map_path, *deadline):  # FlipWorker.send's own arguments, passed on as they are
         self.bench = (time.perf_counter(), process_cpu(psutil.Process(self.proc.pid)), Path(map_path))
-        return send(self, ref, test, map_path)
+        return send(self, ref, test, map_path, *deadline)
 
-    def flip_receive(self, timeout):
+    def flip_receive(self, *deadline):
         t0, c0, map_path = self.bench
         try:
             c1 = process_cpu(psutil.Process(self.proc.pid))
         except psutil.Error:
             c1 = c0
-        out = receive(self, timeout)
+        out = receive(self, *deadline)
         try:
             c1 = process_cpu(psutil.Process(self.proc.pid))
         except psutil.Error:  # died: what it had spent before
