@@ -138,6 +138,7 @@ def _params_text(text):
     return re.findall(r"(-?[\d.]+(?:e[+-]?\d+)?) \+- (-?[\d.]+(?:e[+-]?\d+)?)", text)
 
 
+@pytest.mark.slow  # renders (or builds .blend files) through the real entry point: the full suite, not the fast subset
 def test_no_confident_diagnosis_from_one_block(tmp_path):
     """Issue 40: ggx_copper_50 at 32x32 and 32 spp is one noise-test block, 3 residuals (R, G, B,
     one cluster). A constant grey render was 'likely: per-channel scale ... +- 0.000000, explains
@@ -193,6 +194,7 @@ def test_a_model_that_does_not_fully_explain_says_what_it_leaves(tmp_path):
     assert diag["text"] in run["reason"]
 
 
+@pytest.mark.slow  # renders (or builds .blend files) through the real entry point: the full suite, not the fast subset
 def test_a_black_render_gets_no_proposed_known_deviation(tmp_path):
     """Issue 40: a black render (every pixel 0) at 128x128 and 16 spp, many blocks: a uniform scale
     of about 1e-16 fits it exactly and was printed "scale 0.000000 +- 0.000000" with a ready

@@ -87,6 +87,7 @@ def _blend(specs):
         return scene_fuzz.check_blend(specs, d)
 
 
+@pytest.mark.slow  # renders (or builds .blend files) through the real entry point: the full suite, not the fast subset
 @fuzz(3)
 @given(scene_fuzz.blend_scenes())
 def test_ordinary_blend_files_export_scene_by_scene_or_fail_by_name(specs):

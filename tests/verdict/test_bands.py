@@ -135,6 +135,7 @@ def test_the_lone_fluorescent_sphere_is_judged_band_by_band(tmp_path):
     assert dropped["pass"] is False and dropped["worst"]["relative"] > 0.1, dropped["worst"]  # the re-radiated light
 
 
+@pytest.mark.slow  # renders (or builds .blend files) through the real entry point: the full suite, not the fast subset
 def test_a_correct_render_at_low_settings_is_not_failed_on_bands_without_samples(tmp_path):
     """Issue 40: the unmodified example renderer at --scale 0.125 --spp 4 (62x42, about 20 pixels a
     patch, a 5 nm band sampled in one pixel of six) passed the noise test and failed 15 band checks
