@@ -74,12 +74,6 @@ def mitsuba_threads(spp=16, seed=3):
                          "same_as_one_thread": {n: bool(np.array_equal(out[1], img)) for n, img in out.items()},
                          "max_abs_diff_from_one_thread": max(float(np.abs(out[1] - img).max()) for img in out.values())})
             print(json.dumps(rows[-1]), flush=True)
-    if args.art_threads:
-        os.cpu_count = real_cpu_count
-        first = next(iter(by_label.values()), None)
-        same = {label: bool(np.array_equal(first, img)) for label, img in by_label.items()}
-        rows.append({"art_same_image_whatever_the_thread_count": same})
-        print(json.dumps(rows[-1]), flush=True)
     return rows
 
 
