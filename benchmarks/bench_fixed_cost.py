@@ -291,7 +291,7 @@ def main():
     ap.add_argument("--default", action="store_true", help="the default suite (every scene at its own settings)")
     ap.add_argument("--smoke", action="store_true", help="one scene, tiny settings (checks the script runs)")
     ap.add_argument("--write", action="store_true", help="record the tables in benchmarks/ENGINES.md")
-    ap.add_argument("--flip", choices=("on", "off", "auto"), help="the run's --flip (default: the runner's, on)")
+    ap.add_argument("--flip", choices=("on", "off", "auto"), help="the run's --flip (default: the runner's, auto)")
     args = ap.parse_args()
     argv, title = (([], "default suite") if args.default else (SMOKE, "smoke") if args.smoke
                    else (TINY, "tiny suite"))
@@ -301,6 +301,9 @@ def main():
     with tempfile.TemporaryDirectory() as tmp:
         wall, cpu, code, events, runs = measure(argv, Path(tmp) / "out")
     load1 = os.getloadavg()[0]
+    void = [f"{r.get('scene')} ({r.get('backend')}): {r['flip_error']}" for r in runs if r.get("flip_error")]
+    if void:  # FLIP failed (its CPU then counts nothing): the judging share would be void, not small
+        raise SystemExit(f"FLIP failed in {len(void)} job(s), so judging's CPU is not measured: " + "; ".join(void[:3]))
     jobs, totals = breakdown(wall, events, runs)
     text = tables(title, argv, wall, cpu, code, jobs, totals, (f"{load0:.2f}", f"{load1:.2f}"))
     print(text)
