@@ -8,7 +8,8 @@ far below each planted effect, so a render too small to see them fails here loud
 
 The renders are shared by every test of the module (one fixture: the copper scene with seven
 planted renderers in one batch run, and one run for each of the three scenes the polarisation
-and observer plants need), at a quarter of the resolution. The fitting itself on synthetic
+and observer plants need), at a quarter of the resolution (the polariser and observer runs
+at an eighth). The fitting itself on synthetic
 images: tests/diagnosis/test_diagnosis_fit.py.
 """
 import json
@@ -31,9 +32,14 @@ from spectral_bench.batch.verdict import known  # noqa: E402
 RUN = ROOT / "batch" / "run.py"
 PLANTS = ROOT / "tests" / "data" / "plant_renderers.toml"
 COPPER = ("plant_scale", "plant_srgb", "plant_flip", "plant_alpha", "plant_emitter", "plant_stain", "plant_none")
-# (scene, renderer, spp): the runs besides the copper one
-OTHERS = (("polarizing_plane_0", "plant_polariser", 256), ("polarizing_spheres", "plant_stokes", 64),
-          ("macbeth_chart_D65", "plant_observer", 64))
+# (scene, renderer, scale, spp): the runs besides the copper one. The polariser and observer
+# runs at an eighth of the resolution (issue 45: measured on seeds 0, 1 and 2, detectable 0.24 %
+# and 0.43 %, the polariser's angle within 0.7 se); the Stokes run stays at a quarter, 64 spp (at
+# an eighth its angle's standard error either grew 85-fold at 64 spp or came out 2.3 se off at
+# 256). The copper run stays at a quarter, 256 spp: its time is the diagnosis's GGX alpha fits,
+# which do not shrink with the image, and at an eighth with 1024 spp two of three seeds failed.
+OTHERS = (("polarizing_plane_0", "plant_polariser", "0.125", 256), ("polarizing_spheres", "plant_stokes", "0.25", 64),
+          ("macbeth_chart_D65", "plant_observer", "0.125", 256))
 
 
 def batch(out, *args):
@@ -55,8 +61,8 @@ def runs(tmp_path_factory):
     out.update({r["backend"]: r for r in data["runs"]})
     out["_copper"] = base / "copper"
     out["_junit"] = base / "junit.xml"
-    for scene, renderer, spp in OTHERS:
-        proc, data = batch(base / renderer, "-r", renderer, "-s", scene, "--spp", str(spp))
+    for scene, renderer, scale, spp in OTHERS:
+        proc, data = batch(base / renderer, "-r", renderer, "-s", scene, "--scale", scale, "--spp", str(spp))
         assert proc.returncode == 1, proc.stdout[-3000:] + proc.stderr[-3000:]
         assert not records.validate(data)
         out.update({r["backend"]: r for r in data["runs"]})
