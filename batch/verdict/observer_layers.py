@@ -233,7 +233,6 @@ def _write_record(directory, scene_name, meta_path, meta):
 def _own_old_file(directory, scene_name, obs, item):
     """The old-layout file ``<scene>.<obs>.exr`` if it is this scene's layer (its record's file
     and sha256), else None: a file of that name that is not is another scene's reference."""
-    from . import references
     old = Path(directory) / f"{scene_name}.{obs}.exr"
     if isinstance(item, dict) and item.get("file") == old.name and old.is_file() \
             and sha256_of_or_none(old) == item.get("sha256"):
