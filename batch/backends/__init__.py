@@ -20,21 +20,22 @@ Rendering goes through one pass loop (batch/backends/passes.py): a backend's ``s
 log)`` renders one pass at a time (``render`` above is that loop). Renderers declared in TOML
 (batch/backends/command.py) are backends like these, built from their declaration.
 Constructors take ``executable`` (and: Mitsuba ``force_variant``, ART ``ggx``, Cycles and LuxCore
-``approximate``, from --approximate).
+``approximate``, from --approximate; pbrt-v4 takes nothing more).
 """
 from .art.backend import ArtBackend
 from .command import CommandBackend
 from .cycles.backend import CyclesBackend
 from .luxcore.backend import LuxCoreBackend
 from .mitsuba.backend import MitsubaBackend
+from .pbrt.backend import PbrtBackend
 from .passes import BackendFailure  # noqa: F401 - BackendFailure is part of the interface
 
 # spectral backends first; the RGB ones (Cycles, LuxCore) measure what reducing spectra to RGB costs
-BACKENDS = {"mitsuba": MitsubaBackend, "art": ArtBackend, "cycles": CyclesBackend, "luxcore": LuxCoreBackend}
+BACKENDS = {"mitsuba": MitsubaBackend, "art": ArtBackend, "pbrt": PbrtBackend, "cycles": CyclesBackend, "luxcore": LuxCoreBackend}
 # Groups for -r: the spectral renderers are the default (the regression run against spectral ground
 # truth); the RGB ones measure what RGB rendering gets wrong, so their verdicts against spectral
 # references fail by design on spectral scenes (benchmarks/RGB.md) and they run when asked for.
-GROUPS = {"spectral": ["mitsuba", "art"], "rgb": ["cycles", "luxcore"], "all": list(BACKENDS)}
+GROUPS = {"spectral": ["mitsuba", "art", "pbrt"], "rgb": ["cycles", "luxcore"], "all": list(BACKENDS)}
 DEFAULT = GROUPS["spectral"]
 
 

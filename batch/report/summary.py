@@ -154,7 +154,7 @@ def stability_table(rows):
 
 
 RGB_BACKENDS = ("cycles", "luxcore")
-SPECTRAL_BACKENDS = ("mitsuba", "art")
+SPECTRAL_BACKENDS = ("mitsuba", "art", "pbrt")
 
 
 def _rgb_cell(r):
