@@ -212,3 +212,135 @@ def test_the_env_file_path_comes_from_the_environment(tmp_path):
                           capture_output=True, text=True, timeout=120,
                           env=dict(os.environ, SPECTRAL_BENCH_PBRT_ENV=str(tmp_path / "x.json")))
     assert proc.returncode == 0 and proc.stdout.strip() == str(tmp_path / "x.json"), proc.stderr
+
+
+# -- the spectral film as the backend reads it (a hand-written scene: pbrt's own format) ----------------------------
+def plate_scene(folder, spp=8, size=48, savefp16=False, sampler="independent", reflectance=0.5):
+    """A diffuse plate of constant reflectance filling the view under a uniform environment of
+    radiance 1 at every wavelength: every pixel's radiance is ``reflectance`` at every wavelength
+    (nothing but the environment above the plate; pbrt's light normalisation divides the flat
+    spectrum by its luminance, 1, and the film multiplies the CIE Y integral back)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    text = f"""LookAt 0 0 5  0 0 0  0 1 0
+Camera "perspective" "float fov" [ 20 ]
+Sampler "{sampler}" "integer pixelsamples" [ {spp} ]
+Integrator "path" "integer maxdepth" [ 5 ]
+PixelFilter "box" "float xradius" [ 0.5 ] "float yradius" [ 0.5 ]
+Film "spectral" "integer xresolution" [ {size} ] "integer yresolution" [ {size} ] "string filename" "scene.exr"
+    "bool savefp16" {"true" if savefp16 else "false"} "integer nbuckets" [ 47 ] "float lambdamin" [ 360 ] "float lambdamax" [ 830 ]
+WorldBegin
+LightSource "infinite" "spectrum L" [ 360 1 830 1 ]
+Material "diffuse" "spectrum reflectance" [ 360 {reflectance} 830 {reflectance} ]
+Shape "trianglemesh" "point3 P" [ -10 -10 0 10 -10 0 10 10 0 -10 10 0 ] "integer indices" [ 0 1 2 0 2 3 ]
+"""
+    (folder / "scene.pbrt").write_text(text)
+    (folder / pbrt_backend.SIZE_FILE).write_text(json.dumps({"width": size, "height": size}))
+    return folder / "scene.pbrt"
+
+
+def _pbrt_pass(scene, out, spp, seed=1):
+    proc = subprocess.run([str(PBRT), "--seed", str(seed), "--spp", str(spp), "--outfile", str(out), str(scene)],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+    return out
+
+
+def test_occupancy_is_the_chance_that_a_bucket_gets_a_wavelength():
+    """1 - (1 - 4/N)^n: 47 buckets at 8 samples per pixel 0.509, at 32 0.942 (5.8 % low unread), at
+    256 1 - 1e-10; fewer buckets than a sample's wavelengths have no such rate (refused)."""
+    assert pbrt_backend.occupancy(47, 8) == pytest.approx(1 - (43 / 47) ** 8) == pytest.approx(0.5091, abs=1e-4)
+    assert 1 - pbrt_backend.occupancy(47, 32) == pytest.approx(0.0580, abs=1e-4)
+    assert 1 - pbrt_backend.occupancy(47, 256) < 1e-9
+    with pytest.raises(pbrt_backend.BackendFailure, match="fewer than"):
+        pbrt_backend.occupancy(3, 8)
+
+
+@needs_pbrt
+def test_film_buckets_are_box_means_once_their_empty_rate_is_divided_out(tmp_path):
+    """pbrt's film writes 0 in a bucket no wavelength of the pixel fell in: at 8 samples per pixel
+    and 47 buckets, half the buckets of a pixel are empty and the raw buckets of a plate of
+    radiance 0.5 average 0.5 x 0.509. Divided by that occupancy (the backend's reading), every
+    bucket averages 0.5 over the image, and R, G, B are the plate's colour (the flat spectrum
+    read as box bands through their histospline: exact). Each bucket's mean over the 2304
+    pixels is judged against its standard error from the pixels' spread; the raw buckets fail the
+    same test (its power), the corrected ones pass."""
+    from conftest import RANDOM_TEST_ALPHA
+    from spectral_bench.batch.verdict import stats
+    from spectral_bench.exporters import colorimetry
+    scene = plate_scene(tmp_path / "plate", spp=8)
+    out = _pbrt_pass(scene, tmp_path / "pass.exr", 8)
+    raw = spectral_exr.read(out)
+    assert raw.wavelengths_nm.size == 47 and raw.channels[0][0] == "S0.365,000nm", raw.channels[0][:3]
+    assert pbrt_backend.bucket_width(raw.wavelengths_nm) == pytest.approx(10.0, abs=1e-6)
+    cube = raw.stokes[0].reshape(-1, 47)
+    empty = float(np.mean(cube == 0))
+    assert empty == pytest.approx((43 / 47) ** 8, abs=0.02), empty  # the film's empty buckets, as modelled
+    names, img, bands = pbrt_backend.read_pass(out, 8, (48, 48))
+    corrected = bands["cube"].reshape(-1, 47)
+    n = corrected.shape[0]
+
+    def judge(values):
+        return stats.compare_means(values.mean(axis=0), np.full(47, 0.5), values.std(axis=0, ddof=1) / np.sqrt(n),
+                                   dof=n - 1, alpha=RANDOM_TEST_ALPHA, tests=47)
+    assert not judge(cube)["pass"] and judge(cube)["z"] > 20  # the raw film: 49 % low, seen
+    assert judge(corrected)["pass"], judge(corrected)
+    assert bands["bands"] == "box" and bands["band_width_nm"] == pytest.approx(10.0, abs=1e-6)
+    wl, xb, yb, zb, norm = colorimetry.observer("cie1931")
+    flat = colorimetry.xyz_to_srgb(np.array([np.trapz(c, wl) for c in (xb, yb, zb)]) / norm)
+    rgb = img.reshape(-1, 3)
+    se = rgb.std(axis=0, ddof=1) / np.sqrt(n)
+    assert names == ["R", "G", "B"]
+    verdict = stats.compare_means(rgb.mean(axis=0), 0.5 * flat, se, dof=n - 1, alpha=RANDOM_TEST_ALPHA, tests=3)
+    assert verdict["pass"], verdict
+
+
+@needs_pbrt
+def test_a_half_float_film_is_refused_naming_savefp16(tmp_path):
+    """pbrt's default film writes half floats (rounded to 11 bits, clamped at 65504): a pass that
+    holds them is a failure naming the setting, never read."""
+    out = _pbrt_pass(plate_scene(tmp_path / "plate", spp=1, size=8, savefp16=True), tmp_path / "pass.exr", 1)
+    with pytest.raises(pbrt_backend.BackendFailure, match="savefp16"):
+        pbrt_backend.read_pass(out, 1, (8, 8))
+
+
+def test_a_sampler_other_than_independent_is_refused_before_rendering(tmp_path):
+    """The occupancy correction holds for the independent sampler: a scene asking for another
+    (pbrt's default zsobol stratifies the wavelengths) fails naming it, before pbrt runs."""
+    exe = tmp_path / "pbrt"
+    exe.write_text("#!/bin/sh\nexit 1\n")
+    exe.chmod(0o755)
+    scene = plate_scene(tmp_path / "plate", sampler="zsobol")
+    with pytest.raises(pbrt_backend.BackendFailure, match='"zsobol".*"independent"'):
+        pbrt_backend.PbrtBackend(executable=str(exe)).render(scene, "spectral47", 8, tmp_path / "out.exr")
+
+
+@needs_pbrt
+@pytest.mark.slow
+def test_passes_have_their_own_seeds_and_a_time_out_ends_pbrt(tmp_path):
+    """Through the one pass loop: two passes with their own seeds (their spread is the standard
+    error: nonzero), the record names pbrt's version from its banner; a pass past its time limit
+    fails saying so and leaves no pbrt running (its process group is ended)."""
+    scene = plate_scene(tmp_path / "plate", spp=4, size=16)
+    backend = pbrt_backend.PbrtBackend()
+    record = backend.render(scene, "spectral47", 8, tmp_path / "r" / "render.exr", passes=2, seed=3,
+                            log_path=tmp_path / "r" / "render.log")
+    assert record["passes"] == 2 and record["spp"] == 8 and record["resolution"] == [16, 16]
+    assert record["versions"]["pbrt"].startswith("4 ") and record["versions"]["pbrt_exe"] == str(PBRT)
+    log = (tmp_path / "r" / "render.log").read_text()
+    assert "--seed 3 " in log and "--seed 1003 " in log
+    names, img = exr.read_image(tmp_path / "r" / "render.exr")
+    assert names[:3] == ["R", "G", "B"] and "stderr.R" in names
+    assert np.all(img[..., names.index("stderr.G")] > 0)
+    assert record["spectral"]["bands"] == "box" and len(record["spectral"]["wavelengths_nm"]) == 47
+    slow = plate_scene(tmp_path / "slow", spp=4, size=256)
+    with pytest.raises(pbrt_backend.BackendFailure, match="timed out"):
+        backend.render(slow, "spectral47", 1 << 20, tmp_path / "s" / "render.exr", timeout=3)
+    left = []
+    for entry in os.scandir("/proc"):
+        try:
+            cmdline = open(f"/proc/{entry.name}/cmdline", "rb").read().decode(errors="replace")
+        except OSError:
+            continue
+        if str(tmp_path / "slow") in cmdline:
+            left.append((entry.name, cmdline))
+    assert not left, left

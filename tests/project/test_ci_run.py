@@ -89,3 +89,75 @@ def test_a_good_art_source_whose_build_breaks_fails_ci(tmp_path):
     proc = _art_step(tmp_path, src, path=str(bin_dir))
     assert proc.returncode == 3, (proc.stdout, proc.stderr)
     assert "tests get" not in proc.stdout and "'cmake' is missing" in proc.stderr and "CI fails" in proc.stderr, proc.stderr
+
+
+# -- the pbrt-v4 step (issue 43, .ci/pbrt): the same rules as ART's ----------------------------------------------------
+def test_ci_sources_its_pbrt_step_before_the_tests_and_names_no_pbrt_to_the_main_command():
+    """.ci/pbrt is sourced before the tests (which get SPECTRAL_BENCH_PBRT_ENV); the env variable is
+    unset before the main command, which then finds no pbrt where it looks by default and keeps
+    the fresh machine's promise (pbrt skipped, with the reason)."""
+    lines = [line.strip() for line in (ROOT / ".ci" / "run").read_text().splitlines()
+             if line.strip() and not line.lstrip().startswith("#")]
+    main, tests = _readme_commands()
+    assert ". .ci/pbrt" in lines and lines.index(". .ci/pbrt") < lines.index(tests), lines
+    unset = [i for i, line in enumerate(lines) if line.startswith("unset ") and "SPECTRAL_BENCH_PBRT_ENV" in line.split()]
+    run_main = main.split("&&")[-1].strip()
+    assert unset and unset[0] > lines.index(tests) and unset[0] < lines.index(run_main), lines
+
+
+def _pbrt_step(tmp_path, src, path=None):
+    """.ci/pbrt as .ci/run runs it (sourced under ``set -euo pipefail`` in the repository root),
+    with the pbrt source ``src``, building into tmp_path/prefix and naming tmp_path/ci-env.json
+    (there from an earlier CI run) to the tests; what the tests would get is printed after it."""
+    import os
+    import shutil
+    import subprocess
+    (tmp_path / "ci-env.json").write_text('{"pbrt": "/an/earlier/build/bin/pbrt"}\n')
+    env = dict(os.environ, PBRT_SRC=str(src), PBRT_PREFIX=str(tmp_path / "prefix"), PBRT_CI_ENV=str(tmp_path / "ci-env.json"))
+    if path is not None:
+        env["PATH"] = path
+    return subprocess.run([shutil.which("bash"), "-c", 'set -euo pipefail; . .ci/pbrt; echo "tests get: $SPECTRAL_BENCH_PBRT_ENV"'],
+                          cwd=ROOT, env=env, capture_output=True, text=True, timeout=120)
+
+
+def test_a_broken_pbrt_source_goes_on_with_pbrt_skipped_saying_why(tmp_path):
+    """A truncated pbrt tarball (build_pbrt.sh exit 2): CI goes on to the tests, saying the source
+    is broken and the pbrt tests skip, and the env file of an earlier build is gone."""
+    import io
+    import tarfile
+    with tarfile.open(tmp_path / "whole.tar.gz", "w:gz") as t:
+        data = bytes(range(256)) * 64
+        info = tarfile.TarInfo("src/CMakeLists.txt")
+        info.size = len(data)
+        t.addfile(info, io.BytesIO(data))
+    whole = (tmp_path / "whole.tar.gz").read_bytes()
+    (tmp_path / "pbrt-v4-src-trimmed.tar.gz").write_bytes(whole[: len(whole) // 2])
+    proc = _pbrt_step(tmp_path, tmp_path / "pbrt-v4-src-trimmed.tar.gz")
+    assert proc.returncode == 0, proc.stderr
+    assert f"tests get: {tmp_path / 'ci-env.json'}" in proc.stdout
+    assert "not a readable tarball" in proc.stderr and "is broken" in proc.stderr and "will skip" in proc.stderr, proc.stderr
+    assert not (tmp_path / "ci-env.json").exists()
+
+
+def test_a_good_pbrt_source_whose_build_breaks_fails_ci(tmp_path):
+    """A source with pbrt-v4's shape (project(PBRT-V4), src/pbrt/cmd/pbrt.cpp, src/pbrt/film.cpp)
+    on a machine that cannot build it (no dpkg, no cmake: PATH holds only what the step needs up to
+    there): build_pbrt.sh exits 3 and so does the step, before the tests, saying CI fails."""
+    import io
+    import shutil
+    import tarfile
+    src = tmp_path / "pbrt-v4-src.tar"
+    with tarfile.open(src, "w") as t:
+        for name, data in (("src/CMakeLists.txt", b"project (PBRT-V4 LANGUAGES CXX C)\n"),
+                           ("src/src/pbrt/cmd/pbrt.cpp", b"int main() {}\n"), ("src/src/pbrt/film.cpp", b"//\n")):
+            info = tarfile.TarInfo(name)
+            info.size = len(data)
+            t.addfile(info, io.BytesIO(data))
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    for tool in ("bash", "dirname", "basename", "mkdir", "sha256sum", "cut", "cat", "rm", "tar", "head", "tr", "grep", "mv", "ls"):
+        (bin_dir / tool).symlink_to(shutil.which(tool))
+    proc = _pbrt_step(tmp_path, src, path=str(bin_dir))
+    assert proc.returncode == 3, (proc.stdout, proc.stderr)
+    assert "tests get" not in proc.stdout and "'cmake' is missing" in proc.stderr and "CI fails" in proc.stderr, proc.stderr
+

@@ -40,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ....exporters import pbrt_writer
 from ... import exr, spectral_exr
 from .. import passes as passes_mod
 from ..passes import BackendFailure
@@ -47,7 +48,7 @@ from ..passes import BackendFailure
 # written by scripts/build_pbrt.sh; SPECTRAL_BENCH_PBRT_ENV names another (.ci/run: one for the tests only)
 ENV_FILE = Path(os.environ.get("SPECTRAL_BENCH_PBRT_ENV") or Path(__file__).resolve().parents[3] / ".pbrt" / "env.json")
 WAVELENGTHS_PER_SAMPLE = 4  # pbrt-v4 src/pbrt/util/spectrum.h NSpectrumSamples (a compile-time constant)
-SAMPLER = "independent"  # the sampler whose bucket occupancy is known (module docstring)
+SAMPLER = pbrt_writer.SAMPLER  # "independent": the sampler whose bucket occupancy is known (module docstring)
 BANNER = re.compile(r"pbrt version ([^\n]*?)\s*(?:\n|$)")  # "pbrt version 4 (built Dec  4 2026 at 18:20:00)"
 SAMPLER_LINE = re.compile(r'^\s*Sampler\s+"([^"]*)"', re.M)
 SIZE_FILE = ".render_size.json"  # written beside the export: the resolution the pass must have
@@ -136,14 +137,12 @@ class PbrtBackend:
         return True, ""
 
     def mode_for(self, scene):
-        from ....exporters import pbrt_writer
         problems = pbrt_writer.unsupported(scene)  # per object and field
         if problems:
             return None, "pbrt-v4 cannot express: " + "; ".join(f"{o}.{f}: {m}" for o, f, m in problems)
         return f"spectral{pbrt_writer.FILM['nbuckets']}", None
 
     def export(self, scene, out_dir):
-        from ....exporters import pbrt_writer
         path = Path(pbrt_writer.write(scene, out_dir))
         r = scene["render"]
         (path.parent / SIZE_FILE).write_text(json.dumps({"width": int(r["width"]), "height": int(r["height"])}))
