@@ -61,6 +61,12 @@ RANDOM_JUDGEMENTS = {  # test (file::function) -> how many families of tests its
     # Stokes), and the four Brewster renders (one probe family each)
     "backends/test_art.py::art_runs (test_art_renders_the_five_scenes_and_judges_them, test_art_chart_keeps_out_of_gamut_colour)": 11,
     "backends/test_art.py::test_art_brewster_and_polariser_convention": 4,
+    # pbrt-v4 (tests/backends/test_pbrt.py): the same image for one seed whatever the thread count on one
+    # build, but CI builds it for each machine (-march=native): across a fleet its outcome is a draw. The
+    # shared run's two noise tests and its probe families (macbeth_chart_D65: lambert, bands;
+    # ggx_copper_50_isolated: ggx), and the film test's two families (47 buckets, R G B)
+    "backends/test_pbrt.py::pbrt_runs (test_pbrt_renders_the_scenes_and_judges_them)": 5,
+    "backends/test_pbrt.py::test_film_buckets_are_box_means_once_their_empty_rate_is_divided_out": 2,
 }
 N_RANDOM_TESTS = sum(RANDOM_JUDGEMENTS.values())
 RANDOM_TEST_ALPHA = SUITE_ALPHA / N_RANDOM_TESTS  # each random family's false-alarm rate (Bonferroni)

@@ -328,9 +328,8 @@ def test_passes_have_their_own_seeds_and_a_time_out_ends_pbrt(tmp_path):
     assert record["versions"]["pbrt"].startswith("4 ") and record["versions"]["pbrt_exe"] == str(PBRT)
     log = (tmp_path / "r" / "render.log").read_text()
     assert "--seed 3 " in log and "--seed 1003 " in log
-    names, img = exr.read_image(tmp_path / "r" / "render.exr")
-    assert names[:3] == ["R", "G", "B"] and "stderr.R" in names
-    assert np.all(img[..., names.index("stderr.G")] > 0)
+    names, img, se = exr.read_image_and_stderr(tmp_path / "r" / "render.exr")
+    assert names == ["R", "G", "B"] and se is not None and np.all(se > 0)
     assert record["spectral"]["bands"] == "box" and len(record["spectral"]["wavelengths_nm"]) == 47
     slow = plate_scene(tmp_path / "slow", spp=4, size=256)
     with pytest.raises(pbrt_backend.BackendFailure, match="timed out"):
@@ -344,3 +343,99 @@ def test_passes_have_their_own_seeds_and_a_time_out_ends_pbrt(tmp_path):
         if str(tmp_path / "slow") in cmdline:
             left.append((entry.name, cmdline))
     assert not left, left
+
+
+# -- pbrt renders, judged like any other backend's (one batch run per condition, shared) ----------------------------
+JUDGED = ["macbeth_chart_D65", "ggx_copper_50_isolated"]  # the ColorChecker (lambert, bands), a GGX plate (its probe)
+SCENES = [*JUDGED, "polarizing_plane_0"]  # pbrt-v4 has no polariser: unsupported, naming object and field
+# 32 spp in 2 passes at full resolution: the chart's patches have the pixels its band checks need at
+# the suite's alpha (at half resolution none is judged: too few pixels for the skew of 16 samples per
+# pass); the planted run at half resolution, whose power is enough (each run detects 0.3-0.4 %,
+# 2026-12-04: far below the planted 2 %)
+REDUCED = ["--spp", "32"]
+PLANTED_SETTINGS = ["--scale", "0.5"]
+PLANTED = 1.02  # every light 2 % brighter (the writer's test hook): every judged scene must fail
+
+
+def _pbrt_batch(out, scenes, *extra):
+    from conftest import RANDOM_TEST_ALPHA, random_run_env
+    proc = run_batch("-r", "pbrt", *[a for s in scenes for a in ("-s", s)], *REDUCED, "--alpha", RANDOM_TEST_ALPHA,
+                     *extra, "-o", out, timeout=1200, env=random_run_env())
+    assert (out / "metrics.json").is_file(), proc.stderr[-3000:]
+    return proc, {r["scene"]: r for r in metrics(out)["runs"]}
+
+
+@pytest.fixture(scope="module")
+def pbrt_runs(tmp_path_factory):
+    """The scenes rendered with pbrt at reduced settings, as a user runs the command."""
+    if not PBRT:
+        pytest.skip(needs_pbrt.kwargs["reason"])
+    out = tmp_path_factory.mktemp("pbrt") / "out"
+    proc, runs = _pbrt_batch(out, SCENES)
+    return proc, out, runs
+
+
+@pytest.fixture(scope="module")
+def planted_runs(tmp_path_factory):
+    """The judged scenes again, every light of the .pbrt 2 % brighter (the writer's hook)."""
+    if not PBRT:
+        pytest.skip(needs_pbrt.kwargs["reason"])
+    from spectral_bench.exporters import pbrt_writer
+    out = tmp_path_factory.mktemp("pbrt_planted") / "out"
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv(pbrt_writer.TEST_HOOK, str(PLANTED))
+        proc, runs = _pbrt_batch(out, JUDGED, *PLANTED_SETTINGS)
+    return proc, out, runs
+
+
+def _has_power(run):
+    """The run could see the planted error: its own detectable scale (90 % power) is below it."""
+    from conftest import assert_sees
+    assert_sees(run, PLANTED - 1, "every light 2 % brighter")
+
+
+@pytest.mark.slow
+@needs_pbrt
+def test_pbrt_renders_the_scenes_and_judges_them(pbrt_runs):
+    """macbeth_chart_D65 and ggx_copper_50_isolated `ok` against the CMF references and their probes
+    (every ColorChecker patch, the GGX plate's closed form), with the power to see 2 %, band checks
+    run on pbrt's buckets read as 10 nm boxes (those with enough samples judged, and passing);
+    polarizing_plane_0 `unsupported`, naming the camera's polariser; pbrt's version recorded."""
+    proc, out, runs = pbrt_runs
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    for name in JUDGED:
+        run = runs[name]
+        assert (run["status"], run["mode"]) == ("ok", "spectral47"), (name, run["status"], run["reason"])
+        assert run["versions"]["pbrt"].startswith("4 ") and run["versions"]["pbrt_exe"] == str(PBRT)
+        assert run["passes"] == 2 and run["test"]["pass"], (name, run["test"])
+        assert run["probes"] and all(p["pass"] is not False for p in run["probes"]), run["probes"]
+        _has_power(run)
+    chart = {p["name"]: p for p in runs["macbeth_chart_D65"]["probes"]}
+    patches = [p for n, p in chart.items() if n.startswith("lambert patch_")]
+    assert len(patches) == 24 and all(p["pass"] for p in patches)
+    bands = [p for n, p in chart.items() if n.startswith("bands ")]
+    assert len(bands) == 25 and all(p["pass"] is True for p in bands), [(p["name"], p["pass"]) for p in bands]
+    ggx = [p for p in runs["ggx_copper_50_isolated"]["probes"] if p["name"].startswith("ggx copper_plate_50")]
+    assert len(ggx) == 2 and all(p["pass"] is True for p in ggx), ggx
+    polariser = runs["polarizing_plane_0"]
+    assert polariser["status"] == "unsupported" and "plane_camera_0.polarizer" in polariser["reason"]
+
+
+@pytest.mark.slow
+@needs_pbrt
+def test_planted_light_error_in_the_pbrt_route_fails_every_judged_scene(pbrt_runs, planted_runs):
+    """The .pbrt writer's lights 2 % too bright (nothing else changed): every judged scene fails its
+    noise test against the references, with the power to see it, and the run exits 1. The written
+    scene differs from the unplanted run's by that factor on every light's scale."""
+    import re
+    proc, out, runs = planted_runs
+    assert proc.returncode == 1, proc.stdout[-3000:] + proc.stderr[-3000:]
+    scale = re.compile(r'"float scale" \[ ([0-9.e+-]+) \]')
+    for name in JUDGED:
+        run = runs[name]
+        assert run["status"] == "failed" and "noise test" in run["reason"], (name, run["status"], run["reason"])
+        _has_power(run)
+        plain = (pbrt_runs[1] / name / "pbrt" / "scene.pbrt").read_text()
+        planted = (out / name / "pbrt" / "scene.pbrt").read_text()
+        a, b = (np.array([float(x) for x in scale.findall(t)]) for t in (plain, planted))
+        assert len(a) == len(b) > 0 and np.allclose(b / a, PLANTED), (name, a, b)
