@@ -98,10 +98,15 @@ def spectrum(params, name):
     return np.array(v[0::2]), np.array(v[1::2])
 
 
+PBRT_CIE_Y_INTEGRAL = 106.856895  # pbrt-v4 util/spectrum.h CIE_Y_integral: its spectral film's factor
+
+
 def y_sum(wl, vals):
-    """pbrt's SpectrumToPhotometric: the CIE Y table times the spectrum at every whole nanometre."""
+    """The scale pbrt's light and film need to read the spectrum as the IR's radiance: its
+    SpectrumToPhotometric (the CIE Y table times the spectrum at every whole nanometre), which the
+    light divides by, over CIE_Y_integral, which the spectral film multiplies by."""
     cmf_wl, _x, yb, _z = spectra.cie_1931_cmfs()
-    return float(np.sum(yb * np.interp(cmf_wl, wl, vals)))
+    return float(np.sum(yb * np.interp(cmf_wl, wl, vals))) / PBRT_CIE_Y_INTEGRAL
 
 
 def write(scene, tmp_path, name="out"):
@@ -272,9 +277,11 @@ def test_dielectric_eta_is_relative_and_a_dispersive_one_spectral(golden, tmp_pa
 
 def test_lights_carry_the_photometric_scale_pbrt_divides_by(golden, tmp_path):
     """pbrt-v4 divides every light's spectrum by the sum over whole nanometres of y_bar times it
-    (lights.cpp, util/spectrum.cpp SpectrumToPhotometric): the scale written is that sum, so the
-    radiance pbrt emits, scale x L / sum, is the IR's L. For D65 scaled 5 (1.0 at 560 nm times 5)
-    the sum is computed here independently from colour-science's tables."""
+    (lights.cpp, util/spectrum.cpp SpectrumToPhotometric) and its spectral film multiplies by
+    CIE_Y_integral (film.h): the scale written is the sum over CIE_Y_integral, so the film reads
+    scale x L / sum x CIE_Y_integral = L, the IR's radiance. For D65 scaled 5 (1.0 at 560 nm
+    times 5) the sum is computed here independently from colour-science's tables; a flat 2 is 2
+    (to the 2e-7 by which pbrt's constant differs from its table's sum)."""
     import colour
     sc = golden["ggx_glass"]
     parsed = write(sc, tmp_path)
@@ -288,7 +295,7 @@ def test_lights_carry_the_photometric_scale_pbrt_divides_by(golden, tmp_path):
     grid = np.arange(360, 831)
     cmfs = colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"]
     d65_at = np.interp(grid, d65.wavelengths, d65.values) / np.interp(560, d65.wavelengths, d65.values)
-    independent = 5.0 * float(np.sum(np.interp(grid, cmfs.wavelengths, cmfs.values[:, 1]) * d65_at))
+    independent = 5.0 * float(np.sum(np.interp(grid, cmfs.wavelengths, cmfs.values[:, 1]) * d65_at)) / PBRT_CIE_Y_INTEGRAL
     assert params["scale"] == ("float", [pytest.approx(independent, rel=1e-6)])
     assert params["scale"][1][0] / y_sum(wl, vals) == pytest.approx(1.0, rel=1e-8)
     # the black material of an emitter without a BSDF (it blocks and reflects nothing)
@@ -296,6 +303,7 @@ def test_lights_carry_the_photometric_scale_pbrt_divides_by(golden, tmp_path):
     assert kind == "diffuse" and spectrum(mat, "reflectance")[1].tolist() == [0.0, 0.0]
     # the environment, a constant one, a blackbody and a dark one
     chart = copy.deepcopy(golden["macbeth_chart_D50"])
+    assert y_sum([360, 830], [2, 2]) == pytest.approx(2.0, rel=3e-7)
     for radiance, expected_scale in (({"type": "constant", "value": 2.0}, 2.0 * y_sum([360, 830], [1, 1])),
                                      ({"type": "blackbody", "temperature": 3000.0, "scale": 1.5}, None),
                                      ({"type": "constant", "value": 0.0}, 0.0)):
