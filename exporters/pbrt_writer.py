@@ -11,11 +11,14 @@ What each IR field becomes (docs/scene-format.md, "pbrt-v4" section, says the sa
   (a formula) is tabulated at 1 nm.
 - Lights: pbrt divides every light's spectrum by its photometric value (lights.cpp: ``scale /=
   SpectrumToPhotometric(L)``, the sum over whole nanometres 360-830 of the CIE Y function times the
-  spectrum; util/spectrum.cpp). The writer puts that factor back through ``"float scale"``, computed
-  the same way from the same CIE 1931 table (exporters/data: pbrt's CIE_Y table agrees with it to
-  5e-9 at every nanometre), so the emitted radiance is the IR's in absolute terms. A spectrum of
-  photometric value 0 (no emission) is written as the flat spectrum 1 with scale 0 (pbrt would
-  divide 0 by 0).
+  spectrum; util/spectrum.cpp), and its spectral film multiplies what reaches it by CIE_Y_integral
+  (106.856895, film.h SpectralFilm::AddSample; util/spectrum.h). The writer's ``"float scale"`` is
+  the product's inverse, the spectrum's luminance as the IR defines it: sum(y_bar s) / CIE_Y_integral
+  (a flat spectrum 1: scale 1), computed from the same CIE 1931 table (exporters/data: pbrt's CIE_Y
+  table agrees with it to 5e-9 at every nanometre), so the film's buckets hold the IR's absolute
+  radiance (measured: tests/exporters/test_pbrt_renders.py; with the photometric value alone they
+  were CIE_Y_integral times too bright). A spectrum of photometric value 0 (no emission) is written
+  as the flat spectrum 1 with scale 0 (pbrt would divide 0 by 0).
   area emitter -> ``AreaLightSource "diffuse"`` (one-sided, ``twosided`` false, as the IR);
   environment -> ``LightSource "infinite"`` with ``L``; point -> ``"point"`` (``I``, ``from``);
   directional -> ``"distant"`` (``L``, from 0 to the IR's direction of travel); spot -> ``"spot"``
@@ -74,6 +77,7 @@ SAMPLER = "independent"
 SCENE_FILE = "scene.pbrt"
 FILM_FILE = "scene.exr"
 MIN_ROUGH_ALPHA = 1e-3  # util/scattering.h TrowbridgeReitzDistribution::EffectivelySmooth
+CIE_Y_INTEGRAL = 106.856895  # pbrt-v4 util/spectrum.h: the spectral film multiplies by it
 FORMULA_STEP_NM = 1.0  # a blackbody or an IOR model tabulated at every nanometre
 TEST_HOOK = "SPECTRAL_BENCH_TEST_PBRT_LIGHT_SCALE"
 # pbrt-v4 camera space (+x right, +y up, looking down +z) -> the IR's (looking down -z)
@@ -117,6 +121,12 @@ def photometric(wavelengths, values):
     over l = 360, 361, ..., 830 nm of y_bar(l) s(l), y_bar the CIE 1931 table at 1 nm."""
     wl, _xb, yb, _zb = spectra.cie_1931_cmfs()
     return float(np.sum(yb * np.interp(wl, wavelengths, values)))
+
+
+def light_scale(wavelengths, values):
+    """The ``scale`` that makes pbrt's spectral film read the spectrum (wavelengths, values) as the
+    IR's radiance: photometric / CIE_Y_integral (module docstring)."""
+    return photometric(wavelengths, values) / CIE_Y_INTEGRAL
 
 
 def tabulated(spec):
@@ -200,9 +210,10 @@ class _Writer:
 
     # -- writing ----------------------------------------------------------------------------------
     def light_params(self, key, spec):
-        """``"spectrum KEY" [...] "float scale" S`` with S undoing pbrt's photometric normalisation."""
+        """``"spectrum KEY" [...] "float scale" S`` with S undoing pbrt's photometric normalisation
+        and its spectral film's factor."""
         wl, vals = tabulated(spec)
-        y = photometric(wl, vals)
+        y = light_scale(wl, vals)
         if not y > 0:
             return f'{_spectrum_param(key, [spectra.LAMBDA_MIN, spectra.LAMBDA_MAX], [1.0, 1.0])} "float scale" [ 0 ]'
         return f'{_spectrum_param(key, wl, vals)} "float scale" [ {_num(y * self.planted)} ]'
@@ -305,7 +316,8 @@ class _Writer:
         skipped_lights = {o for o, f, _m in self.unsupported if f == "beam_width"}
         lines = [f"# {names.comment_text(sc['name'])} ({names.comment_text(sc.get('case'))}), written from the scene IR "
                  f"v{ir.VERSION} by spectral_bench for pbrt v4 (exporters/pbrt_writer.py)",
-                 "# every light's scale is its spectrum's photometric value, which pbrt divides by (lights.cpp)"]
+                 "# every light's scale is its spectrum's photometric value (which pbrt divides by, lights.cpp) over "
+                 "CIE_Y_integral (which the spectral film multiplies by, film.h)"]
         if self.planted != 1.0:
             lines.append(f"# {TEST_HOOK}={self.planted!r}: every light's scale is multiplied by it (a planted error)")
         for o, f, m in self.unsupported:
