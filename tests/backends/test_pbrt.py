@@ -214,6 +214,19 @@ def test_the_env_file_path_comes_from_the_environment(tmp_path):
     assert proc.returncode == 0 and proc.stdout.strip() == str(tmp_path / "x.json"), proc.stderr
 
 
+def test_missing_pbrt_gives_skipped_jobs_never_passed(golden, tmp_path):
+    """No pbrt where it is looked for: the job is `skipped` with the reason (how to build it), the
+    run renders nothing (exit 4) and the summary lists it; the spectral group, the default, holds pbrt."""
+    from spectral_bench.batch import backends
+    assert "pbrt" in backends.GROUPS["spectral"] and "pbrt" in backends.DEFAULT
+    out = tmp_path / "o"
+    proc = run_batch("-i", write_scene(tmp_path, golden["macbeth_chart_D65"]), "-r", "pbrt",
+                     "-e", f"pbrt={tmp_path / 'no_pbrt'}", "-o", out)
+    runs = metrics(out)["runs"]
+    assert [r["status"] for r in runs] == ["skipped"] and "scripts/build_pbrt.sh" in runs[0]["reason"], runs
+    assert proc.returncode == 4
+    assert "skipped" in (out / "summary.md").read_text()
+
 # -- the spectral film as the backend reads it (a hand-written scene: pbrt's own format) ----------------------------
 def plate_scene(folder, spp=8, size=48, savefp16=False, sampler="independent", reflectance=0.5):
     """A diffuse plate of constant reflectance filling the view under a uniform environment of
