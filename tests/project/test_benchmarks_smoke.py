@@ -30,7 +30,7 @@ SMOKE = {  # script -> (arguments that make it run in seconds, what its output m
     "bench_gpu.py": (["--smoke"], TABLE + r"|Not measured: no CUDA device \(.+\)"),
     "bench_rgb_backends.py": (["--smoke", "--scale", "0.25", "--passes", "2", "--repeats", "1", "--out", "{tmp}"], TABLE),
     "bench_thin_film.py": (["--scale", "0.05", "--spp", "4", "--repeat", "1"], TABLE),
-    "calibrate_fluorescence.py": (["--size", "16", "--spp", "4", "--seeds", "2"], TABLE),
+    "calibrate_fluorescence.py": (["--smoke"], TABLE),
     # its render half (the judge half reads what render cached: CALIBRATION.md has both commands)
     "calibrate_glass_false_alarms.py": (["render", "--seeds", "1", "--scale", "0.25", "-s", "ggx_glass", "--cache", "{tmp}"],
                                         r"ggx_glass seed 0: [0-9.]+ s"),
