@@ -365,19 +365,34 @@ def check_blend(specs, root, timeout=180):
     traceback, every scene of the file recorded under its own name (one bad scene fails alone),
     every failure naming scene, object and field (none a fault of the exporter), every exported
     JSON loading back."""
+    return check_blends([specs], root, timeout)[0]
+
+
+def check_blends(files, root, timeout=180):
+    """``check_blend`` for many files at the cost of two child start-ups: every .blend built by one
+    bpy child (tests/blend_builder.py takes many pairs), all exported by one batch/run.py (one -i
+    each, under ``timeout`` per file). The scenes of file I are renamed ``fI_<name>`` (a run's
+    scene names are unique: outputs are written per scene name), each file's paths (IMAGES) in its
+    own folder ROOT/fI. Returns [{scene name as in ``files``: status}], one per file; asserts for
+    every file and scene what ``check_blend`` asserts."""
     import subprocess
     import sys
     root = Path(root)
-    spec = root / "spec.json"
-    spec.write_text(json.dumps(_with_paths(specs, root)))
-    blend = root / "fuzz.blend"
-    proc = subprocess.run([sys.executable, str(ROOT / "tests" / "blend_builder.py"), str(spec), str(blend)],
-                          capture_output=True, text=True, timeout=timeout)
+    files = [[dict(sc, name=sc["name"] if len(files) == 1 else f"f{i}_{sc['name']}") for sc in specs]
+             for i, specs in enumerate(files)]
+    pairs = []
+    for i, specs in enumerate(files):
+        folder = root if len(files) == 1 else root / f"f{i}"
+        folder.mkdir(parents=True, exist_ok=True)
+        (folder / "spec.json").write_text(json.dumps(_with_paths(specs, folder)))
+        pairs += [str(folder / "spec.json"), str(folder / "fuzz.blend")]
+    proc = subprocess.run([sys.executable, str(ROOT / "tests" / "blend_builder.py"), *pairs],
+                          capture_output=True, text=True, timeout=timeout * len(files))
     assert proc.returncode == 0, proc.stderr[-3000:]
     out = root / "out"
-    proc = subprocess.run([sys.executable, str(ROOT / "batch" / "run.py"), "-i", str(blend), "--export-only",
-                           "--format", "json", "--format", "mitsuba", "-o", str(out)],
-                          capture_output=True, text=True, timeout=timeout, cwd=ROOT)
+    proc = subprocess.run([sys.executable, str(ROOT / "batch" / "run.py"), *sum((["-i", b] for b in pairs[1::2]), []),
+                           "--export-only", "--format", "json", "--format", "mitsuba", "-o", str(out)],
+                          capture_output=True, text=True, timeout=timeout * len(files), cwd=ROOT)
     assert proc.returncode in (0, 1, 2, 3), (proc.returncode, proc.stderr[-3000:])
     assert "Traceback" not in proc.stderr + proc.stdout, proc.stderr[-3000:]
     runs = json.loads((out / "metrics.json").read_text())["runs"]
@@ -388,8 +403,10 @@ def check_blend(specs, root, timeout=180):
             m = SCENE_PROBLEM.search(r["reason"] or "")
             assert m and m.group(1) == r["scene"] and m.group(3) not in ("", "(file)"), r["reason"]
             assert "a fault of the exporter" not in r["reason"], r["reason"]
-    assert set(statuses) == {s["name"] for s in specs}, (sorted(statuses), proc.stderr[-2000:])
+    assert set(statuses) == {s["name"] for specs in files for s in specs}, (sorted(statuses), proc.stderr[-2000:])
     for name, status in statuses.items():
         if "failed" not in status:
             ir_json.load(out / name / "json" / f"{name}.json")  # what was exported loads back
-    return {name: "failed" if "failed" in s else "exported" for name, s in statuses.items()}
+    verdict = {name: "failed" if "failed" in s else "exported" for name, s in statuses.items()}
+    return [{(sc["name"] if len(files) == 1 else sc["name"].split("_", 1)[1]): verdict[sc["name"]] for sc in specs}
+            for specs in files]

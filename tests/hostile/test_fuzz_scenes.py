@@ -3,7 +3,8 @@ ends in a validation error naming scene, object and field, or in exports that pa
 their folder. A bounded number of scenes here; benchmarks/fuzz_scenes.py makes the long run
 (benchmarks/FUZZ.md). Ordinary .blend files too (scene_fuzz.blend_scenes, tests/blend_builder.py):
 batch/run.py --export-only on each, every scene exported or failed alone naming scene, object and
-field (3 files of 4 scenes here, about 20 s; 20 of 6 marked slow)."""
+field (3 files of 4 scenes here, 20 of 6: both slow; each test's files built by one bpy child
+and exported by one batch/run.py)."""
 import tempfile
 
 import pytest
@@ -82,22 +83,30 @@ def test_the_checker_sees_what_it_must_refuse(tmp_path):
     assert scene_fuzz.snapshot(tmp_path) != before
 
 
-def _blend(specs):
-    with tempfile.TemporaryDirectory() as d:
-        return scene_fuzz.check_blend(specs, d)
+def _blend_files(strategy, examples, tmp_path):
+    """The ``examples`` .blend files Hypothesis draws from ``strategy`` (derandomised, as ``fuzz``),
+    built by one bpy child and exported by one batch/run.py (scene_fuzz.check_blends: two child
+    start-ups in all instead of two per file); every file's scenes exported or failed by name."""
+    files = []
+
+    @fuzz(examples)
+    @given(strategy)
+    def draw(specs):
+        files.append(specs)
+
+    draw()
+    assert len(files) == examples, len(files)
+    for statuses in scene_fuzz.check_blends(files, tmp_path):
+        assert set(statuses.values()) <= {"exported", "failed"}
 
 
 @pytest.mark.slow  # renders (or builds .blend files) through the real entry point: the full suite, not the fast subset
-@fuzz(3)
-@given(scene_fuzz.blend_scenes())
-def test_ordinary_blend_files_export_scene_by_scene_or_fail_by_name(specs):
-    """Hypothesis-made .blend files (a bpy child per file of 4 scenes) through batch/run.py
-    --export-only: each scene exported or failed alone naming scene, object and field."""
-    assert set(_blend(specs).values()) <= {"exported", "failed"}
+def test_ordinary_blend_files_export_scene_by_scene_or_fail_by_name(tmp_path):
+    """Hypothesis-made .blend files (3 files of 4 scenes, built by one bpy child) through
+    batch/run.py --export-only: each scene exported or failed alone naming scene, object and field."""
+    _blend_files(scene_fuzz.blend_scenes(), 3, tmp_path)
 
 
 @pytest.mark.slow
-@fuzz(20)
-@given(scene_fuzz.blend_scenes(n=6))
-def test_ordinary_blend_files_many(specs):
-    assert set(_blend(specs).values()) <= {"exported", "failed"}
+def test_ordinary_blend_files_many(tmp_path):
+    _blend_files(scene_fuzz.blend_scenes(n=6), 20, tmp_path)
