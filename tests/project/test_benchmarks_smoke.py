@@ -24,7 +24,7 @@ SMOKE = {  # script -> (arguments that make it run in seconds, what its output m
                             "--results", "{tmp}/runs.jsonl"], TABLE),
     "bench_dispersion.py": (["--size", "16", "--spp", "4", "--repeat", "1", "--calls", "1"], TABLE),
     "bench_engines.py": (["--smoke"], TABLE),
-    "bench_export_render.py": (["--scale", "0.05", "--repeat", "1"], TABLE),
+    "bench_export_render.py": (["--smoke"], TABLE),
     "bench_fixed_cost.py": (["--smoke", "--flip", "on"], TABLE),  # --flip on: its FLIP hooks run (a broken hook fails it)
     "bench_fluorescence.py": (["--scale", "0.1", "--spp", "4", "--rounds", "1", "--repeat", "1"], TABLE),
     "bench_gpu.py": (["--smoke"], TABLE + r"|Not measured: no CUDA device \(.+\)"),
