@@ -7,6 +7,9 @@ import numpy as np
 from . import Fit, Model, RegionEvidence, least_squares, reference_model, region_fit
 
 FAMILY = "materials"
+# ev.cache's key for the GGX probe's quadrature geometry (probes/ggx.py expected_images ``cache``),
+# shared by every trial of every plate model of one render: only D, G and the Fresnel table change
+GGX_CACHE = "ggx quadrature"
 
 
 def _plates(ev):
@@ -37,7 +40,7 @@ def _plate_model(change, starts=None, bounds=None):
             if x is not None:
                 sc = copy.deepcopy(scene)
                 change(sc["objects"][plate]["bsdf"], x)
-            mask, images = ggx.expected_images(sc, plate, light_ids, w, h)
+            mask, images = ggx.expected_images(sc, plate, light_ids, w, h, cache=ev.cache.setdefault(GGX_CACHE, {}))
             return np.where(mask[..., None], images["cie1931"], 0.0)
         truth = predict(None)
         mask = np.any(truth != 0, axis=-1)
@@ -85,7 +88,7 @@ def _reference_plate_model(change, starts):
                 for plate in plates:
                     if x is not None:
                         change(sc["objects"][plate]["bsdf"], x)
-                    mask, images = ggx.expected_images(sc, plate, lights, w, h)
+                    mask, images = ggx.expected_images(sc, plate, lights, w, h, cache=ev.cache.setdefault(GGX_CACHE, {}))
                     total += np.where(mask[..., None], images["cie1931"], 0.0)
                 cache[key] = total
             return cache[key]
