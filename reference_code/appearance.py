@@ -65,7 +65,8 @@ __all__ = [
     "ggx_d", "beckmann_d", "microfacet_d", "ggx_d_aniso", "ggx_lambda", "beckmann_lambda", "smith_lambda",
     "ggx_lambda_aniso", "smith_g1", "smith_g", "ggx_sample_vndf", "ggx_vndf_pdf", "ggx_reflection_pdf",
     "reflect", "fresnel_amplitudes", "fresnel_dielectric", "fresnel_conductor", "fresnel_conductor_sp",
-    "mueller_reflection", "airy_amplitudes", "airy_sum", "airy_reflectance", "airy_mueller", "airy_incoherent_reflectance",
+    "mueller_reflection", "airy_amplitudes", "airy_sum", "airy_reflectance", "airy_mueller",
+    "airy_incoherent_reflectance",
     "sellmeier", "cauchy", "art_fluorescence_bands", "FLUORESCENCE_DOMAIN_NM",
 ]
 

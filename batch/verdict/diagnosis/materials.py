@@ -91,7 +91,8 @@ def _reference_plate_model(change, starts):
                 for plate in plates:
                     if x is not None:
                         change(sc["objects"][plate]["bsdf"], x)
-                    mask, images = ggx.expected_images(sc, plate, lights, w, h, cache=ev.cache.setdefault(GGX_CACHE, {}))
+                    mask, images = ggx.expected_images(sc, plate, lights, w, h,
+                                                       cache=ev.cache.setdefault(GGX_CACHE, {}))
                     total += np.where(mask[..., None], images["cie1931"], 0.0)
                 cache[key] = total
             return cache[key]

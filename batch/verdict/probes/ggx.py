@@ -215,7 +215,8 @@ def expected_images(scene, plate, light_ids, w, h, observers=(colorimetry.GROUND
     obj = objs[plate]
     geo = None
     if cache is not None:
-        gkey = json.dumps([cam, obj["shape"], [objs[i]["shape"] for i in light_ids], w, h], sort_keys=True, default=repr)
+        gkey = json.dumps([cam, obj["shape"], [objs[i]["shape"] for i in light_ids], w, h], sort_keys=True,
+                          default=repr)
         geo = cache.setdefault(gkey, {})
     if geo and "mask" in geo:
         mask = geo["mask"]
