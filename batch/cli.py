@@ -20,7 +20,7 @@ from ..exporters import names as scene_names, validate
 from .backends import BACKENDS, DEFAULT, GROUPS, command, expand, known_names
 
 DEVICES = ("cpu", "gpu", "auto")  # --device (batch/backends/mitsuba/cuda.py)
-FORMATS = ("mitsuba", "art", "json", "cycles", "luxcore")
+FORMATS = ("mitsuba", "art", "json", "cycles", "luxcore", "pbrt")
 # Bounds of the options (documented in --help and docs/running.md's option table)
 MAX_SPP = validate.render_limit("spp")[1]  # samples per pixel: the scene IR's own bound
 MAX_SCALE = 4.0            # resolution scale
@@ -330,7 +330,7 @@ def parser():
     ap.add_argument("--export-only", action="store_true", help="export scenes, render nothing")
     ap.add_argument("--format", action="append", type=T["format"], metavar="FORMAT",
                     help=f"export format for --export-only (repeatable: {', '.join(FORMATS)}; default: mitsuba, art, json; "
-                         "cycles writes a .blend, luxcore its .scn/.cfg)")
+                         "cycles writes a .blend, luxcore its .scn/.cfg, pbrt a pbrt-v4 scene.pbrt)")
     ap.add_argument("-l", "--log", type=T["log"], metavar="FILE", help="also write the log to FILE")
     ap.add_argument("-v", "--visualize", action="store_true", help="open the results when done")
     ap.add_argument("--settings", action="extend", nargs="+", type=T["settings"], metavar="FILE",

@@ -1,5 +1,5 @@
-"""Regenerate golden/ir/<scene>.json from scenes.blend, and golden/mitsuba/<scene>/ and
-golden/art/<scene>/ from those (an explicit request; review the diff).
+"""Regenerate golden/ir/<scene>.json from scenes.blend, and golden/mitsuba/<scene>/,
+golden/art/<scene>/ and golden/pbrt/<scene>/ from those (an explicit request; review the diff).
 
     .venv/bin/python scripts/update_golden.py
 """
@@ -14,7 +14,7 @@ def main():
     pkg_bootstrap.package()
     from spectral_bench.batch import blend_input
     import shutil
-    from spectral_bench.exporters import art_writer, ir_json, mitsuba_writer
+    from spectral_bench.exporters import art_writer, ir_json, mitsuba_writer, pbrt_writer
     golden = pkg_bootstrap.ROOT / "golden"
     for name, result in blend_input.load_blend(pkg_bootstrap.ROOT / "scenes.blend"):
         if isinstance(result, Exception):
@@ -28,6 +28,8 @@ def main():
         (golden / "mitsuba" / name / "load_plugins.py").unlink(missing_ok=True)
         shutil.rmtree(golden / "art" / name, ignore_errors=True)
         print("wrote", art_writer.write(result, golden / "art" / name)[0])
+        shutil.rmtree(golden / "pbrt" / name, ignore_errors=True)
+        print("wrote", pbrt_writer.write(result, golden / "pbrt" / name))
 
 
 if __name__ == "__main__":

@@ -23,7 +23,7 @@ from pathlib import Path
 
 from hypothesis import strategies as st
 
-from spectral_bench.exporters import art_writer, ir_json, luxcore_writer, mitsuba_writer, names, rgb_scene, validate
+from spectral_bench.exporters import art_writer, ir_json, luxcore_writer, mitsuba_writer, names, pbrt_writer, rgb_scene, validate
 
 ROOT = Path(__file__).resolve().parents[1]
 GOLDEN = ROOT / "golden"
@@ -205,6 +205,46 @@ def check_mitsuba(path, scene):
             assert _inside(folder / value, folder) and (folder / value).is_file(), value
 
 
+PBRT_DIRECTIVES = {"Transform", "Translate", "Camera", "Sampler", "Integrator", "PixelFilter", "Film", "WorldBegin",
+                   "LightSource", "AreaLightSource", "AttributeBegin", "AttributeEnd", "Material", "Shape"}
+_PBRT_TOKEN = re.compile(r'\s*(?:("[^"\n]*")|([\[\]])|([-+0-9.eE]+)|([A-Z][A-Za-z]*)|(true|false))')
+
+
+def check_pbrt(path, scene):
+    """scene.pbrt: comments of the safe characters only; outside them only the pbrt writer's
+    directives, quoted strings, numbers and brackets; one shape per object written and one light per
+    emitter, environment and delta light written; every file it names inside the folder."""
+    folder = Path(path).parent
+    left_out = {o for o, f, _m in pbrt_writer.unsupported(scene)}
+    code = []
+    for line in Path(path).read_text().splitlines():
+        if line.lstrip().startswith("#"):
+            assert re.fullmatch(r"\s*# [ A-Za-z0-9_.,:;()\[\]+=%/'?*-]*", line), line
+            continue
+        code.append(line)
+    text, pos, directives, strings = "\n".join(code), 0, [], []
+    while pos < len(text):
+        m = _PBRT_TOKEN.match(text, pos)
+        if m is None or m.end() == pos:
+            if text[pos:].strip() == "":
+                break
+            raise AssertionError(f"outside the pbrt writer's grammar: {text[pos:pos + 60]!r}")
+        if m.group(4):
+            assert m.group(4) in PBRT_DIRECTIVES, f"unexpected directive {m.group(4)}"
+            directives.append(m.group(4))
+        if m.group(1):
+            strings.append(m.group(1).strip('"'))
+        pos = m.end()
+    written = [o for o in scene["objects"] if o["name"] not in left_out]
+    assert directives.count("Shape") == len(written), "a shape was injected or lost"
+    lights = sum(1 for o in written if o.get("emitter")) + (1 if scene.get("environment") else 0)
+    lights += sum(1 for light in scene.get("lights", []) if light["name"] not in left_out)
+    assert directives.count("LightSource") + directives.count("AreaLightSource") == lights
+    for value in strings:
+        if value.startswith("meshes/"):
+            assert _inside(folder / value, folder) and (folder / value).is_file(), value
+
+
 def check_luxcore(cfg, rgb):
     scn = Path(cfg).parent / "scene.scn"
     objects = set()
@@ -251,6 +291,9 @@ def check_detailed(text, root):
     check_mitsuba(path, scene)
     arm, _missing = art_writer.write(scene, out / name / "art")
     check_art(arm, art_vocabulary_cached())
+    for o, f, m in pbrt_writer.unsupported(scene):  # what pbrt-v4 cannot express: named object, field, why
+        assert all(isinstance(x, str) and x for x in (o, f, m)), (o, f, m)
+    check_pbrt(pbrt_writer.write(scene, out / name / "pbrt"), scene)
     json_path = ir_json.write(scene, out / name / "json" / f"{name}.json")
     back = ir_json.load(json_path)  # the self-contained file reads back to the same scene
     assert {k: v for k, v in back.items() if not k.startswith("_")} == {k: v for k, v in scene.items() if not k.startswith("_")}

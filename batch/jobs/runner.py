@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 
 
-from ...exporters import art_writer, ir_json
+from ...exporters import art_writer, ir_json, pbrt_writer
 from .. import backends, records, scene_sources
 from ..verdict import baseline as baselines, known, status
 from ..report import html as report, summary
@@ -230,12 +230,16 @@ class Run:
                     sc, target = scene, self.out / name / fmt
                     try:
                         sc = planning.for_run(scene, self.opts)
-                        reason = ""
+                        reason, who = "", ""
                         if fmt == "json":
                             path = ir_json.write(sc, target / f"{name}.json")
                         elif fmt == "art":
                             path, missing = art_writer.write(sc, target, ggx=bool(self.opts["art_ggx"]))
-                            reason = "; ".join(f"{o}.{f}: {m}" for o, f, m in missing)
+                            reason, who = "; ".join(f"{o}.{f}: {m}" for o, f, m in missing), "ART"
+                        elif fmt == "pbrt":
+                            path = pbrt_writer.write(sc, target)
+                            reason = "; ".join(f"{o}.{f}: {m}" for o, f, m in pbrt_writer.unsupported(sc))
+                            who = "pbrt-v4"
                         elif fmt in rgb:
                             mode, why = rgb[fmt].mode_for(sc)
                             if mode is None:
@@ -247,7 +251,7 @@ class Run:
                             path = backends.get("mitsuba").export(sc, target)
                         # an export that leaves something out says so: "unsupported", not "ok"
                         self.add(planning.entry(name, sc, fmt, mode="export", image=None, status="unsupported" if reason else "ok",
-                                        reason=(f"ART cannot express: {reason}" if reason else ""),
+                                        reason=(f"{who} cannot express: {reason}" if reason else ""),
                                         export=str(path.relative_to(self.out))))
                     except Exception as exc:  # noqa: BLE001 - one bad export must not stop the batch
                         self.add(planning.entry(name, sc, fmt, mode="export", status="failed", reason=f"export failed: {exc}"))

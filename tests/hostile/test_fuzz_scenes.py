@@ -77,6 +77,15 @@ def test_the_checker_sees_what_it_must_refuse(tmp_path):
     arm.write_text(arm.read_text().replace("// floor", "// floor\n__attribute__((constructor)) static void f(void) { abort(); }"))
     with pytest.raises(AssertionError, match="grammar"):
         scene_fuzz.check_art(arm, scene_fuzz.art_vocabulary())
+    from spectral_bench.exporters import pbrt_writer
+    pbrt = pbrt_writer.write(scene, tmp_path / "p")
+    scene_fuzz.check_pbrt(pbrt, scene)
+    pbrt.write_text(pbrt.read_text().replace("# floor", "# floor\nShape \"sphere\""))
+    with pytest.raises(AssertionError, match="shape was injected"):
+        scene_fuzz.check_pbrt(pbrt, scene)
+    pbrt.write_text(pbrt.read_text().replace("WorldBegin", "WorldBegin\nInclude \"/etc/passwd\""))
+    with pytest.raises(AssertionError, match="unexpected directive"):
+        scene_fuzz.check_pbrt(pbrt, scene)
     (tmp_path / "outside").mkdir()
     before = scene_fuzz.snapshot(tmp_path)
     (tmp_path / "outside" / "x").write_text(json.dumps({}))

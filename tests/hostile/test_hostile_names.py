@@ -9,7 +9,7 @@ import pytest
 
 import scene_fuzz
 from conftest import metrics, run_batch, write_hand_made_metrics, write_scene
-from spectral_bench.exporters import art_writer, ir_json, luxcore_writer, mitsuba_writer, names, rgb_scene, validate
+from spectral_bench.exporters import art_writer, ir_json, luxcore_writer, mitsuba_writer, names, pbrt_writer, rgb_scene, validate
 
 INJECTION = "reflectance\n__attribute__((constructor)) static void pwn(void) { system(\"touch pwned\"); }\n//"
 
@@ -98,7 +98,8 @@ def test_writers_refuse_a_path_name_even_when_validation_was_skipped(golden, tmp
     sc = copy.deepcopy(golden["dispersion_prism"])
     _obj(sc, "prism")["name"] = "../../../../escaped/prism"
     before = scene_fuzz.snapshot(tmp_path)
-    for write in (lambda: mitsuba_writer.write(sc, tmp_path / "out" / "m"), lambda: art_writer.write(sc, tmp_path / "out" / "a")):
+    for write in (lambda: mitsuba_writer.write(sc, tmp_path / "out" / "m"), lambda: art_writer.write(sc, tmp_path / "out" / "a"),
+                  lambda: pbrt_writer.write(sc, tmp_path / "out" / "p")):
         with pytest.raises(ValueError, match="refusing"):
             write()
     assert not any(p.startswith("escaped") or "escaped" in p for p in set(scene_fuzz.snapshot(tmp_path)) - set(before))
@@ -121,6 +122,10 @@ def test_free_text_cannot_leave_its_comment_in_any_format(golden, tmp_path):
     comment = next(c for c in ET.parse(xml, parser=ET.XMLParser(target=ET.TreeBuilder(insert_comments=True))).getroot()
                    .iter() if c.tag is ET.Comment)
     assert "-->" not in comment.text and "\n" not in comment.text
+    pbrt = pbrt_writer.write(sc, tmp_path / "pbrt")  # pbrt's comments end only at a newline
+    code = [line for line in pbrt.read_text().splitlines() if not line.lstrip().startswith("#")]
+    assert code == [line for line in pbrt_writer.write(golden["ggx_copper_50"], tmp_path / "pbrt_clean").read_text()
+                    .splitlines() if not line.lstrip().startswith("#")]
     rgb = rgb_scene.build(sc, ("ggx", "beckmann"), approximate=True)
     rgb["objects"][0]["name"] = "floor\nscene.lights.injected.type = \"sky2\""
     cfg = luxcore_writer.write(rgb, tmp_path / "luxcore")
@@ -142,14 +147,14 @@ def test_a_hostile_scene_among_good_ones_fails_alone_and_nothing_leaves_out(gold
     before = scene_fuzz.snapshot(tmp_path)
     out = tmp_path / "OUT"
     proc = run_batch("-i", good, bad, "--export-only", "--format", "mitsuba", "--format", "art", "--format", "json",
-                     "--format", "luxcore", "-o", out, timeout=600)
+                     "--format", "luxcore", "--format", "pbrt", "-o", out, timeout=600)
     assert proc.returncode == 1, proc.stderr[-2000:]
     runs = metrics(out)["runs"]
     by_scene = {}
     for r in runs:
         by_scene.setdefault(r["scene"], []).append(r)
     good_status = {r["backend"]: r["status"] for r in by_scene["ggx_copper_50_isolated"]}
-    assert good_status == {"mitsuba": "ok", "art": "unsupported", "json": "ok", "luxcore": "ok"}, good_status
+    assert good_status == {"mitsuba": "ok", "art": "unsupported", "json": "ok", "luxcore": "ok", "pbrt": "ok"}, good_status
     failed = [r for r in runs if r["status"] == "failed"]
     assert failed and all("objects[" in r["reason"] and "name" in r["reason"] for r in failed)
     assert any("case" in r["reason"] for r in failed)

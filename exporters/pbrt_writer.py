@@ -1,0 +1,363 @@
+"""pbrt-v4 writer: IR scene -> folder with a scene.pbrt (pbrt-v4's scene format) and, for meshes,
+meshes/<object>.ply. The folder renders with ``pbrt scene.pbrt`` unchanged (pbrt-v4 at 5f7a6068;
+parameter names read from its source: lights.cpp, materials.cpp, cameras.cpp, film.cpp).
+
+What each IR field becomes (docs/scene-format.md, "pbrt-v4" section, says the same per field):
+
+- Spectra: inline ``"spectrum NAME" [l0 v0 l1 v1 ...]`` (a PiecewiseLinearSpectrum, which pbrt
+  evaluates as 0 outside its first and last wavelength), tabulated at the IR's own samples (a
+  sampled spectrum's points, a named table's points) and always from 360 to 830 nm with the edge
+  values continued, as the IR defines them; a constant is the two points 360 and 830; a blackbody
+  (a formula) is tabulated at 1 nm.
+- Lights: pbrt divides every light's spectrum by its photometric value (lights.cpp: ``scale /=
+  SpectrumToPhotometric(L)``, the sum over whole nanometres 360-830 of the CIE Y function times the
+  spectrum; util/spectrum.cpp), and its spectral film multiplies what reaches it by CIE_Y_integral
+  (106.856895, film.h SpectralFilm::AddSample; util/spectrum.h). The writer's ``"float scale"`` is
+  the product's inverse, the spectrum's luminance as the IR defines it: sum(y_bar s) / CIE_Y_integral
+  (a flat spectrum 1: scale 1), computed from the same CIE 1931 table (exporters/data: pbrt's CIE_Y
+  table agrees with it to 5e-9 at every nanometre), so the film's buckets hold the IR's absolute
+  radiance (measured: tests/exporters/test_pbrt_renders.py; with the photometric value alone they
+  were CIE_Y_integral times too bright). A spectrum of photometric value 0 (no emission) is written
+  as the flat spectrum 1 with scale 0 (pbrt would divide 0 by 0).
+  area emitter -> ``AreaLightSource "diffuse"`` (one-sided, ``twosided`` false, as the IR);
+  environment -> ``LightSource "infinite"`` with ``L``; point -> ``"point"`` (``I``, ``from``);
+  directional -> ``"distant"`` (``L``, from 0 to the IR's direction of travel); spot -> ``"spot"``
+  only with a hard edge (beam_width = cutoff_angle: ``coneangle``, ``conedelta`` 0), as pbrt's
+  falloff is a smoothstep in cos between the cones, not the IR's linear falloff in angle.
+- Materials: diffuse -> ``"diffuse"`` ``reflectance``; conductor -> ``"conductor"`` with ``eta``
+  and ``k`` (named conductors as the IR's own tables, not pbrt's named spectra); dielectric ->
+  ``"dielectric"`` with ``"float eta"`` int_ior / ext_ior (pbrt's eta is relative and its outside
+  is the normal's side, as the IR's ext_ior), a dispersion model as ``"spectrum eta"`` n(l) / ext_ior
+  at 1 nm (pbrt then follows the first wavelength of a sample and terminates the other three,
+  materials.h); GGX alpha as ``"float roughness"`` with ``"bool remaproughness" false`` (pbrt's
+  default remaps roughness to alpha); an object without a BSDF, or an emitter without one, is a
+  black diffuse (reflectance 0).
+- Shapes: rectangle -> a two-triangle ``trianglemesh`` over [-1, 1]^2 under its ``Transform``
+  (pbrt flips a triangle's normal when the transform swaps handedness, which is the IR's normal
+  transformed by the inverse transpose); sphere -> ``"sphere"`` translated to its centre; mesh ->
+  ``"plymesh"`` of its vertices in world coordinates (flat faces: no normals in the file).
+- Camera: ``"perspective"``; its ``Transform`` is the inverse of the IR's to_world times
+  diag(1, 1, -1) (pbrt's camera looks down +z, raster y down); ``fov`` with an explicit
+  ``screenwindow`` so that ``fov`` spans the IR's fov_axis and the principal point is the image
+  centre (pbrt's own fov spans the shorter axis). ``PixelFilter "box"`` of radius 0.5 (a pixel
+  averages its own area), ``Sampler "independent"`` with ``pixelsamples`` = spp and no seed
+  (``pbrt --seed`` sets each pass's), ``Integrator "path"`` with ``maxdepth`` = max_depth - 1
+  (pbrt counts scattering events, the IR path segments; cpu/integrators.cpp PathIntegrator::Li).
+  The IR's ``ptracer`` asks for an estimator, not an image: pbrt's path tracer estimates the
+  same image (a collimated emitter, which needs light tracing, is unsupported anyway).
+- Film: ``"spectral"`` (FILM below): full floats (``savefp16`` false), box buckets over 360-830 nm.
+
+What pbrt-v4 cannot express is returned by :func:`unsupported` as (object, field, message), and
+the written file leaves that part out and says so at its top, never a stand-in: polarisation
+(camera.polarizer, render.output stokes), fluorescence, thin-film interference, Beckmann
+microfacets, collimated emitters, spots with a soft edge, 0 < alpha < 1e-3 (pbrt renders it as a
+perfect mirror: TrowbridgeReitzDistribution::EffectivelySmooth), and a one-sided surface (diffuse,
+conductor) whose back faces the camera (pbrt's diffuse and conductor reflect on both sides).
+
+Known differences that are not a field: pbrt's GGX shadowing-masking is the height-correlated
+1 / (1 + Lambda(o) + Lambda(i)) (util/scattering.h), the IR's the separable G1(o) G1(i); the
+written file says so where it writes a rough GGX surface, and the verdict judges the difference.
+pbrt samples light spectra at the nearest whole nanometre (DenselySampledSpectrum), exact for the
+box buckets of tables whose knots are whole nanometres.
+
+Names reach the file only as comments (names.comment_text) and mesh file names through
+names.file_stem. Test hook (planted error, like ART's): ``SPECTRAL_BENCH_TEST_PBRT_LIGHT_SCALE=F``
+multiplies every light's scale by F and the file says so in a comment.
+"""
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+
+from . import dispersion, ir, mesh_io, names, spectra
+
+FILM = {"nbuckets": 47, "lambdamin": 360.0, "lambdamax": 830.0}  # 47 box buckets of 10 nm
+SAMPLER = "independent"
+SCENE_FILE = "scene.pbrt"
+FILM_FILE = "scene.exr"
+MIN_ROUGH_ALPHA = 1e-3  # util/scattering.h TrowbridgeReitzDistribution::EffectivelySmooth
+CIE_Y_INTEGRAL = 106.856895  # pbrt-v4 util/spectrum.h: the spectral film multiplies by it
+FORMULA_STEP_NM = 1.0  # a blackbody or an IOR model tabulated at every nanometre
+TEST_HOOK = "SPECTRAL_BENCH_TEST_PBRT_LIGHT_SCALE"
+# pbrt-v4 camera space (+x right, +y up, looking down +z) -> the IR's (looking down -z)
+_CAMERA_FLIP = np.diag([1.0, 1.0, -1.0, 1.0])
+
+
+def planted_scale():
+    """The test hook's factor on every light (1.0 when unset); not a positive number: an error."""
+    text = os.environ.get(TEST_HOOK)
+    if not text:
+        return 1.0
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not (value > 0 and math.isfinite(value)):
+        raise ValueError(f"{TEST_HOOK}={text!r}: expected a positive number (a test hook's planted factor)")
+    return value
+
+
+def _num(x):
+    """A number as pbrt reads it (9 significant digits: a float32 exactly); never nan or inf."""
+    x = float(x)
+    if not math.isfinite(x):
+        raise ValueError(f"refusing to write {x!r} into a pbrt scene")
+    text = f"{x:.9g}"
+    return "0" if text == "-0" else text
+
+
+def _list(values):
+    return "[ " + " ".join(_num(v) for v in values) + " ]"
+
+
+def _matrix(m):
+    """pbrt's Transform takes the matrix column by column (parser: Transpose of the 16 values)."""
+    return _list(np.asarray(m, dtype=np.float64).T.reshape(-1))
+
+
+def photometric(wavelengths, values):
+    """pbrt's SpectrumToPhotometric of the piecewise-linear spectrum (wavelengths, values): the sum
+    over l = 360, 361, ..., 830 nm of y_bar(l) s(l), y_bar the CIE 1931 table at 1 nm."""
+    wl, _xb, yb, _zb = spectra.cie_1931_cmfs()
+    return float(np.sum(yb * np.interp(wl, wavelengths, values)))
+
+
+def light_scale(wavelengths, values):
+    """The ``scale`` that makes pbrt's spectral film read the spectrum (wavelengths, values) as the
+    IR's radiance: photometric / CIE_Y_integral (module docstring)."""
+    return photometric(wavelengths, values) / CIE_Y_INTEGRAL
+
+
+def tabulated(spec):
+    """(wavelengths, values) over 360-830 nm at the IR's own samples (a formula at 1 nm)."""
+    if spectra.is_constant(spec):
+        v = float(spec["value"])
+        return np.array([spectra.LAMBDA_MIN, spectra.LAMBDA_MAX]), np.array([v, v])
+    if spec.get("type") == "blackbody":
+        return spectra.tabulate(spec, step=FORMULA_STEP_NM)
+    return spectra.tabulate(spec)
+
+
+def _spectrum_param(name, wl, vals):
+    pairs = " ".join(f"{_num(w)} {_num(v)}" for w, v in zip(wl, vals))
+    return f'"spectrum {name}" [ {pairs} ]'
+
+
+def _camera_position(scene):
+    return np.asarray(scene["camera"]["to_world"], dtype=np.float64)[:3, 3]
+
+
+class _Writer:
+    def __init__(self, scene, out_dir):
+        self.scene, self.out = scene, Path(out_dir)
+        self.unsupported = []  # (object, field, message)
+        self.planted = planted_scale()
+
+    # -- what pbrt-v4 cannot express -----------------------------------------------------------
+    def bsdf_problems(self, obj):
+        """[(field, message)] of an object's BSDF pbrt-v4 cannot express."""
+        b, out = obj.get("bsdf"), []
+        if not b:
+            return out
+        if b.get("fluorescence") is not None:
+            out.append(("bsdf.fluorescence", "pbrt v4 has no fluorescence (no reradiation between wavelengths "
+                        "anywhere in src/pbrt)"))
+        if b.get("thin_film") is not None:
+            out.append(("bsdf.thin_film", "pbrt v4 has no thin film interference (no Airy sum material)"))
+        rough = b.get("roughness")
+        if rough is not None and rough["alpha"] > 0:
+            if rough["distribution"] != "ggx":
+                out.append(("bsdf.roughness.distribution", f"{rough['distribution']} microfacets: pbrt v4's are "
+                            "Trowbridge Reitz (GGX) only"))
+            elif rough["alpha"] < MIN_ROUGH_ALPHA:
+                out.append(("bsdf.roughness.alpha", f"alpha {rough['alpha']:g}: pbrt v4 renders alpha below "
+                            f"{MIN_ROUGH_ALPHA:g} as a perfect mirror (TrowbridgeReitzDistribution::EffectivelySmooth)"))
+        if b["type"] in ("diffuse", "conductor") and obj["shape"]["type"] == "rectangle":
+            m = np.asarray(obj["shape"]["to_world"], dtype=np.float64)
+            normal = np.linalg.inv(m[:3, :3]).T @ np.array([0.0, 0.0, 1.0])
+            if normal @ (_camera_position(self.scene) - m[:3, 3]) < 0:
+                out.append(("bsdf.type", f"a one sided {b['type']} seen from behind by the camera: the IR's is black "
+                            "there, pbrt v4's reflects on both sides"))
+        return out
+
+    def scene_problems(self):
+        sc, found = self.scene, []
+        cam = sc["camera"]
+        if cam.get("polarizer"):
+            found.append((cam.get("name", "camera"), "polarizer", "pbrt v4 has no polarisation (no Stokes vectors, "
+                          "no polariser)"))
+        if sc["render"].get("output", "rgb") == "stokes":
+            found.append(("render", "output", "Stokes output: pbrt v4 has no polarisation"))
+        for obj in sc["objects"]:
+            em = obj.get("emitter") or {}
+            if em.get("type") == "collimated":
+                found.append((obj["name"], "emitter.type", "pbrt v4 has no collimated (directional area) emitter"))
+            found += [(obj["name"], f, m) for f, m in self.bsdf_problems(obj)]
+        for light in sc.get("lights", []):
+            if light["type"] == "spot" and light["beam_width"] < light["cutoff_angle"]:
+                found.append((light["name"], "beam_width", f"a soft spot edge ({light['beam_width']:g} to "
+                              f"{light['cutoff_angle']:g} degrees): pbrt v4's falls off as a smoothstep in cos, "
+                              "the IR's linearly in angle"))
+        reported = {f.split(".")[-1] for _o, f, _m in found}
+        by_need = {"polarization": ("polarizer", "output"), "fluorescence": ("fluorescence",),
+                   "thin_film": ("thin_film",)}
+        for need in sc.get("needs", []):
+            if need in by_need and not reported & set(by_need[need]):
+                found.append(("scene", "needs", f"{need}: pbrt v4 has none"))
+        self.unsupported = found
+        return found
+
+    # -- writing ----------------------------------------------------------------------------------
+    def light_params(self, key, spec):
+        """``"spectrum KEY" [...] "float scale" S`` with S undoing pbrt's photometric normalisation
+        and its spectral film's factor."""
+        wl, vals = tabulated(spec)
+        y = light_scale(wl, vals)
+        if not y > 0:
+            return f'{_spectrum_param(key, [spectra.LAMBDA_MIN, spectra.LAMBDA_MAX], [1.0, 1.0])} "float scale" [ 0 ]'
+        return f'{_spectrum_param(key, wl, vals)} "float scale" [ {_num(y * self.planted)} ]'
+
+    def material(self, obj):
+        b = obj.get("bsdf")
+        if not b:
+            return 'Material "diffuse" "spectrum reflectance" [ 360 0 830 0 ]', []
+        notes = []
+        rough = b.get("roughness")
+        alpha = rough["alpha"] if rough is not None else 0.0
+        rough_text = f'"float roughness" [ {_num(alpha)} ] "bool remaproughness" false'
+        if alpha > 0:
+            notes.append("GGX: pbrt v4's shadowing and masking is height correlated, 1 / (1 + Lambda(o) + Lambda(i)); "
+                         "the IR's is separable, G1(o) G1(i)")
+        if b["type"] == "diffuse":
+            return f'Material "diffuse" {_spectrum_param("reflectance", *tabulated(b["reflectance"]))}', notes
+        if b["type"] == "conductor":
+            eta, k = spectra.named_conductor(b["material"]) if "material" in b else (b["eta"], b["k"])
+            return (f'Material "conductor"\n    {_spectrum_param("eta", *tabulated(eta))}\n'
+                    f'    {_spectrum_param("k", *tabulated(k))}\n    {rough_text}'), notes
+        if b["type"] == "dielectric":
+            ext = float(b.get("ext_ior", ir.AIR_IOR))
+            value = b["int_ior"]
+            if dispersion.is_dispersive(value):
+                wl = np.arange(spectra.LAMBDA_MIN, spectra.LAMBDA_MAX + 0.5, FORMULA_STEP_NM)
+                eta = _spectrum_param("eta", wl, dispersion.ior(value, wl) / ext)
+                notes.append("dispersive: n(l) / ext_ior at 1 nm; pbrt follows one wavelength per sample past it")
+            else:
+                eta = f'"float eta" [ {_num(float(value) / ext)} ]'
+            return f'Material "dielectric"\n    {eta}\n    {rough_text}', notes
+        raise ValueError(f"unknown bsdf type {b['type']!r}")
+
+    def shape(self, obj):
+        s = obj["shape"]
+        if s["type"] == "rectangle":
+            return [f"Transform {_matrix(s['to_world'])}",
+                    'Shape "trianglemesh" "point3 P" [ -1 -1 0 1 -1 0 1 1 0 -1 1 0 ] "integer indices" [ 0 1 2 0 2 3 ]']
+        if s["type"] == "sphere":
+            c = s["center"]
+            return [f"Translate {_num(c[0])} {_num(c[1])} {_num(c[2])}",
+                    f'Shape "sphere" "float radius" [ {_num(s["radius"])} ]']
+        if s["type"] == "mesh":
+            verts, faces = mesh_io.load_mesh(s, self.scene.get("_base_dir"))
+            v = np.asarray(verts, dtype=np.float64).reshape(-1, 3)
+            if "to_world" in s:  # world coordinates, as the Mitsuba and ART exports place them
+                m = np.asarray(s["to_world"], dtype=np.float64)
+                v = v @ m[:3, :3].T + m[:3, 3]
+            rel = f"meshes/{names.file_stem(obj['name'])}.ply"
+            mesh_io.write_ply(self.out / rel, v, faces)
+            return [f'Shape "plymesh" "string filename" "{rel}"']
+        raise ValueError(f"unknown shape type {s['type']!r}")
+
+    def camera(self):
+        sc = self.scene
+        cam, r = sc["camera"], sc["render"]
+        w, h = int(r["width"]), int(r["height"])
+        to_world = np.asarray(cam["to_world"], dtype=np.float64) @ _CAMERA_FLIP
+        camera_from_world = np.linalg.inv(to_world)
+        if cam.get("fov_axis", "x") == "x":
+            window = (-1.0, 1.0, -h / w, h / w)
+        else:
+            window = (-w / h, w / h, -1.0, 1.0)
+        return [f"# camera {names.comment_text(cam.get('name', 'camera'))}: the IR's to_world times diag(1, 1, -1), inverted",
+                f"Transform {_matrix(camera_from_world)}",
+                f'Camera "perspective" "float fov" [ {_num(cam["fov"])} ] "float screenwindow" {_list(window)}',
+                f'Sampler "{SAMPLER}" "integer pixelsamples" [ {int(r["spp"])} ]',
+                f'Integrator "path" "integer maxdepth" [ {int(r.get("max_depth", 64)) - 1} ]',
+                'PixelFilter "box" "float xradius" [ 0.5 ] "float yradius" [ 0.5 ]',
+                f'Film "spectral" "integer xresolution" [ {w} ] "integer yresolution" [ {h} ] '
+                f'"string filename" "{FILM_FILE}"\n    "bool savefp16" false "integer nbuckets" [ {FILM["nbuckets"]} ] '
+                f'"float lambdamin" [ {_num(FILM["lambdamin"])} ] "float lambdamax" [ {_num(FILM["lambdamax"])} ]']
+
+    def lights(self, skipped=()):
+        out = []
+        for light in self.scene.get("lights", []):
+            out.append(f"# light {names.comment_text(light['name'])}")
+            if light["name"] in skipped:
+                out.append("# (left out: see NOT EXPRESSED above)")
+                continue
+            kind = light["type"]
+            if kind == "point":
+                p = light["position"]
+                out.append(f'LightSource "point" "point3 from" {_list(p)}\n    {self.light_params("I", light["intensity"])}')
+            elif kind == "spot":
+                cutoff = float(light["cutoff_angle"])
+                out += ["AttributeBegin", f"    Transform {_matrix(light['to_world'])}",
+                        f'    LightSource "spot" "point3 from" [ 0 0 0 ] "point3 to" [ 0 0 1 ] "float coneangle" '
+                        f'[ {_num(cutoff)} ] "float conedelta" [ 0 ]\n        {self.light_params("I", light["intensity"])}',
+                        "AttributeEnd"]
+            else:
+                out.append(f'LightSource "distant" "point3 from" [ 0 0 0 ] "point3 to" {_list(light["direction"])}\n'
+                           f'    {self.light_params("L", light["irradiance"])}')
+        return out
+
+    def write(self):
+        sc = self.scene
+        self.scene_problems()
+        skipped = {o for o, f, _m in self.unsupported if f.startswith(("bsdf", "emitter"))}
+        skipped_lights = {o for o, f, _m in self.unsupported if f == "beam_width"}
+        lines = [f"# {names.comment_text(sc['name'])} ({names.comment_text(sc.get('case'))}), written from the scene IR "
+                 f"v{ir.VERSION} by spectral_bench for pbrt v4 (exporters/pbrt_writer.py)",
+                 "# every light's scale is its spectrum's photometric value (which pbrt divides by, lights.cpp) over "
+                 "CIE_Y_integral (which the spectral film multiplies by, film.h)"]
+        if self.planted != 1.0:
+            lines.append(f"# {TEST_HOOK}={self.planted!r}: every light's scale is multiplied by it (a planted error)")
+        for o, f, m in self.unsupported:
+            lines.append(f"# NOT EXPRESSED (left out): {names.comment_text(f'{o}.{f}: {m}')}")
+        if sc["render"].get("integrator", "path") != "path":
+            lines.append(f"# the IR asks for the {names.comment_text(sc['render']['integrator'])} estimator; pbrt's path "
+                         "tracer estimates the same image")
+        lines += self.camera()
+        lines += ["", "WorldBegin", ""]
+        env = sc.get("environment")
+        if env:
+            lines.append(f'LightSource "infinite" {self.light_params("L", env["radiance"])}')
+        lines += self.lights(skipped_lights)
+        for obj in sc["objects"]:
+            lines.append("")
+            lines.append(f"# {names.comment_text(obj['name'])}")
+            if obj["name"] in skipped:
+                lines.append("# (left out: see NOT EXPRESSED above)")
+                continue
+            material, notes = self.material(obj)
+            lines.append("AttributeBegin")
+            lines += [f"    # {names.comment_text(n)}" for n in notes]
+            lines.append("    " + material)
+            em = obj.get("emitter")
+            if em:
+                lines.append(f'    AreaLightSource "diffuse" {self.light_params("L", em["radiance"])} "bool twosided" false')
+            lines += ["    " + line for line in self.shape(obj)]
+            lines.append("AttributeEnd")
+        self.out.mkdir(parents=True, exist_ok=True)
+        path = self.out / SCENE_FILE
+        path.write_text("\n".join(lines) + "\n")
+        return path
+
+
+def unsupported(scene):
+    """[(object, field, message)] of what pbrt-v4 cannot express in ``scene``, without writing."""
+    return _Writer(scene, Path(".")).scene_problems()
+
+
+def write(scene, out_dir):
+    """Write ``scene`` into ``out_dir``; returns the path of scene.pbrt. What pbrt-v4 cannot express
+    (``unsupported(scene)``) is left out and named at the top of the file."""
+    return _Writer(scene, out_dir).write()
