@@ -1,6 +1,7 @@
 """Time export of all scenes and render of each scene, Mitsuba scalar vs LLVM variant, same spp.
 
     .venv/bin/python benchmarks/bench_export_render.py [--scale 0.5] [--repeat 3] [--write]
+    .venv/bin/python benchmarks/bench_export_render.py --smoke   # seconds: checks the script runs; not recorded
 
 Prints a Markdown table; --write also records it in benchmarks/RESULTS.md. Render time counts
 the render calls only; wall time adds process start, scene loading and JIT compilation.
@@ -32,7 +33,14 @@ def main():
     ap.add_argument("--scale", type=float, default=0.5)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--write", action="store_true")
+    ap.add_argument("--smoke", action="store_true", help="checks that the script runs: every scene exported once, "
+                    "two rendered at scale 0.05 (the first with a scalar twin, the first with a Python plugin); "
+                    "never recorded")
     args = ap.parse_args()
+    if args.smoke and args.write:
+        ap.error("--smoke checks that the script runs; its figures are never recorded: leave out --write")
+    if args.smoke:
+        args.scale, args.repeat = 0.05, 1
 
     t = time.perf_counter()
     scenes = scene_sources.load([str(scene_sources.DEFAULT_BLEND)])
@@ -47,17 +55,21 @@ def main():
                 ir_json.write(sc, Path(tmp) / f"{k}" / name / "json" / f"{name}.json")
             export_times.append(time.perf_counter() - t)
 
+    from spectral_bench.batch.backends.mitsuba.backend import PLUGIN_NEEDS, scalar_twin
     backend = backends.get("mitsuba")
-    rows = []
+    rows, kinds = [], set()
     with tempfile.TemporaryDirectory() as tmp:
         for name, sc in scenes:
             sc = plan.for_run(sc, {"spp": None, "scale": args.scale})
-            xml = backend.export(sc, Path(tmp) / name)
-            mode, _ = backend.mode_for(sc)
-            from spectral_bench.batch.backends.mitsuba.backend import PLUGIN_NEEDS, scalar_twin
             # a scene with a Python plugin would call Python per ray in a scalar variant (and the
             # fluorescent integrator needs a JIT one): its plugin's own benchmark times it instead
-            scalar = None if PLUGIN_NEEDS & set(sc.get("needs", [])) else scalar_twin(mode)
+            plugin = bool(PLUGIN_NEEDS & set(sc.get("needs", [])))
+            if args.smoke and plugin in kinds:
+                continue  # --smoke: one scene of each kind
+            kinds.add(plugin)
+            xml = backend.export(sc, Path(tmp) / name)
+            mode, _ = backend.mode_for(sc)
+            scalar = None if plugin else scalar_twin(mode)
             fast = mode
             times = {}
             for variant in (v for v in (scalar, fast) if v):

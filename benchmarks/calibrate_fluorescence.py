@@ -1,6 +1,7 @@
 """Calibrate the lone fluorescent sphere's probe (batch/verdict/probes/fluorescence.py).
 
     .venv/bin/python benchmarks/calibrate_fluorescence.py [--size 64] [--spp 64] [--seeds 10] [--write]
+    .venv/bin/python benchmarks/calibrate_fluorescence.py --smoke   # seconds: checks the script runs; not recorded
 
 Measures, without and with renders:
 1. how far a film's colour matching may sit from the probe's CIE 1931 integral (1 nm tables,
@@ -54,9 +55,16 @@ def main():
     ap.add_argument("--spp", type=int, default=64)
     ap.add_argument("--seeds", type=int, default=10)
     ap.add_argument("--write", action="store_true")
+    ap.add_argument("--smoke", action="store_true", help="checks that the script runs: table 1 on the probe's scene "
+                    "alone (the others take the same path), 16x16, 4 spp, one seed; not recorded")
     args = ap.parse_args()
+    if args.smoke and args.write:
+        ap.error("--smoke checks that the script runs; its figures are never recorded: leave out --write")
+    if args.smoke:
+        args.size, args.spp, args.seeds = 16, 4, 1
     scenes = {n: s for n, s in scene_sources.load([str(scene_sources.DEFAULT_BLEND)])
-              if isinstance(s, dict) and s.get("case") == "fluorescence"}
+              if isinstance(s, dict) and s.get("case") == "fluorescence"
+              and (not args.smoke or n == "fluorescent_sphere_lone")}
     lone = scenes["fluorescent_sphere_lone"]
 
     with tempfile.TemporaryDirectory() as tmp:

@@ -65,7 +65,8 @@ __all__ = [
     "ggx_d", "beckmann_d", "microfacet_d", "ggx_d_aniso", "ggx_lambda", "beckmann_lambda", "smith_lambda",
     "ggx_lambda_aniso", "smith_g1", "smith_g", "ggx_sample_vndf", "ggx_vndf_pdf", "ggx_reflection_pdf",
     "reflect", "fresnel_amplitudes", "fresnel_dielectric", "fresnel_conductor", "fresnel_conductor_sp",
-    "mueller_reflection", "airy_amplitudes", "airy_reflectance", "airy_mueller", "airy_incoherent_reflectance",
+    "mueller_reflection", "airy_amplitudes", "airy_sum", "airy_reflectance", "airy_mueller",
+    "airy_incoherent_reflectance",
     "sellmeier", "cauchy", "art_fluorescence_bands", "FLUORESCENCE_DOMAIN_NM",
 ]
 
@@ -305,7 +306,14 @@ def airy_amplitudes(cos1, wavelength_nm, n1, n2, thickness_nm, n3):
     real index n1 and a base n3 = eta + i k, for light at cos1 in the exterior: the Airy sum
     r = (r12 + r23 e^{i phi}) / (1 + r12 r23 e^{i phi}), phi = 4 pi d n2 cos(theta2) / lambda
     (Born and Wolf 1.6.4 eq. 57-58)."""
-    q2, (r12s, r12p), (r23s, r23p) = _film_interfaces(cos1, n1, n2, n3)
+    return airy_sum(_film_interfaces(cos1, n1, n2, n3), wavelength_nm, thickness_nm)
+
+
+def airy_sum(interfaces, wavelength_nm, thickness_nm):
+    """airy_amplitudes from the film's interfaces (q2, (r12_s, r12_p), (r23_s, r23_p)) as
+    ``_film_interfaces`` gives them: the only part that depends on the thickness, so that a fit
+    over it computes the interfaces once."""
+    q2, (r12s, r12p), (r23s, r23p) = interfaces
     e = np.exp(1j * 4.0 * np.pi * thickness_nm * q2 / np.asarray(wavelength_nm, dtype=np.float64))
     return tuple((r12 + r23 * e) / (1.0 + r12 * r23 * e) for r12, r23 in ((r12s, r23s), (r12p, r23p)))
 

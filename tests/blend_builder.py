@@ -1,7 +1,10 @@
 """Build a .blend of ordinary Blender scenes from a JSON description, with real bpy, as a user's
 file would hold them: run in a child process (one per file, however many scenes it holds)
 
-    python tests/blend_builder.py SPEC.json OUT.blend
+    python tests/blend_builder.py SPEC.json OUT.blend [SPEC2.json OUT2.blend ...]
+
+(several pairs: the files one after the other in the same child, each from Blender's factory
+settings, so that many files pay for one bpy start-up)
 
 SPEC.json is a list of scenes, each
     {"name": str,
@@ -30,7 +33,7 @@ def build(specs, out):
     import pkg_bootstrap
     pkg_bootstrap.package()
     from spectral_bench.exporters import blender_properties
-    blender_properties.register()  # the annotated sphere of "sphere": true
+    blender_properties.register()  # the annotated sphere of "sphere": true (a no-op when already registered)
     first = True
     for spec in specs:
         scene = bpy.context.scene if first else bpy.data.scenes.new(spec["name"])
@@ -131,4 +134,7 @@ def _scene(bpy, scene, spec):
 
 
 if __name__ == "__main__":
-    build(json.loads(Path(sys.argv[1]).read_text()), Path(sys.argv[2]))
+    if len(sys.argv) < 3 or len(sys.argv) % 2 == 0:
+        sys.exit("usage: blend_builder.py SPEC.json OUT.blend [SPEC2.json OUT2.blend ...]")
+    for spec_path, out_path in zip(sys.argv[1::2], sys.argv[2::2]):
+        build(json.loads(Path(spec_path).read_text()), Path(out_path))

@@ -48,6 +48,12 @@ ALL_SCENES = sorted(REFLECTANCE + SPECTRAL_ACCURACY + POLARIZATION + IRIDESCENCE
 # be counted here (and in benchmarks/TESTS.md) and judge at RANDOM_TEST_ALPHA.
 SUITE_ALPHA = 1e-3
 RANDOM_JUDGEMENTS = {  # test (file::function) -> how many families of tests its random renders are judged by
+    # pbrt-v4's renders of the pbrt writer's exports (tests/exporters/test_pbrt_renders.py): the same image for
+    # one seed whatever the thread count on one build, but a build per machine: one family each (the Lambert
+    # probe; the plate's region test; the GGX probe)
+    "exporters/test_pbrt_renders.py::test_white_plate_under_a_d65_environment_has_the_lambert_probes_radiance": 1,
+    "exporters/test_pbrt_renders.py::test_white_plate_under_a_d65_area_light_has_lamberts_irradiance": 1,
+    "exporters/test_pbrt_renders.py::test_ggx_copper_plate_under_an_area_light_matches_the_ggx_probe_with_pbrts_shadowing": 1,
     # LuxCore (tests/backends/test_rgb_backends.py, tests/backends/test_warm_rgb.py)
     "backends/test_rgb_backends.py::test_units_agree_with_the_closed_form_and_with_mitsuba": 2,  # closed form, against Mitsuba
     "backends/test_rgb_backends.py::test_render_is_judged_on_its_own_noise[luxcore]": 1,  # the block test

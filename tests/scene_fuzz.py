@@ -23,7 +23,7 @@ from pathlib import Path
 
 from hypothesis import strategies as st
 
-from spectral_bench.exporters import art_writer, ir_json, luxcore_writer, mitsuba_writer, names, rgb_scene, validate
+from spectral_bench.exporters import art_writer, ir_json, luxcore_writer, mitsuba_writer, names, pbrt_writer, rgb_scene, validate
 
 ROOT = Path(__file__).resolve().parents[1]
 GOLDEN = ROOT / "golden"
@@ -205,6 +205,46 @@ def check_mitsuba(path, scene):
             assert _inside(folder / value, folder) and (folder / value).is_file(), value
 
 
+PBRT_DIRECTIVES = {"Transform", "Translate", "Camera", "Sampler", "Integrator", "PixelFilter", "Film", "WorldBegin",
+                   "LightSource", "AreaLightSource", "AttributeBegin", "AttributeEnd", "Material", "Shape"}
+_PBRT_TOKEN = re.compile(r'\s*(?:("[^"\n]*")|([\[\]])|([-+0-9.eE]+)|([A-Z][A-Za-z]*)|(true|false))')
+
+
+def check_pbrt(path, scene):
+    """scene.pbrt: comments of the safe characters only; outside them only the pbrt writer's
+    directives, quoted strings, numbers and brackets; one shape per object written and one light per
+    emitter, environment and delta light written; every file it names inside the folder."""
+    folder = Path(path).parent
+    left_out = {o for o, f, _m in pbrt_writer.unsupported(scene)}
+    code = []
+    for line in Path(path).read_text().splitlines():
+        if line.lstrip().startswith("#"):
+            assert re.fullmatch(r"\s*# [ A-Za-z0-9_.,:;()\[\]+=%/'?*-]*", line), line
+            continue
+        code.append(line)
+    text, pos, directives, strings = "\n".join(code), 0, [], []
+    while pos < len(text):
+        m = _PBRT_TOKEN.match(text, pos)
+        if m is None or m.end() == pos:
+            if text[pos:].strip() == "":
+                break
+            raise AssertionError(f"outside the pbrt writer's grammar: {text[pos:pos + 60]!r}")
+        if m.group(4):
+            assert m.group(4) in PBRT_DIRECTIVES, f"unexpected directive {m.group(4)}"
+            directives.append(m.group(4))
+        if m.group(1):
+            strings.append(m.group(1).strip('"'))
+        pos = m.end()
+    written = [o for o in scene["objects"] if o["name"] not in left_out]
+    assert directives.count("Shape") == len(written), "a shape was injected or lost"
+    lights = sum(1 for o in written if o.get("emitter")) + (1 if scene.get("environment") else 0)
+    lights += sum(1 for light in scene.get("lights", []) if light["name"] not in left_out)
+    assert directives.count("LightSource") + directives.count("AreaLightSource") == lights
+    for value in strings:
+        if value.startswith("meshes/"):
+            assert _inside(folder / value, folder) and (folder / value).is_file(), value
+
+
 def check_luxcore(cfg, rgb):
     scn = Path(cfg).parent / "scene.scn"
     objects = set()
@@ -251,6 +291,9 @@ def check_detailed(text, root):
     check_mitsuba(path, scene)
     arm, _missing = art_writer.write(scene, out / name / "art")
     check_art(arm, art_vocabulary_cached())
+    for o, f, m in pbrt_writer.unsupported(scene):  # what pbrt-v4 cannot express: named object, field, why
+        assert all(isinstance(x, str) and x for x in (o, f, m)), (o, f, m)
+    check_pbrt(pbrt_writer.write(scene, out / name / "pbrt"), scene)
     json_path = ir_json.write(scene, out / name / "json" / f"{name}.json")
     back = ir_json.load(json_path)  # the self-contained file reads back to the same scene
     assert {k: v for k, v in back.items() if not k.startswith("_")} == {k: v for k, v in scene.items() if not k.startswith("_")}
@@ -365,19 +408,34 @@ def check_blend(specs, root, timeout=180):
     traceback, every scene of the file recorded under its own name (one bad scene fails alone),
     every failure naming scene, object and field (none a fault of the exporter), every exported
     JSON loading back."""
+    return check_blends([specs], root, timeout)[0]
+
+
+def check_blends(files, root, timeout=180):
+    """``check_blend`` for many files at the cost of two child start-ups: every .blend built by one
+    bpy child (tests/blend_builder.py takes many pairs), all exported by one batch/run.py (one -i
+    each, under ``timeout`` per file). The scenes of file I are renamed ``fI_<name>`` (a run's
+    scene names are unique: outputs are written per scene name), each file's paths (IMAGES) in its
+    own folder ROOT/fI. Returns [{scene name as in ``files``: status}], one per file; asserts for
+    every file and scene what ``check_blend`` asserts."""
     import subprocess
     import sys
     root = Path(root)
-    spec = root / "spec.json"
-    spec.write_text(json.dumps(_with_paths(specs, root)))
-    blend = root / "fuzz.blend"
-    proc = subprocess.run([sys.executable, str(ROOT / "tests" / "blend_builder.py"), str(spec), str(blend)],
-                          capture_output=True, text=True, timeout=timeout)
+    files = [[dict(sc, name=sc["name"] if len(files) == 1 else f"f{i}_{sc['name']}") for sc in specs]
+             for i, specs in enumerate(files)]
+    pairs = []
+    for i, specs in enumerate(files):
+        folder = root if len(files) == 1 else root / f"f{i}"
+        folder.mkdir(parents=True, exist_ok=True)
+        (folder / "spec.json").write_text(json.dumps(_with_paths(specs, folder)))
+        pairs += [str(folder / "spec.json"), str(folder / "fuzz.blend")]
+    proc = subprocess.run([sys.executable, str(ROOT / "tests" / "blend_builder.py"), *pairs],
+                          capture_output=True, text=True, timeout=timeout * len(files))
     assert proc.returncode == 0, proc.stderr[-3000:]
     out = root / "out"
-    proc = subprocess.run([sys.executable, str(ROOT / "batch" / "run.py"), "-i", str(blend), "--export-only",
-                           "--format", "json", "--format", "mitsuba", "-o", str(out)],
-                          capture_output=True, text=True, timeout=timeout, cwd=ROOT)
+    proc = subprocess.run([sys.executable, str(ROOT / "batch" / "run.py"), *sum((["-i", b] for b in pairs[1::2]), []),
+                           "--export-only", "--format", "json", "--format", "mitsuba", "-o", str(out)],
+                          capture_output=True, text=True, timeout=timeout * len(files), cwd=ROOT)
     assert proc.returncode in (0, 1, 2, 3), (proc.returncode, proc.stderr[-3000:])
     assert "Traceback" not in proc.stderr + proc.stdout, proc.stderr[-3000:]
     runs = json.loads((out / "metrics.json").read_text())["runs"]
@@ -388,8 +446,10 @@ def check_blend(specs, root, timeout=180):
             m = SCENE_PROBLEM.search(r["reason"] or "")
             assert m and m.group(1) == r["scene"] and m.group(3) not in ("", "(file)"), r["reason"]
             assert "a fault of the exporter" not in r["reason"], r["reason"]
-    assert set(statuses) == {s["name"] for s in specs}, (sorted(statuses), proc.stderr[-2000:])
+    assert set(statuses) == {s["name"] for specs in files for s in specs}, (sorted(statuses), proc.stderr[-2000:])
     for name, status in statuses.items():
         if "failed" not in status:
             ir_json.load(out / name / "json" / f"{name}.json")  # what was exported loads back
-    return {name: "failed" if "failed" in s else "exported" for name, s in statuses.items()}
+    verdict = {name: "failed" if "failed" in s else "exported" for name, s in statuses.items()}
+    return [{(sc["name"] if len(files) == 1 else sc["name"].split("_", 1)[1]): verdict[sc["name"]] for sc in specs}
+            for specs in files]

@@ -31,6 +31,8 @@ fresnel = appearance._amplitudes  # (r_s, r_p) from medium a into medium b given
 film_amplitudes = appearance.airy_amplitudes  # complex (r_s, r_p) of the film system
 film_reflectance = appearance.airy_reflectance  # (R_s, R_p): the coherent Airy sum
 incoherent_reflectance = appearance.airy_incoherent_reflectance  # thick lossless film, intensities add
+film_interfaces = appearance._film_interfaces  # (q2, r12 (s, p), r23 (s, p)): the film system but its thickness
+airy_sum = appearance.airy_sum  # film_amplitudes from film_interfaces and the thickness
 
 
 def unpolarized_reflectance(cos1, wavelength_nm, n1, n2, thickness_nm, n3):

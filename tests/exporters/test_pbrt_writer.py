@@ -549,3 +549,19 @@ def test_the_planted_light_error_scales_every_light_and_says_so(golden, tmp_path
     monkeypatch.setenv(pbrt_writer.TEST_HOOK, "-1")
     with pytest.raises(ValueError, match=pbrt_writer.TEST_HOOK):
         pbrt_writer.write(sc, tmp_path / "bad")
+
+
+def test_an_emitter_with_a_bsdf_reflects_and_emits(golden, tmp_path):
+    """An object with both: its material and its area light in one attribute block (pbrt attaches
+    the AreaLightSource to the shapes that follow it there), a sphere emitting outwards."""
+    sc = copy.deepcopy(golden["ggx_glass"])
+    sphere = _obj(sc, "glass_sphere")
+    sphere["emitter"] = {"type": "area", "radiance": {"type": "constant", "value": 0.25}}
+    sphere["bsdf"] = {"type": "diffuse", "reflectance": {"type": "constant", "value": 0.3}}
+    blk = _block_of(write(sc, tmp_path), sc, "glass_sphere")
+    kinds = [(d[0], d[1]) for d in blk if d[0] in ("Material", "AreaLightSource", "Shape")]
+    assert kinds == [("Material", "diffuse"), ("AreaLightSource", "diffuse"), ("Shape", "sphere")]
+    light = next(d for d in blk if d[0] == "AreaLightSource")[2]
+    assert spectrum(light, "L")[1].tolist() == [0.25, 0.25]
+    assert light["scale"] == ("float", [pytest.approx(y_sum([360, 830], [0.25, 0.25]), rel=1e-8)])
+    assert spectrum(next(d for d in blk if d[0] == "Material")[2], "reflectance")[1].tolist() == [0.3, 0.3]

@@ -3,7 +3,8 @@ ends in a validation error naming scene, object and field, or in exports that pa
 their folder. A bounded number of scenes here; benchmarks/fuzz_scenes.py makes the long run
 (benchmarks/FUZZ.md). Ordinary .blend files too (scene_fuzz.blend_scenes, tests/blend_builder.py):
 batch/run.py --export-only on each, every scene exported or failed alone naming scene, object and
-field (3 files of 4 scenes here, about 20 s; 20 of 6 marked slow)."""
+field (3 files of 4 scenes here, 20 of 6: both slow; each test's files built by one bpy child
+and exported by one batch/run.py)."""
 import tempfile
 
 import pytest
@@ -76,28 +77,45 @@ def test_the_checker_sees_what_it_must_refuse(tmp_path):
     arm.write_text(arm.read_text().replace("// floor", "// floor\n__attribute__((constructor)) static void f(void) { abort(); }"))
     with pytest.raises(AssertionError, match="grammar"):
         scene_fuzz.check_art(arm, scene_fuzz.art_vocabulary())
+    from spectral_bench.exporters import pbrt_writer
+    pbrt = pbrt_writer.write(scene, tmp_path / "p")
+    scene_fuzz.check_pbrt(pbrt, scene)
+    pbrt.write_text(pbrt.read_text().replace("# floor", "# floor\nShape \"sphere\""))
+    with pytest.raises(AssertionError, match="shape was injected"):
+        scene_fuzz.check_pbrt(pbrt, scene)
+    pbrt.write_text(pbrt.read_text().replace("WorldBegin", "WorldBegin\nInclude \"/etc/passwd\""))
+    with pytest.raises(AssertionError, match="unexpected directive"):
+        scene_fuzz.check_pbrt(pbrt, scene)
     (tmp_path / "outside").mkdir()
     before = scene_fuzz.snapshot(tmp_path)
     (tmp_path / "outside" / "x").write_text(json.dumps({}))
     assert scene_fuzz.snapshot(tmp_path) != before
 
 
-def _blend(specs):
-    with tempfile.TemporaryDirectory() as d:
-        return scene_fuzz.check_blend(specs, d)
+def _blend_files(strategy, examples, tmp_path):
+    """The ``examples`` .blend files Hypothesis draws from ``strategy`` (derandomised, as ``fuzz``),
+    built by one bpy child and exported by one batch/run.py (scene_fuzz.check_blends: two child
+    start-ups in all instead of two per file); every file's scenes exported or failed by name."""
+    files = []
+
+    @fuzz(examples)
+    @given(strategy)
+    def draw(specs):
+        files.append(specs)
+
+    draw()
+    assert len(files) == examples, len(files)
+    for statuses in scene_fuzz.check_blends(files, tmp_path):
+        assert set(statuses.values()) <= {"exported", "failed"}
 
 
 @pytest.mark.slow  # renders (or builds .blend files) through the real entry point: the full suite, not the fast subset
-@fuzz(3)
-@given(scene_fuzz.blend_scenes())
-def test_ordinary_blend_files_export_scene_by_scene_or_fail_by_name(specs):
-    """Hypothesis-made .blend files (a bpy child per file of 4 scenes) through batch/run.py
-    --export-only: each scene exported or failed alone naming scene, object and field."""
-    assert set(_blend(specs).values()) <= {"exported", "failed"}
+def test_ordinary_blend_files_export_scene_by_scene_or_fail_by_name(tmp_path):
+    """Hypothesis-made .blend files (3 files of 4 scenes, built by one bpy child) through
+    batch/run.py --export-only: each scene exported or failed alone naming scene, object and field."""
+    _blend_files(scene_fuzz.blend_scenes(), 3, tmp_path)
 
 
 @pytest.mark.slow
-@fuzz(20)
-@given(scene_fuzz.blend_scenes(n=6))
-def test_ordinary_blend_files_many(specs):
-    assert set(_blend(specs).values()) <= {"exported", "failed"}
+def test_ordinary_blend_files_many(tmp_path):
+    _blend_files(scene_fuzz.blend_scenes(n=6), 20, tmp_path)

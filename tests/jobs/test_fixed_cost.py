@@ -11,6 +11,10 @@ after: benchmarks/ENGINES.md).
 - a probe's colour table integrates its rows at once (exporters/colorimetry.py ``xyz_rows``);
 - the prism probe clips the pixel boxes of many wavelengths in one call (probes/prism.py);
 - the spectral tables are remembered per material and light (probes/common.py ``remembered``);
+- the GGX quadrature's geometry is kept across a fit's trial materials (probes/ggx.py
+  ``expected_images(cache=)``, the diagnosis's alpha, Beckmann and no-k fits);
+- the Airy probe's sub-rays and film interfaces are kept across a fit's trial thicknesses
+  (probes/thin_film.py ``expected_images(cache=)``, the diagnosis's film models);
 - the default engine's verdict thread loads what the verdicts need while the first job renders.
 """
 import json
@@ -150,6 +154,63 @@ def test_spectral_tables_are_remembered_and_read_only(golden):
     assert all(np.array_equal(a, b) for a, b in zip(first, fresh))
     with pytest.raises(ValueError):
         first[1][0, 0] = 0.0  # shared by every caller: never written
+
+
+def test_ggx_geometry_kept_across_trial_materials_gives_the_plain_images(golden):
+    """The diagnosis's fits reuse the GGX quadrature's geometry between trials (only D, G and the
+    Fresnel table change): every trial's image must be the plain computation's, to rounding, in an
+    order that goes back to a material already seen, changes the distribution and drops k (a new
+    Fresnel table: its colours must not be the cached ones)."""
+    import copy
+
+    from spectral_bench.batch.verdict.diagnosis import materials
+    from spectral_bench.batch.verdict.probes import ggx
+    scene = golden["ggx_copper_50"]
+    plates, lights = materials._ggx_plates(scene)  # the plate and its light, the floor aside
+    plate = plates[0]
+    changes = [("alpha", 0.3), ("alpha", 0.05), ("alpha", None), ("distribution", "beckmann"), ("k", 0.0),
+               ("alpha", 0.3)]
+    cache = {}
+    for what, value in changes:
+        sc = copy.deepcopy(scene)
+        bsdf = sc["objects"][plate]["bsdf"]
+        if what == "distribution":
+            bsdf["roughness"]["distribution"] = value
+        elif what == "k":
+            eta, _ = ggx._eta_k(bsdf)
+            bsdf.pop("material", None)
+            bsdf["eta"], bsdf["k"] = eta, {"type": "constant", "value": value}
+        elif value is not None:
+            bsdf["roughness"]["alpha"] = value
+        mask, images = ggx.expected_images(sc, plate, lights, 48, 36, cache=cache)
+        plain_mask, plain = ggx.expected_images(sc, plate, lights, 48, 36)
+        assert mask.any() and np.array_equal(mask, plain_mask)
+        got, want = images["cie1931"], plain["cie1931"]
+        assert np.max(np.abs(got - want)) <= 1e-12 * np.max(np.abs(want)), (what, value)
+    again = ggx.expected_images(scene, plate, lights, 48, 36, cache=cache)[1]["cie1931"]
+    assert np.array_equal(again, ggx.expected_images(scene, plate, lights, 48, 36, cache=cache)[1]["cie1931"])
+    assert len(cache) == 1  # one geometry for all of them
+
+
+def test_film_geometry_kept_across_trial_thicknesses_gives_the_plain_images(golden):
+    """The diagnosis's thickness fit reuses the Airy probe's sub-rays and the film's interfaces
+    between trials (only the Airy sum's phase changes): every trial's image and mask must be the
+    plain computation's, for thicknesses that go back to one already seen and to no film (0)."""
+    import copy
+
+    from spectral_bench.batch.verdict.probes import thin_film
+    scene = golden["iridescent_sphere_smooth"]
+    i = next(k for k, o in enumerate(scene["objects"]) if thin_film.applies(o))
+    declared = scene["objects"][i]["bsdf"]["thin_film"]["thickness"]
+    cache = {}
+    for nm in (declared * 1.05, 0.0, declared * 1.05):
+        sc = copy.deepcopy(scene)
+        sc["objects"][i]["bsdf"]["thin_film"]["thickness"] = nm
+        got, mask = thin_film.expected_image(sc, i, 24, 20, cache=cache)
+        want, plain_mask = thin_film.expected_image(sc, i, 24, 20)
+        assert mask.any() and np.array_equal(mask, plain_mask)
+        assert np.max(np.abs(got - want)) <= 1e-12 * np.max(np.abs(want)), nm
+    assert len(cache) == 2  # one geometry, one set of interfaces
 
 
 def test_prestart_does_not_wait_for_a_flip_in_flight(tmp_path):

@@ -24,13 +24,13 @@ SMOKE = {  # script -> (arguments that make it run in seconds, what its output m
                             "--results", "{tmp}/runs.jsonl"], TABLE),
     "bench_dispersion.py": (["--size", "16", "--spp", "4", "--repeat", "1", "--calls", "1"], TABLE),
     "bench_engines.py": (["--smoke"], TABLE),
-    "bench_export_render.py": (["--scale", "0.05", "--repeat", "1"], TABLE),
+    "bench_export_render.py": (["--smoke"], TABLE),
     "bench_fixed_cost.py": (["--smoke", "--flip", "on"], TABLE),  # --flip on: its FLIP hooks run (a broken hook fails it)
     "bench_fluorescence.py": (["--scale", "0.1", "--spp", "4", "--rounds", "1", "--repeat", "1"], TABLE),
     "bench_gpu.py": (["--smoke"], TABLE + r"|Not measured: no CUDA device \(.+\)"),
     "bench_rgb_backends.py": (["--smoke", "--scale", "0.25", "--passes", "2", "--repeats", "1", "--out", "{tmp}"], TABLE),
     "bench_thin_film.py": (["--scale", "0.05", "--spp", "4", "--repeat", "1"], TABLE),
-    "calibrate_fluorescence.py": (["--size", "16", "--spp", "4", "--seeds", "2"], TABLE),
+    "calibrate_fluorescence.py": (["--smoke"], TABLE),
     # its render half (the judge half reads what render cached: CALIBRATION.md has both commands)
     "calibrate_glass_false_alarms.py": (["render", "--seeds", "1", "--scale", "0.25", "-s", "ggx_glass", "--cache", "{tmp}"],
                                         r"ggx_glass seed 0: [0-9.]+ s"),
@@ -42,6 +42,7 @@ SMOKE = {  # script -> (arguments that make it run in seconds, what its output m
     "crosscheck_fluorescence.py": (["--size", "16", "--spp", "4", "--passes", "2", "-s", "fluorescent_sphere_lone"], TABLE),
     "fuzz_scenes.py": (["--count", "40", "--schema-count", "4", "--chunk", "20", "--workers", "1"], TABLE),
     "measure_determinism.py": (["--only", "mitsuba", "--size", "8", "--spp", "2", "--repeats", "2"], r'"bit_identical": (true|false)'),
+    "pbrt_writer_checks.py": (["--smoke"], TABLE + r"|Not measured: no pbrt-v4"),
     "plugin_lane_estimators.py": ([], r"variance one-lane / mixture"),
     "power_by_scene.py": (["-s", "ggx_copper_50"], TABLE),
     "reference_colour_change.py": (["--smoke", "{tmp}"], TABLE),

@@ -7,6 +7,12 @@ import numpy as np
 from . import Fit, Model, RegionEvidence, least_squares, reference_model, region_fit
 
 FAMILY = "materials"
+# ev.cache's key for the GGX probe's quadrature geometry (probes/ggx.py expected_images ``cache``),
+# shared by every trial of every plate model of one render: only D, G and the Fresnel table change
+GGX_CACHE = "ggx quadrature"
+# and for the Airy probe's sub-rays and film interfaces (probes/thin_film.py expected_images ``cache``),
+# shared by every trial thickness of the film models of one render
+FILM_CACHE = "airy film"
 
 
 def _plates(ev):
@@ -37,7 +43,7 @@ def _plate_model(change, starts=None, bounds=None):
             if x is not None:
                 sc = copy.deepcopy(scene)
                 change(sc["objects"][plate]["bsdf"], x)
-            mask, images = ggx.expected_images(sc, plate, light_ids, w, h)
+            mask, images = ggx.expected_images(sc, plate, light_ids, w, h, cache=ev.cache.setdefault(GGX_CACHE, {}))
             return np.where(mask[..., None], images["cie1931"], 0.0)
         truth = predict(None)
         mask = np.any(truth != 0, axis=-1)
@@ -85,7 +91,8 @@ def _reference_plate_model(change, starts):
                 for plate in plates:
                     if x is not None:
                         change(sc["objects"][plate]["bsdf"], x)
-                    mask, images = ggx.expected_images(sc, plate, lights, w, h)
+                    mask, images = ggx.expected_images(sc, plate, lights, w, h,
+                                                       cache=ev.cache.setdefault(GGX_CACHE, {}))
                     total += np.where(mask[..., None], images["cie1931"], 0.0)
                 cache[key] = total
             return cache[key]
@@ -235,7 +242,7 @@ def _fluorescence_dropped(ev):
 
 
 def _film_setup(ev):
-    """(scene, index of the filmed sphere, the render's R, G, B, the probe's tiles) or None."""
+    """(scene, index of the filmed sphere, the render's R, G, B, the probe's tiles, the trial cache) or None."""
     from ..probes import thin_film
     if "R" not in ev.names[:3] or not ev.scene.get("environment"):
         return None
@@ -245,20 +252,21 @@ def _film_setup(ev):
     i = films[0]
     rgb = np.asarray(ev.image[..., :3], dtype=np.float64)
     h, w = rgb.shape[:2]
-    _, mask = thin_film.expected_image(ev.scene, i, w, h)
+    _, mask = thin_film.expected_image(ev.scene, i, w, h, cache=ev.cache.setdefault(FILM_CACHE, {}))
     blocks = thin_film.tiles(mask)
-    return (ev.scene, i, rgb, blocks) if blocks else None
+    return (ev.scene, i, rgb, blocks, ev.cache[FILM_CACHE]) if blocks else None
 
 
-def _film_stat(scene, i, rgb, blocks, thickness):
+def _film_stat(scene, i, rgb, blocks, thickness, cache=None):
     """The Airy probe's tile test with the film ``thickness`` nm thick (0: no film: the bare
-    conductor's Fresnel reflectance, Airy's limit)."""
+    conductor's Fresnel reflectance, Airy's limit). ``cache``: the probe's sub-rays and the film's
+    interfaces kept across trial thicknesses (probes/thin_film.py ``expected_images``)."""
     from .. import stats
     from ..probes import thin_film
     sc = copy.deepcopy(scene)
     sc["objects"][i]["bsdf"]["thin_film"]["thickness"] = float(thickness)
     h, w = rgb.shape[:2]
-    expected, _ = thin_film.expected_image(sc, i, w, h)
+    expected, _ = thin_film.expected_image(sc, i, w, h, cache=cache)
     return thin_film._tile_stat(rgb, expected, blocks, stats.ALPHA)
 
 
@@ -271,9 +279,10 @@ def _film_missing(ev):
     got = _film_setup(ev)
     if got is None:
         return None
-    scene, i, rgb, blocks = got
-    chi2_none, n = _chi2(_film_stat(scene, i, rgb, blocks, scene["objects"][i]["bsdf"]["thin_film"]["thickness"]))
-    bare = _film_stat(scene, i, rgb, blocks, 0.0)
+    scene, i, rgb, blocks, cache = got
+    chi2_none, n = _chi2(_film_stat(scene, i, rgb, blocks, scene["objects"][i]["bsdf"]["thin_film"]["thickness"],
+                                    cache))
+    bare = _film_stat(scene, i, rgb, blocks, 0.0, cache)
     return Fit([], [], _chi2(bare)[0], chi2_none, n, 0, bare["pass"])
 
 
@@ -284,11 +293,11 @@ def _film_thickness(ev):
     got = _film_setup(ev)
     if got is None:
         return None
-    scene, i, rgb, blocks = got
+    scene, i, rgb, blocks, cache = got
     declared = float(scene["objects"][i]["bsdf"]["thin_film"]["thickness"])
 
     def residual(x):
-        st = _film_stat(scene, i, rgb, blocks, float(x[0]))
+        st = _film_stat(scene, i, rgb, blocks, float(x[0]), cache)
         m, e, s = (np.asarray(st[k], dtype=np.float64) for k in ("measured", "expected", "se"))
         return (m - e) / np.maximum(s, 1e-300)
     lo, hi = max(0.0, declared * 0.5), declared * 1.5 + 10.0
@@ -299,7 +308,7 @@ def _film_thickness(ev):
         return None
     x, err, chi2 = found
     r0 = residual([declared])
-    ok = _film_stat(scene, i, rgb, blocks, float(x[0]))["pass"]
+    ok = _film_stat(scene, i, rgb, blocks, float(x[0]), cache)["pass"]
     return Fit([float(x[0])], [float(err[0])], chi2, float(r0 @ r0), r0.size, 1, ok)
 
 

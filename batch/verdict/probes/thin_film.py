@@ -62,57 +62,117 @@ def reflectance_table(bsdf):
     return theta, wl, refl
 
 
-@remembered()
-def colour_table(bsdf, radiance, obs=colorimetry.GROUND_TRUTH):
-    """(theta grid, linear sRGB of R(theta, l) L(l) per angle) for a filmed conductor."""
-    theta, wl, refl = reflectance_table(bsdf)
+def _rgb_table(theta, wl, refl, radiance, obs):
     light = spectra.evaluate(radiance, wl)
     xyz = colorimetry.xyz_rows(refl * light[None, :], obs)
     return theta, colorimetry.xyz_to_srgb(xyz)
 
 
-def expected_image(scene, index, width, height, sub=None, obs=colorimetry.GROUND_TRUTH):
+@remembered()
+def colour_table(bsdf, radiance, obs=colorimetry.GROUND_TRUTH):
+    """(theta grid, linear sRGB of R(theta, l) L(l) per angle) for a filmed conductor."""
+    return _rgb_table(*reflectance_table(bsdf), radiance, obs)
+
+
+def _trial_colour_table(bsdf, radiance, obs, cache):
+    """``colour_table`` for a fit over the film's thickness: the film's interfaces (q2, r12 and
+    r23 per angle and wavelength: reference_code's ``_film_interfaces``, all of the Airy sum but
+    the thickness) kept in ``cache`` for the material without its thickness, so that a trial
+    thickness computes the Airy sum alone (``airy_sum``: the same operations as
+    ``airy.unpolarized_reflectance``, the same values)."""
+    import json
+    film = bsdf["thin_film"]
+    base = dict(bsdf, thin_film={k: v for k, v in film.items() if k != "thickness"})
+    key = json.dumps(["film interfaces", base], sort_keys=True, default=repr)
+    if key not in cache:
+        wl = spectra.cie_1931_cmfs()[0]
+        n3 = spectra.evaluate(bsdf["eta"], wl) + 1j * spectra.evaluate(bsdf["k"], wl)
+        theta = np.linspace(0.0, np.pi / 2, THETA_TABLE)
+        cache[key] = theta, wl, airy.film_interfaces(np.cos(theta)[:, None], film.get("ext_ior", 1.0), film["ior"],
+                                                     n3[None, :])
+    theta, wl, interfaces = cache[key]
+    rs, rp = airy.airy_sum(interfaces, wl[None, :], film["thickness"])
+    return _rgb_table(theta, wl, 0.5 * (np.abs(rs) ** 2 + np.abs(rp) ** 2), radiance, obs)
+
+
+def expected_image(scene, index, width, height, sub=None, obs=colorimetry.GROUND_TRUTH, cache=None):
     """(expected linear sRGB per pixel (H, W, 3), mask of pixels fully on the sphere with every
-    reflected ray reaching the environment) for object ``index``."""
-    images, mask = expected_images(scene, index, width, height, (obs,), sub)
+    reflected ray reaching the environment) for object ``index``; ``cache``: as for
+    ``expected_images``."""
+    images, mask = expected_images(scene, index, width, height, (obs,), sub, cache)
     return images[obs], mask
 
 
-def expected_images(scene, index, width, height, observers=(colorimetry.GROUND_TRUTH,), sub=None):
+def _sub_rays(scene, index, width, height, sub, r0, r1, origin):
+    """Pixel rows r0..r1's sub-rays: (their angle of incidence on the sphere as an index and
+    weight into the colour tables' uniform theta grid, the rows' mask: every sub-ray meets the
+    sphere and its reflection reaches the environment)."""
+    objs, cam = scene["objects"], scene["camera"]
+    obj = objs[index]
+    centre = np.asarray(obj["shape"]["center"], dtype=np.float64)
+    others = [o for j, o in enumerate(objs) if j != index]
+    # sub-rays: the centres of an S x S grid in every pixel are the pixel centres at S times
+    # the resolution
+    _, dirs = raycast.camera_rays(cam, width * sub, height * sub, "centers", rows=range(r0 * sub, r1 * sub))
+    who, t = raycast.nearest(objs, origin, dirs)
+    p = origin + np.where(np.isfinite(t), t, 0.0)[..., None] * dirs
+    n = (p - centre) / obj["shape"]["radius"]
+    cos_i = np.clip(-np.sum(dirs * n, axis=-1), 0.0, 1.0)
+    ok = who == index
+    if others:
+        refl = dirs + 2.0 * cos_i[..., None] * n
+        who_r, _ = raycast.nearest(others, p + 1e-6 * n, refl)
+        ok &= who_r == -1
+    # the tables' theta grid is uniform on [0, pi/2] (THETA_TABLE points): np.interp's lerp with
+    # the search done by arithmetic (the same values to rounding)
+    x = np.arccos(cos_i) * ((THETA_TABLE - 1) / (np.pi / 2))
+    i = np.minimum(x.astype(np.intp), THETA_TABLE - 2)
+    return i, x - i, ok.reshape(r1 - r0, sub, width, sub).all(axis=(1, 3))
+
+
+def expected_images(scene, index, width, height, observers=(colorimetry.GROUND_TRUTH,), sub=None, cache=None):
     """({observer: expected linear sRGB per pixel (H, W, 3)}, mask) as ``expected_image``, the
-    rays traced once for every observer."""
+    rays traced once for every observer. ``cache``: a dict the caller keeps across calls where
+    only the film's thickness (or the sphere's material) changes (the diagnosis's thickness fit):
+    the sub-rays are then traced once per geometry (keyed by the camera, the objects' shapes, the
+    sphere and the size), and a trial thickness pays for its Airy table and the sums alone."""
+    import json
     objs, cam = scene["objects"], scene["camera"]
     obj = objs[index]
     sub = sub or supersampling(width, height)
-    tables = {o: colour_table(obj["bsdf"], scene["environment"]["radiance"], o) for o in observers}
-    origin, corners = raycast.camera_rays(cam, width, height, "corners")
-    who_c, _ = raycast.nearest(objs, origin, corners)
-    on = who_c == index
-    mask = on[:-1, :-1] & on[1:, :-1] & on[:-1, 1:] & on[1:, 1:]
+    radiance = scene["environment"]["radiance"]
+    tables = {o: colour_table(obj["bsdf"], radiance, o) if cache is None
+              else _trial_colour_table(obj["bsdf"], radiance, o, cache) for o in observers}
+    geo = None
+    if cache is not None:
+        key = json.dumps(["thin film", cam, [o["shape"] for o in objs], index, width, height, sub], sort_keys=True,
+                         default=repr)
+        geo = cache.setdefault(key, {})
+    if geo and "corners" in geo:
+        origin, corner_mask = geo["corners"]
+    else:
+        origin, corners = raycast.camera_rays(cam, width, height, "corners")
+        who_c, _ = raycast.nearest(objs, origin, corners)
+        on = who_c == index
+        corner_mask = on[:-1, :-1] & on[1:, :-1] & on[:-1, 1:] & on[1:, 1:]
+        if geo is not None:
+            geo["corners"] = (origin, corner_mask)
+    mask = corner_mask.copy()
     images = {o: np.zeros((height, width, 3)) for o in observers}
-    centre = np.asarray(obj["shape"]["center"], dtype=np.float64)
-    others = [o for j, o in enumerate(objs) if j != index]
     rows = max(1, 262144 // (width * sub * sub))  # pixel rows per chunk (bounded memory)
     for r0 in range(0, height, rows):
         r1 = min(height, r0 + rows)
-        # sub-rays: the centres of an S x S grid in every pixel are the pixel centres at S times
-        # the resolution
-        _, dirs = raycast.camera_rays(cam, width * sub, height * sub, "centers", rows=range(r0 * sub, r1 * sub))
-        who, t = raycast.nearest(objs, origin, dirs)
-        p = origin + np.where(np.isfinite(t), t, 0.0)[..., None] * dirs
-        n = (p - centre) / obj["shape"]["radius"]
-        cos_i = np.clip(-np.sum(dirs * n, axis=-1), 0.0, 1.0)
-        ok = who == index
-        if others:
-            refl = dirs + 2.0 * cos_i[..., None] * n
-            who_r, _ = raycast.nearest(others, p + 1e-6 * n, refl)
-            ok &= who_r == -1
-        theta = np.arccos(cos_i)
+        rays = None if geo is None else geo.get(r0)
+        if rays is None:
+            rays = _sub_rays(scene, index, width, height, sub, r0, r1, origin)
+            if geo is not None:
+                geo[r0] = rays
+        i, f, ok = rays
         shape = (r1 - r0, sub, width, sub)
-        for o, (theta_grid, rgb_grid) in tables.items():
-            rgb = np.stack([np.interp(theta, theta_grid, rgb_grid[:, c]) for c in range(3)], axis=-1)
+        for o, (_theta_grid, rgb_grid) in tables.items():
+            rgb = rgb_grid[i] + f[..., None] * (rgb_grid[1:] - rgb_grid[:-1])[i]
             images[o][r0:r1] = rgb.reshape(shape + (3,)).mean(axis=(1, 3))
-        mask[r0:r1] &= ok.reshape(shape).all(axis=(1, 3))
+        mask[r0:r1] &= ok
     return images, mask
 
 
