@@ -185,7 +185,8 @@ class PbrtBackend:
         names, img, bands = read_pass(exr_path, spp, expect)
         version = _banner(log, before)
         if version:
-            versions.setdefault("pbrt", version)
+            versions["pbrt"] = version
+        versions.setdefault("pbrt", "unknown (no banner read: the render had no log)")
         shutil.rmtree(work, ignore_errors=True)
         return {"names": names, "image": img.astype(np.float64), "time_s": wall, "spectral": bands,
                 "info": {"versions": dict(versions)}}
