@@ -9,72 +9,6 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-# -- the session's bytecode cache (issue 45 item 2; docs/developing.md) -------------------------------
-# Where PYTHONDONTWRITEBYTECODE (or -B) is set, every child the suite starts (batch/run.py, bpy,
-# Mitsuba: ~130 in the fast subset) compiles the project's modules anew, and each xdist worker
-# rewrites the test modules' asserts anew. The variable is there so that nothing is written beside
-# the sources and nothing is left behind; the session honours that and still compiles each module
-# once: its bytecode goes to a temporary folder outside the repository (PYTHONPYCACHEPREFIX, which
-# the workers and every child inherit), removed when the session ends. Under a prefix Python reads
-# bytecode only there, so the interpreter's own (standard library, site-packages) compiled files are
-# linked into it first, or they would all be compiled again. Where bytecode may be written (the
-# variable unset), Python keeps it beside the sources as always and nothing is changed here.
-PYCACHE_ENV = "SPECTRAL_BENCH_TEST_PYCACHE"  # the session's folder, set by the process that made it
-
-
-UNLINKED = {"test", "tests", "idlelib", "tkinter", "turtledemo", "ensurepip", "pip"}  # never imported by the suite: not worth a link
-
-
-def _link_installed_bytecode(prefix):
-    """Link every compiled module of the interpreter's path (not the repository's) into ``prefix``
-    where a pycache prefix looks for it: PREFIX/<source folder>/<name>.<tag>.pyc. A module whose
-    source changed is compiled again by Python and its link replaced (atomically), never its target."""
-    import os
-    suffix = f".{sys.implementation.cache_tag}.pyc"
-    tests = str(ROOT / "tests")
-    seen = set()
-    for entry in sys.path:  # the repository's own entries (ROOT, tests/, its rooms) hold no bytecode to link
-        if not entry or not os.path.isdir(entry) or entry == str(ROOT) or entry == tests or entry.startswith(tests + os.sep):
-            continue
-        for folder, subfolders, files in os.walk(entry):
-            subfolders[:] = [s for s in subfolders if s not in UNLINKED]
-            if os.path.basename(folder) != "__pycache__" or folder in seen:
-                continue
-            seen.add(folder)
-            names = [f for f in files if f.endswith(suffix) and f.count(".") == 2]  # not opt-1/opt-2
-            if not names:
-                continue
-            target = os.path.join(prefix, os.path.dirname(folder).lstrip(os.sep))
-            os.makedirs(target, exist_ok=True)
-            for name in names:
-                try:
-                    os.symlink(os.path.join(folder, name), os.path.join(target, name))
-                except FileExistsError:
-                    pass
-
-
-def _session_bytecode_cache():
-    """Give this session a bytecode cache outside the tree where writing bytecode is switched off
-    (this process makes it and removes it in pytest_unconfigure; the xdist workers and every child
-    inherit it through the environment). Returns the folder this process made, else None."""
-    import os
-    import tempfile
-    if not sys.flags.dont_write_bytecode or os.environ.get(PYCACHE_ENV):
-        return None  # bytecode is written as usual, or a parent session made the cache
-    shm = Path("/dev/shm")  # memory: tens of thousands of links made and removed in a blink (a disk may take a minute)
-    prefix = tempfile.mkdtemp(prefix="spectral-bench-pycache-", dir=shm if shm.is_dir() and os.access(shm, os.W_OK) else None)
-    _link_installed_bytecode(prefix)
-    os.environ[PYCACHE_ENV] = prefix
-    os.environ["PYTHONPYCACHEPREFIX"] = prefix
-    os.environ.pop("PYTHONDONTWRITEBYTECODE", None)
-    sys.pycache_prefix = prefix
-    sys.dont_write_bytecode = False
-    return prefix
-
-
-_PYCACHE_MADE = _session_bytecode_cache()
 sys.path.insert(0, str(ROOT))
 # The tests are grouped by the part of the house they test (tests/<room>/test_*.py, issue 45 item 4);
 # this folder holds what they share: this file's fixtures and the helper modules beside it
@@ -282,12 +216,6 @@ def run_bpy(body, timeout=600, env=None):
 
 def pytest_configure(config):
     config.addinivalue_line("markers", "slow: renders whole cases or runs long studies; `pytest -m 'not slow'` is the fast subset")
-
-
-def pytest_unconfigure(config):
-    if _PYCACHE_MADE:  # the session's bytecode cache goes with the session (only its maker removes it)
-        import shutil
-        shutil.rmtree(_PYCACHE_MADE, ignore_errors=True)
 
 
 # pytest.ini runs the suite on pytest-xdist workers with `--dist loadscope`, which this file's
