@@ -54,8 +54,9 @@ in H(n) with vertices v_i relative to p,
 after clipping the polygon to the half-space (v - p) . n >= 0 (Sutherland-Hodgman, one plane).
 
 Judged on the render's own noise, on the pixels where the bound leaves power: those whose
-interval is narrow (relative width of the luminance interval below WIDTH_MAX, which selects the
-upper part of the sphere, where the floor lies near the horizon). The region's mean per channel is
+interval is narrow (relative width below WIDTH_MAX in at least one channel, which selects the
+upper part of the sphere, where the floor lies near the horizon: the selection depends on the
+scene alone, never on the render). The region's mean per channel is
 tested one-sided against the region's mean lo (too dark) and mean hi (too bright), its standard
 error from the pixels' residuals to their own lo (Student's t, n - 1), Sidak over the 3 channels x
 2 sides at stats.ALPHA. ``detectable``: how far (relative) beyond the interval a render's mean must
@@ -67,7 +68,7 @@ from ....exporters import colorimetry, fluorescence as fluo, spectra
 from .. import raycast, stats
 from .common import MIN_PIXELS, probe as _probe, remembered
 
-WIDTH_MAX = 0.02  # relative width of a pixel's luminance interval for it to be judged
+WIDTH_MAX = 0.02  # relative width of a pixel's interval, in its narrowest channel, for it to be judged
 SQUARES = (0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0)  # half-sides R, in units of the sphere's radius
 FOOTPRINT = 3  # Gauss-Legendre points per pixel axis
 POWER = 0.9
@@ -294,11 +295,8 @@ def sphere_on_floor(m):
         return [_probe(name, None, None, None, "relative", None, pixels=int(mask.sum()),
                        why=f"no bound on the floor's radiance (contraction {contraction:.3f} >= 1)")]
     f, per = _pixel_shares(scene, si, fi, mask)
-    y_row = colorimetry.srgb_to_xyz(np.eye(3))[:, 1]
     lo, hi = _channels(a, u_lo, u_hi, ups, f, per, colorimetry.GROUND_TRUTH)
-    ylo, yhi = lo @ y_row, hi @ y_row
-    with np.errstate(divide="ignore", invalid="ignore"):
-        narrow = (yhi - ylo) <= WIDTH_MAX * np.maximum(ylo, 0.0)
+    narrow = np.any((lo > 0) & (hi - lo <= WIDTH_MAX * lo), axis=1)
     n = int(narrow.sum())
     if n < MIN_PIXELS:
         return [_probe(name, None, None, None, "relative", None, pixels=n, sphere_pixels=int(mask.sum()))]
