@@ -258,14 +258,15 @@ def floor_shares(scene, si, fi, points, normals):
     return f, out
 
 
-def _pixel_shares(scene, si, fi, mask):
-    """Footprint means of floor_shares over the pixels of ``mask``."""
+def _pixel_shares(scene, si, fi, mask, k=FOOTPRINT):
+    """Means of floor_shares over the footprints of the pixels of ``mask`` (k x k points each;
+    k = 1: the pixel centre)."""
     cam, sph = scene["camera"], scene["objects"][si]["shape"]
     h, w = mask.shape
     ys, xs = np.nonzero(mask)
     c = np.asarray(sph["center"], dtype=np.float64)
     f_sum, sums = np.zeros(len(ys)), {}
-    for (ox, oy), wt in raycast.footprint_offsets(FOOTPRINT):
+    for (ox, oy), wt in (raycast.footprint_offsets(k) if k > 1 else [((0.5, 0.5), 1.0)]):
         origin, dirs = raycast.camera_rays_at(cam, w, h, xs + ox, ys + oy)
         t = raycast.hit_sphere(sph, origin, dirs)
         pts = origin + t[:, None] * dirs
@@ -291,15 +292,22 @@ def sphere_on_floor(m):
     a, u_lo, u_hi, ups, contraction = _spectra(sphere["bsdf"], objs[fi]["bsdf"], env["radiance"], shares_r)
     h, w = image.shape[:2]
     mask = raycast.pixels_inside(scene["camera"], w, h, objs, si)
+    sphere_pixels = int(mask.sum())
     if contraction >= 1.0:
         return [_probe(name, None, None, None, "relative", None, pixels=int(mask.sum()),
                        why=f"no bound on the floor's radiance (contraction {contraction:.3f} >= 1)")]
-    f, per = _pixel_shares(scene, si, fi, mask)
+    # which pixels are judged: chosen on the interval at each pixel's centre (the scene alone
+    # decides); their bounds then from the footprint's mean
+    f, per = _pixel_shares(scene, si, fi, mask, 1)
     lo, hi = _channels(a, u_lo, u_hi, ups, f, per, colorimetry.GROUND_TRUTH)
     narrow = np.any((lo > 0) & (hi - lo <= WIDTH_MAX * lo), axis=1)
+    chosen = np.zeros_like(mask)
+    chosen[mask] = narrow
+    f, per = _pixel_shares(scene, si, fi, chosen)
+    mask, narrow = chosen, np.ones(int(chosen.sum()), dtype=bool)
     n = int(narrow.sum())
     if n < MIN_PIXELS:
-        return [_probe(name, None, None, None, "relative", None, pixels=n, sphere_pixels=int(mask.sum()))]
+        return [_probe(name, None, None, None, "relative", None, pixels=n, sphere_pixels=sphere_pixels)]
     px = image[mask][narrow][:, :3].astype(np.float64)
     measured = px.mean(axis=0)
     threshold = stats.sidak_threshold(stats.ALPHA, 6)
@@ -327,7 +335,7 @@ def sphere_on_floor(m):
     alternatives = {o: judged(o) for o in m.observers if o != colorimetry.GROUND_TRUTH}
     best = int(np.nanargmin(np.array(stat["width"]) + np.array(stat["detectable_up"])))
     mid = (np.array(stat["lo"]) + np.array(stat["hi"])) / 2
-    return [_probe(name, mid, measured, stat["z"], "sigma beyond the interval", stat["pass"], pixels=n, sphere_pixels=int(mask.sum()),
+    return [_probe(name, mid, measured, stat["z"], "sigma beyond the interval", stat["pass"], pixels=n, sphere_pixels=sphere_pixels,
                    lo=stat["lo"], hi=stat["hi"], channel="RGB"[best],
                    detectable=max(stat["detectable_up"][best], stat["detectable_down"][best]),
                    width=stat["width"][best], z=stat["z"], interval=stat, alternatives=alternatives,
