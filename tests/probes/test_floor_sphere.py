@@ -156,3 +156,13 @@ def test_a_run_judged_by_the_probe_is_not_checked_against_itself(golden):
     assert results.probes_measured(run) == (1, 1)
     assert not results.checked_against_itself(run)
     assert results.checked_against_itself({**run, "probes": []})
+
+
+def test_the_run_reports_the_probe_s_power(golden):
+    """metrics.json's ``detectable`` names the probe with its width plus its figure beyond the
+    interval (batch/verdict/judge.py): the smallest change of the truth that surely fails."""
+    from spectral_bench.batch.verdict import judge
+    rec = _floor_record(*_reduced(golden, "yellow_sphere_F8"))
+    det = judge.detectable(None, [rec])
+    assert det["probes"][rec["name"]] == pytest.approx(rec["width"] + rec["detectable"])
+    assert det["probes"][rec["name"]] < 0.03
