@@ -186,8 +186,10 @@ def _spectra(sphere_bsdf, floor_bsdf, radiance, shares):
             bound = new
             if change <= 1e-12 * max(np.max(bound / v), 1e-300):
                 break
-        # the iterate approaches the fixed point from below: add the contraction's remainder
-        bound = bound + v * contraction / (1 - contraction) * np.max(np.abs(step(bound) - bound) / v)
+        # the iterates approach the fixed point from below; with B' = step(B), the contraction
+        # bounds the rest: |B* - B'| <= q / (1 - q) |B' - B| in the v-norm
+        nxt = step(bound)
+        bound = nxt + v * contraction / (1 - contraction) * np.max(np.abs(nxt - bound) / v)
 
     def k(values):
         fn = lambda x: np.interp(x, grid, values)  # noqa: E731
