@@ -166,3 +166,22 @@ def test_the_run_reports_the_probe_s_power(golden):
     det = judge.detectable(None, [rec])
     assert det["probes"][rec["name"]] == pytest.approx(rec["width"] + rec["detectable"])
     assert det["probes"][rec["name"]] < 0.03
+
+
+def test_the_bound_on_every_radiance_is_the_sky_without_fluorescence_and_above_it_with(golden):
+    """B (the floor's upper bound over rho_f) is L itself for the yellow sphere (albedos <= 1), so
+    the floor's upper spectrum is K[rho_f L]; with re-radiation into the red under a 450 nm sky
+    (L = 0 there) B must exceed L where the sphere emits, else the floor's red would be bounded by 0."""
+    def spectra_of(name):
+        sc = golden[name]
+        si, fi = floor_sphere.applies(sc)
+        shares = [(big, s) for big, s, _ in floor_sphere._squares(sc, si, fi)]
+        return floor_sphere._spectra(sc["objects"][si]["bsdf"], sc["objects"][fi]["bsdf"],
+                                     sc["environment"]["radiance"], shares)
+    a, u_lo, u_hi, ups, q = spectra_of("yellow_sphere_F8")
+    assert q < 1 and np.allclose(u_hi, u_lo, rtol=1e-12, atol=0)
+    a, u_lo, u_hi, ups, q = spectra_of("fluorescent_sphere_mono_red")
+    assert q < 1
+    wl = np.arange(360, 831)
+    red = (wl >= 620) & (wl <= 680)
+    assert np.all(u_hi[red] > u_lo[red]) and np.all(u_hi >= u_lo - 1e-15)
