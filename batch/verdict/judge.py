@@ -171,14 +171,21 @@ def detectable(ztest, probe_records, alpha=None):
     """The run's power (metrics.json ``detectable``): the smallest relative uniform radiance scale
     error the noise test detects with 90 % power (batch/verdict/compare.py ``ZTest.detectable``),
     each probe's own figure (the smallest relative change of what it measures that its best test
-    detects with 90 % power: batch/verdict/stats.py ``detectable_scale``) and, for the charts, the
+    detects with 90 % power: batch/verdict/stats.py ``detectable_scale``; for an interval probe,
+    its width plus how far beyond it a mean fails) and, for the charts, the
     dE00 of the largest of the patches' figures applied as a brightness change to that patch
     (``patch_de00``: any single patch changed that much in brightness is detected with 90 % power).
     None when nothing could be judged."""
     out = ztest.detectable() if ztest is not None else None
     figures, patches = {}, []
     for p in probe_records or []:
-        if not p.get("stat") or p.get("pass") is None:
+        if p.get("pass") is None:
+            continue
+        if not p.get("stat"):
+            # an interval probe (probes/floor_sphere.py): a change of the truth that surely fails
+            # must cross the interval's width and then its figure beyond it
+            if isinstance(p.get("detectable"), float) and isinstance(p.get("width"), float):
+                figures[p["name"]] = p["width"] + p["detectable"]
             continue
         eps = stats.detectable_scale(p["stat"])
         figures[p["name"]] = eps
