@@ -71,7 +71,8 @@ def _footprints(camera, objects, di, li, w, h):
     valid, Rs, Rp and chi (stacked); the pixels whose corners are all valid; cos_i at the pixel
     centres; eta. What ``_expected`` needs but the polariser: polarizing_plane_0 and _90 differ
     only in their polariser's angle, and the second takes these from the first (issue 45 item 1:
-    1.7 s of its 2.5 s of CPU). ``camera`` is the scene's camera without its polariser."""
+    1.7 s of its 2.5 s of CPU). ``camera``: the camera's fields that raycast reads (its name and
+    polariser are not)."""
     scene = {"camera": camera, "objects": objects}
     up = np.asarray(camera["to_world"], dtype=np.float64)[:3, 1]
     up = up / np.linalg.norm(up)
@@ -89,7 +90,7 @@ def _footprints(camera, objects, di, li, w, h):
 def _expected(scene, di, li, w, h, pol):
     """Footprint means of (I through the polariser or (S0, S1, S2)) / L, and the mask of pixels
     valid over their whole footprint."""
-    camera = {k: v for k, v in scene["camera"].items() if k != "polarizer"}
+    camera = {k: scene["camera"][k] for k in ("to_world", "fov", "fov_axis") if k in scene["camera"]}  # what raycast reads
     valid_all, rs_all, rp_all, chi_all, corners, cos_centre, eta = _footprints(camera, scene["objects"], di, li, w, h)
     mask, acc = None, None
     for k, (offset, weight) in enumerate(raycast.footprint_offsets(FOOTPRINT)):
