@@ -4,6 +4,7 @@ any two runs of the same code (timings, versions, dates, the reference's path, t
 "slowest" seconds). Prints a line per job and each difference; exit 1 when any.
 
     .venv/bin/python benchmarks/compare_records.py BEFORE_RUN_FOLDER AFTER_RUN_FOLDER
+    .venv/bin/python benchmarks/compare_records.py --smoke   # one tiny run, compared with itself
 
 Used for issue 45 item 1 (benchmarks/ENGINES.md, 2026-12-04, "judging's share"): the default
 suite before and after a change, both at the default seed (bench_fixed_cost.py --keep DIR).
@@ -42,7 +43,22 @@ def differences(x, y, path, out):
         out.append((path, f"{x!r:.80} -> {y!r:.80}"))
 
 
+def smoke():
+    """One tiny run of the runner (as a user runs it), compared with itself: the script works."""
+    import subprocess
+    import tempfile
+    root = Path(__file__).resolve().parents[1]
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "run"
+        subprocess.run([sys.executable, str(root / "batch" / "run.py"), "-r", "mitsuba", "--scale", "0.25", "--spp", "4",
+                        "-s", "ggx_copper_50", "-o", str(out)], cwd=root, check=True, stdin=subprocess.DEVNULL,
+                       stdout=subprocess.DEVNULL)
+        return main([__file__, str(out), str(out)])
+
+
 def main(argv):
+    if argv[1:] == ["--smoke"]:
+        return smoke()
     if len(argv) != 3:
         sys.exit(__doc__)
     a, b = (records.read(p) for p in argv[1:3])
