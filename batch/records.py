@@ -30,6 +30,7 @@ import functools
 import json
 import math
 import os
+import pickle
 import subprocess
 import tomllib
 from pathlib import Path, PurePosixPath, PureWindowsPath
@@ -202,39 +203,47 @@ def _long_numbers(value):
 
 def _store_arrays(data, folder):
     """Move each run's long per-block arrays into a .npz beside its image (module doc), in place."""
+    for run in data.get("runs") or ():
+        _store_run_arrays(run, folder)
+
+
+def _store_run_arrays(run, folder):
+    """``_store_arrays`` for one run record (in place): what the result depended on, as
+    [(path, is a directory or file, whether it was)] (``_run_text`` checks them again)."""
     import hashlib
     import io
     import numpy as np
-    for run in data.get("runs") or ():
-        image = run.get("image") if isinstance(run, dict) else None
-        if not isinstance(image, str) or PurePosixPath(image).is_absolute() or ".." in PurePosixPath(image).parts:
-            continue
-        where = PurePosixPath(image).parent
-        if not (folder / where).is_dir():
-            continue
-        arrays, places = {}, []
-        for holder in _stat_holders(run):
-            for k, v in holder.items():
-                dtype = _long_numbers(v)
-                if dtype:
-                    key = f"a{len(arrays)}"
-                    arrays[key] = np.asarray(v, dtype=dtype)
-                    places.append((holder, k, key))
-        if not arrays:
-            continue
-        digest = hashlib.sha256()
-        for key, a in arrays.items():
-            digest.update(f"{key}:{a.dtype.str}:{a.size};".encode() + a.tobytes())
-        rel = (where / f"probe_arrays-{digest.hexdigest()[:20]}.npz").as_posix()
-        path = folder / rel
-        if not path.is_file():
-            buf = io.BytesIO()
-            np.savez(buf, **arrays)
-            tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
-            tmp.write_bytes(buf.getvalue())
-            tmp.replace(path)
-        for holder, k, key in places:
-            holder[k] = {"array_file": rel, "key": key}
+    image = run.get("image") if isinstance(run, dict) else None
+    if not isinstance(image, str) or PurePosixPath(image).is_absolute() or ".." in PurePosixPath(image).parts:
+        return []
+    where = PurePosixPath(image).parent
+    if not (folder / where).is_dir():
+        return [(folder / where, "dir", False)]
+    facts = [(folder / where, "dir", True)]
+    arrays, places = {}, []
+    for holder in _stat_holders(run):
+        for k, v in holder.items():
+            dtype = _long_numbers(v)
+            if dtype:
+                key = f"a{len(arrays)}"
+                arrays[key] = np.asarray(v, dtype=dtype)
+                places.append((holder, k, key))
+    if not arrays:
+        return facts
+    digest = hashlib.sha256()
+    for key, a in arrays.items():
+        digest.update(f"{key}:{a.dtype.str}:{a.size};".encode() + a.tobytes())
+    rel = (where / f"probe_arrays-{digest.hexdigest()[:20]}.npz").as_posix()
+    path = folder / rel
+    if not path.is_file():
+        buf = io.BytesIO()
+        np.savez(buf, **arrays)
+        tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
+        tmp.write_bytes(buf.getvalue())
+        tmp.replace(path)
+    for holder, k, key in places:
+        holder[k] = {"array_file": rel, "key": key}
+    return facts + [(path, "file", True)]
 
 
 def _load_arrays(data, folder, strict, problems):
@@ -277,14 +286,55 @@ def _load_arrays(data, folder, strict, problems):
                         problems.append(problem)
 
 
+# The text of each run record as metrics.json holds it, kept between writes (issue 45 item 1): the
+# runner writes the whole file after every job, and made again each time, every record's paths,
+# arrays and indented JSON cost O(jobs^2) (1.4 s of CPU over the default suite's 27 jobs).
+# {folder: {the record's pickle: (its text, the files it depended on)}}, for the last folder written:
+# a record is made again when it changed (its pickle), or a file it depended on did (_store_run_arrays).
+_RUN_TEXTS = {}
+_RUN_TEXTS_LOCK = __import__("threading").Lock()
+
+
+def _run_text(run, folder, kept, now):
+    """One run record as it stands in metrics.json's "runs" (indented at its depth), from
+    ``kept`` when nothing it depended on changed; the entry goes into ``now``."""
+    try:  # the record's content, types included: equal bytes, equal JSON (floats pickle far faster than JSON writes them)
+        key = pickle.dumps(run, protocol=5)
+    except Exception:  # noqa: BLE001 - an object pickle cannot take: its JSON (as document() writes it) is the key
+        key = json.dumps(run, default=str)
+    hit = kept.get(key)
+    if hit is not None and all((p.is_dir() if kind == "dir" else p.is_file()) == was for p, kind, was in hit[1]):
+        now[key] = hit
+        return hit[0]
+    data = _map_paths({"runs": [json.loads(json.dumps(run, default=str))]}, lambda v: relative(v, folder))
+    facts = _store_run_arrays(data["runs"][0], folder)
+    text = "  " + json.dumps(data["runs"][0], indent=1).replace("\n", "\n  ")  # strings hold no raw newline
+    now[key] = (text, facts)
+    return text
+
+
 def write(folder, started, options, runs, jobs=None, sweeps=None, stability=None, studies=None):
     """Write ``folder``/metrics.json atomically (a reader never sees half a file); returns its path.
-    Long per-block arrays go beside each run's image first (module doc)."""
+    Long per-block arrays go beside each run's image first (module doc). The same text as
+    ``json.dumps(document(...), indent=1)`` with the arrays stored, each run record's part kept
+    from the previous write while it is the same (``_run_text``)."""
     folder = Path(folder)
-    data = document(folder, started, options, runs, jobs, sweeps, stability, studies)
+    runs = list(runs)
+    data = document(folder, started, options, [], jobs, sweeps, stability, studies)
     _store_arrays(data, folder)
+    where = str(folder.absolute())
+    with _RUN_TEXTS_LOCK:
+        kept, now = _RUN_TEXTS.get(where, {}), {}
+        parts = [_run_text(r, folder, kept, now) for r in runs]
+        _RUN_TEXTS.clear()
+        _RUN_TEXTS[where] = now
+    text = json.dumps(data, indent=1)
+    if parts:
+        empty = '\n "runs": [],\n' if list(data).index("runs") < len(data) - 1 else '\n "runs": []\n'
+        assert text.count(empty) == 1, "the runs' place in metrics.json"
+        text = text.replace(empty, empty.replace("[]", "[\n" + ",\n".join(parts) + "\n ]"), 1)
     tmp = folder / (FILE_NAME + ".tmp")
-    tmp.write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
+    tmp.write_text(text + "\n", encoding="utf-8")
     tmp.replace(folder / FILE_NAME)
     return folder / FILE_NAME
 

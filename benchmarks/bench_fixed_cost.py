@@ -292,14 +292,21 @@ def main():
     ap.add_argument("--smoke", action="store_true", help="one scene, tiny settings (checks the script runs)")
     ap.add_argument("--write", action="store_true", help="record the tables in benchmarks/ENGINES.md")
     ap.add_argument("--flip", choices=("on", "off", "auto"), help="the run's --flip (default: the runner's, auto)")
+    ap.add_argument("--keep", metavar="DIR", help="run into DIR (new) and keep it, e.g. to compare metrics.json "
+                    "before and after a change (default: a temporary folder)")
     args = ap.parse_args()
     argv, title = (([], "default suite") if args.default else (SMOKE, "smoke") if args.smoke
                    else (TINY, "tiny suite"))
     if args.flip:
         argv, title = [*argv, "--flip", args.flip], f"{title}, --flip {args.flip}"
     load0 = os.getloadavg()[0]
-    with tempfile.TemporaryDirectory() as tmp:
-        wall, cpu, code, events, runs = measure(argv, Path(tmp) / "out")
+    if args.keep:
+        if Path(args.keep).exists():
+            raise SystemExit(f"--keep {args.keep}: exists; give a new folder")
+        wall, cpu, code, events, runs = measure(argv, Path(args.keep).resolve())
+    else:
+        with tempfile.TemporaryDirectory() as tmp:
+            wall, cpu, code, events, runs = measure(argv, Path(tmp) / "out")
     load1 = os.getloadavg()[0]
     void = [f"{r.get('scene')} ({r.get('backend')}): {r['flip_error']}" for r in runs if r.get("flip_error")]
     if void:  # FLIP failed (its CPU then counts nothing): the judging share would be void, not small

@@ -355,7 +355,7 @@ class Run:
         writer at the end keeps them (batch/report/html.py ``_fresh``: a data file this process wrote
         from EXRs that have not changed since), so the page is the same. A failure here is left to that writer."""
         try:
-            report._viewer(self.out, entry)
+            report.data_files(self.out, entry)  # only the files: the page's other parts are made at the end
         except Exception:  # noqa: BLE001 - only a head start for the report
             log.debug("the report's data of %s / %s are left to the end", entry.get("scene"), entry.get("backend"),
                       exc_info=True)

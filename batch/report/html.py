@@ -125,7 +125,14 @@ def _pack(planes, keep_bits=10):
         drop = 10 - keep_bits
         h = ((h.astype(np.uint32) + (1 << (drop - 1))) >> drop << drop).astype(np.uint16)
     split = np.concatenate([(h & 0xFF).astype(np.uint8), (h >> 8).astype(np.uint8)])
-    return zlib.compress(split.tobytes(), 4)  # level 4: the default run's render layers in 0.8 s of CPU, not 8.1 s (level 9); view.js 24.5 MB, not 21.1
+    return zlib.compress(split.tobytes(), ZLIB_LEVEL)
+
+
+# zlib's level for the page's data. 1 (issue 45 item 1): the default suite's data files took 4.7 s
+# of CPU at level 4 (most of the runner's record phase), against 0.8 s of CPU, not 8.1 s, at level
+# 9 before that; level 1 deflates its renders' layers in 56 % of level 4's CPU, 3.5 % larger
+# (benchmarks/ENGINES.md, 2026-12-04, "judging's share"). The page inflates any level alike.
+ZLIB_LEVEL = 1
 
 
 def _js_bytes(data):
@@ -167,6 +174,11 @@ def _write_atomically(path, data):
 _WRITTEN = {}
 
 
+# The render's channel names of each view.js in _WRITTEN: the page's writer at the end needs only
+# those of a data file it keeps, not the render read again (27 EXRs of the default suite).
+_NAMES = {}
+
+
 def _stat_key(path):
     try:
         st = os.stat(path)
@@ -205,6 +217,8 @@ def _job_data(job):
     sources = (render, z, flip, block_se, probe)
     try:
         before = _sources_key(sources)
+        if _fresh(js, sources) and os.path.abspath(js) in _NAMES:  # kept: the render's channels as read when it was written
+            return _NAMES[os.path.abspath(js)]
         names, img, se = exr.read_image_and_stderr(render)
         if _fresh(js, sources):
             return names
@@ -222,6 +236,7 @@ def _job_data(job):
             layers["flip"] = (["Y"], [exr.read_rgb(flip)[..., 0]], 10)
         _write_data(js, img.shape[1], img.shape[0], layers)
         _wrote(js, sources, before)
+        _NAMES[os.path.abspath(js)] = list(names)
         return names
     except (OSError, ValueError, KeyError):
         return None
@@ -562,16 +577,26 @@ def _known_lines(run, deviations):
             for k in _list(run.get("known"))]
 
 
-def _viewer(out, run, deviations=None):
+def data_files(out, run):
+    """Write the page's data files of a render (its view.js, the scene's reference_WxH.js) unless
+    this process wrote them from their EXRs as they are: (job, the render's channel names or None
+    without a readable render, the reference's data file or None). The runner calls it as each job
+    finishes (batch/jobs/runner.py ``page_data``), the page's writer for every render at the end."""
     job = run_folder.Job(out, run)
     if job.rel("render") is None:
-        return None
+        return job, None, None
     names = _job_data(job)
+    ref = job.rel("reference")  # the scene's shared reference, or a run's own copy from before issue 21
+    ref_js = _reference_data(out / ref) if names and ref is not None else None
+    return job, names, ref_js
+
+
+def _viewer(out, run, deviations=None):
+    job, names, ref_js = data_files(out, run)
     data = run_folder.local_url(out, job.beside(DATA_JS)) if names else None
     if not data:
         return None
-    ref = job.rel("reference")  # the scene's shared reference, or a run's own copy from before issue 21
-    ref_js = _reference_data(out / ref) if ref is not None else None
+    ref = job.rel("reference")
     ref_data = run_folder.local_url(out, ref.with_suffix(".js")) if ref_js else None
     views = ["render"] + (["reference", "difference"] if ref_data else [])
     views += [v for v, k in (("z-score", "zscore"), ("FLIP", "flip")) if job.rel(k) is not None]

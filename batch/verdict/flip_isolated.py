@@ -283,6 +283,84 @@ def hdr_flip(ref_path, test_path, map_path, timeout=DEFAULT_TIMEOUT):
     return flip_images(exr.read_rgb(ref_path), exr.read_rgb(test_path), map_path, timeout)
 
 
+# HDR-FLIP on the part of the image where something is (issue 45, item 1). A render whose
+# background is black (ggx_copper_grazing: 81 % of its pixels are 0 in both images) has a tiny
+# median luminance, so HDR-FLIP takes many exposures (25 there, against 4 for a Macbeth chart),
+# each an LDR-FLIP of the whole image: 7.4 s of CPU, 5 % of the default suite's rendering. Where
+# the reference and the test are both 0 over a pixel's whole filter support, both LDR images are
+# the same there at every exposure, and its error is exactly 0; so FLIP evaluates only the box
+# around the pixels that are not 0 in either image, grown by the filters' radius (below), and the
+# rest of the map is 0. The same numbers as FLIP on the whole image, bit for bit (checked in
+# tests/verdict/test_compare.py on renders of the suite), because:
+# - the exposures are the whole reference's: HDR-FLIP computes them from its largest and median
+#   luminance (flip-evaluator: Image::computeExposures), and those are passed to the box's
+#   evaluation; they are found by FLIP itself on a 1 x 3 image of a black pixel and the
+#   reference's median- and largest-luminance pixels (luminance in float32 as FLIP computes it);
+# - inside the box every pixel sees the same values: FLIP's separable filters clamp at the image
+#   edge, and the box's edge lies in the black (or on the image's edge), where clamping to it
+#   reads the same 0 as the pixels beyond;
+# - outside the box a pixel's whole filter support is black in both images, so its error is 0;
+# - the mean is FLIP's: a float32 sum of the whole map in row order (zeros add nothing), divided
+#   by the pixel count in float32.
+CROP_MAX = 0.8  # crop only when the box is at most this share of the image (else: FLIP as it is)
+_LUMA = tuple(np.float32(c) for c in (0.2126, 0.7152, 0.0722))  # FLIP's linearRGBToLuminance
+
+
+def filter_radius(ppd):
+    """The largest of FLIP's filter radii in pixels at ``ppd`` (its spatial filter's, from the
+    largest Gaussian scale parameter 0.04, and its feature filter's, 3 standard deviations of
+    0.5 * 0.082 degrees), plus 2 pixels against rounding: a wider margin costs only time."""
+    spatial = np.ceil(3.0 * np.sqrt(0.04 / (2.0 * np.pi ** 2)) * ppd)
+    feature = np.ceil(3.0 * 0.5 * 0.082 * ppd)
+    return int(max(spatial, feature)) + 2
+
+
+def content_box(ref, test, margin):
+    """(row slice, column slice) of the pixels not 0 in either image, grown by ``margin`` and
+    kept inside the image; None when every pixel is 0 in both."""
+    some = np.any(ref != 0, axis=-1) | np.any(test != 0, axis=-1)
+    rows, cols = np.flatnonzero(some.any(axis=1)), np.flatnonzero(some.any(axis=0))
+    if not rows.size:
+        return None
+    h, w = some.shape
+    return (slice(max(0, rows[0] - margin), min(h, rows[-1] + 1 + margin)),
+            slice(max(0, cols[0] - margin), min(w, cols[-1] + 1 + margin)))
+
+
+def hdr_flip_map(flip_evaluator, ref, test):
+    """(H x W float32 map, mean) of HDR-FLIP of ``test`` against ``reference`` (H x W x 3 float32,
+    non-negative), as flip_evaluator.evaluate computes them on the whole images; evaluated on the
+    box around what is not black when that is at most CROP_MAX of the image (see above)."""
+    h, w = ref.shape[:2]
+
+    def full():
+        fmap, mean, _ = flip_evaluator.evaluate(ref, test, "HDR", inputsRGB=False, applyMagma=False,
+                                                computeMeanError=True)
+        return np.asarray(fmap, dtype=np.float32).reshape(h, w, -1)[..., 0], float(mean)
+
+    luma = (_LUMA[0] * ref[..., 0] + _LUMA[1] * ref[..., 1]) + _LUMA[2] * ref[..., 2]  # FLIP's order, float32
+    flat = luma.ravel()
+    k = flat.size // 2  # FLIP's median: element size/2 of the sorted luminances
+    median_at = int(np.argpartition(flat, k)[k])
+    proxy = np.zeros((1, 3, 3), np.float32)
+    proxy[0, 1], proxy[0, 2] = ref.reshape(-1, 3)[median_at], ref.reshape(-1, 3)[int(np.argmax(flat))]
+    _, _, params = flip_evaluator.evaluate(proxy, proxy.copy(), "HDR", inputsRGB=False, applyMagma=False,
+                                           computeMeanError=False, parameters={"numExposures": 2})
+    box = content_box(ref, test, filter_radius(params["ppd"]))
+    if box is None or (box[0].stop - box[0].start) * (box[1].stop - box[1].start) > CROP_MAX * h * w:
+        return full()
+    start, stop = np.float32(params["startExposure"]), np.float32(params["stopExposure"])
+    exposures = int(max(np.float32(2.0), np.ceil(np.float32(stop - start))))  # FLIP's count, in float32
+    part, _, _ = flip_evaluator.evaluate(np.ascontiguousarray(ref[box]), np.ascontiguousarray(test[box]), "HDR",
+                                         inputsRGB=False, applyMagma=False, computeMeanError=False,
+                                         parameters={"startExposure": float(start), "stopExposure": float(stop),
+                                                     "numExposures": exposures, "ppd": float(params["ppd"])})
+    fmap = np.zeros((h, w), np.float32)
+    fmap[box] = np.asarray(part, dtype=np.float32).reshape(box[0].stop - box[0].start, box[1].stop - box[1].start, -1)[..., 0]
+    total = np.cumsum(fmap.ravel(), dtype=np.float32)[-1]  # sequential float32 sum, as FLIP's loop
+    return fmap, float(total / np.float32(h * w))
+
+
 def _serve():
     """The child: answer requests from stdin until it closes (module docstring)."""
     reply = os.fdopen(os.dup(1), "w", buffering=1)
@@ -302,9 +380,7 @@ def _serve():
         ref = np.frombuffer(stdin.read(size), dtype=np.float32).reshape(h, w, 3).copy()  # writable, as flip needs
         test = np.frombuffer(stdin.read(size), dtype=np.float32).reshape(h, w, 3).copy()
         try:
-            fmap, mean, _params = flip_evaluator.evaluate(ref, test, "HDR", inputsRGB=False, applyMagma=False,
-                                                          computeMeanError=True)
-            fmap = np.asarray(fmap, dtype=np.float32).reshape(h, w, -1)[..., 0]
+            fmap, mean = hdr_flip_map(flip_evaluator, ref, test)
             previews.write_flip(req["map"], fmap)  # one channel Y, 5 significant bits
             answer = {"flip": float(mean)}
         except (Exception, SystemExit) as exc:  # noqa: BLE001 - reported for this request; the child stays

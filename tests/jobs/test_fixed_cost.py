@@ -428,3 +428,35 @@ def test_a_flip_child_that_stops_reading_is_killed_and_the_queue_behind_it_serve
     value, err = behind[0]
     assert err is None and value == _flip_in_a_fresh_process(tmp_path, test, ref)
     assert flip_isolated._WORKER[0] is not worker and flip_isolated._WORKER[0].alive()
+
+
+def test_the_fresnel_probes_geometry_is_shared_by_polariser_angles(golden):
+    """polarizing_plane_0 and _90 differ only in their polariser: the Fresnel probe's footprint
+    geometry (probes/fresnel.py ``_footprints``) is computed once for both (issue 45 item 1), and
+    each angle's expected image is the plain computation's, bit for bit."""
+    from spectral_bench.batch.verdict.probes import fresnel
+    w, h = 48, 32
+    kept = []
+    for name in ("polarizing_plane_0", "polarizing_plane_90"):
+        scene = golden[name]
+        objs = scene["objects"]
+        di = next(i for i, o in enumerate(objs) if (o.get("bsdf") or {}).get("type") == "dielectric")
+        li = next(i for i, o in enumerate(objs) if o.get("emitter") and o["shape"]["type"] == "rectangle")
+        pol = scene["camera"]["polarizer"]
+        mask, acc, eta, cos_c = fresnel._expected(scene, di, li, w, h, pol)
+        up = np.asarray(scene["camera"]["to_world"], dtype=np.float64)[:3, 1]
+        up = up / np.linalg.norm(up)
+        plain_mask, plain = None, None
+        for offset, weight in fresnel.raycast.footprint_offsets(fresnel.FOOTPRINT):  # the computation without sharing
+            valid, cos_i, e, s, dirs = fresnel._reflection(scene, di, li, w, h, offset)
+            rs, rp = fresnel.fresnel_dielectric(cos_i, e)
+            phi = fresnel._stokes_chi(s, dirs, up) - np.radians(pol["angle"])
+            values = np.stack([(rs * np.cos(phi) ** 2 + rp * np.sin(phi) ** 2) / 2], axis=-1)
+            plain_mask = valid if plain_mask is None else plain_mask & valid
+            plain = weight * values if plain is None else plain + weight * values
+        corners = fresnel._reflection(scene, di, li, w, h, "corners")[0]
+        plain_mask &= corners[:-1, :-1] & corners[1:, :-1] & corners[:-1, 1:] & corners[1:, 1:]
+        assert plain_mask.sum() > 100 and np.array_equal(mask, plain_mask) and np.array_equal(acc, plain)
+        assert np.array_equal(cos_c, fresnel._reflection(scene, di, li, w, h, "centers")[1]) and eta == e
+        kept.append(next(reversed(fresnel._footprints.cache.values())))
+    assert kept[1] is kept[0]  # the second scene found the first's geometry

@@ -306,6 +306,41 @@ def test_long_block_arrays_are_stored_beside_the_image_and_read_back_exactly(tmp
     assert records.read(moved)["runs"] == [want]
 
 
+def test_a_record_written_again_is_the_same_text_as_the_whole_document(tmp_path):
+    """records.write keeps each run record's text between writes (the runner writes the file after
+    every job, issue 45 item 1): after each of a run's writes the file is json.dumps of the whole
+    document, as written without keeping anything; a record changed in place, a new one, one
+    removed, and a deleted array file (written again) all show."""
+    records = _records()
+    out = tmp_path / "out"
+    runs = []
+    for i in range(4):
+        image = out / f"s{i}" / "results" / "mitsuba" / "render.exr"
+        image.parent.mkdir(parents=True)
+        run = _run_with_block_arrays(100 + i)
+        run.update(image=str(image), scene=f"s{i}")
+        runs.append(run)
+
+    def written_as_a_whole(now):
+        data = records.document(out, "2026-12-02T00:00:00", {"o": 1}, now, [{"job": "x", "kind": "sweep", "scene": "s0", "backend": "mitsuba", "status": "rendered"}])
+        records._store_arrays(data, out)
+        assert (out / "metrics.json").read_text() == json.dumps(data, indent=1) + "\n"
+
+    for n in range(len(runs) + 1):
+        records.write(out, "2026-12-02T00:00:00", {"o": 1}, runs[:n], [{"job": "x", "kind": "sweep", "scene": "s0", "backend": "mitsuba", "status": "rendered"}])
+        written_as_a_whole(runs[:n])
+    runs[1]["status"] = "failed"  # changed in place after it was written
+    runs[2]["probes"][0]["stat"]["measured"][0] = 0.5
+    npz = next((out / "s3" / "results" / "mitsuba").glob("probe_arrays-*.npz"))
+    npz.unlink()
+    records.write(out, "2026-12-02T00:00:00", {"o": 1}, runs, [{"job": "x", "kind": "sweep", "scene": "s0", "backend": "mitsuba", "status": "rendered"}])
+    written_as_a_whole(runs)
+    assert npz.is_file() and records.read(out)["runs"][3]["probes"][0]["stat"]["measured"] == runs[3]["probes"][0]["stat"]["measured"]
+    records.write(out, "2026-12-02T00:00:00", {"o": 1}, runs[2:], [{"job": "x", "kind": "sweep", "scene": "s0", "backend": "mitsuba", "status": "rendered"}])  # fewer, and no other section first
+    written_as_a_whole(runs[2:])
+    assert records.read(out)["runs"][0]["probes"][0]["stat"]["measured"][0] == 0.5
+
+
 @pytest.mark.parametrize("damage", ["missing", "outside", "not npz", "no such key"])
 def test_a_block_array_that_cannot_be_read_is_named(tmp_path, damage):
     """Strict (resume, compare): RecordError naming metrics.json, the scene and the array file;

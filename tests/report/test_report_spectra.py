@@ -211,3 +211,27 @@ def test_a_regenerated_report_rewrites_the_data_files_its_page_loads(run, tmp_pa
 def spectral_exr_cube(path):
     from spectral_bench.batch import spectral_exr
     return spectral_exr.read(path).stokes[0].astype(np.float32)
+
+
+def test_the_data_files_written_as_a_job_finishes_are_the_pages(run, tmp_path):
+    """The runner writes a render's data files as its job finishes (batch/jobs/runner.py
+    ``page_data``: html.data_files, only the files, issue 45 item 1); the page written at the end
+    keeps them, and they hold the render's channels as the page reads them."""
+    import shutil
+    from spectral_bench.batch import exr, records
+    from spectral_bench.batch.report import html
+    out = tmp_path / "copy"
+    shutil.copytree(run[0], out)
+    job = out / Path(*run[1].relative_to(run[0]).parts)
+    (job / "view.js").unlink()
+    entry = records.read(out)["runs"][0]
+    _, names, _ = html.data_files(out, entry)
+    assert names and (job / "view.js").is_file()
+    stamp = (job / "view.js").stat()
+    html.write(out)
+    again = (job / "view.js").stat()
+    assert (again.st_ino, again.st_mtime_ns) == (stamp.st_ino, stamp.st_mtime_ns)  # kept, not written again
+    w, h, layers = _decode_data_js(job / "view.js")
+    img = exr.read_rgb(job / "render.exr")
+    for k, c in enumerate("RGB"):
+        np.testing.assert_allclose(layers["render"][c], img[..., k], rtol=1e-3, atol=1e-6)  # binary16

@@ -142,6 +142,59 @@ def test_flip_runs_isolated_and_bad_input_cannot_exit_the_caller(tmp_path):
     assert value is None and "NaN" in err
 
 
+def _lit_on_black(rng, shape, box, highlight=0.0):
+    """A reference and a noisy test: 0 everywhere but inside ``box`` (rows, columns), where a
+    smooth gradient with texture (and a small highlight ``highlight`` times brighter) lies."""
+    ref = np.zeros(shape + (3,), np.float32)
+    rows, cols = box
+    h, w = rows.stop - rows.start, cols.stop - cols.start
+    y, x = np.mgrid[0:h, 0:w]
+    base = (0.2 + 0.5 * x / w)[..., None] * np.array([1.0, 0.6, 0.3]) * (1 + 0.2 * np.sin(y / 3.0))[..., None]
+    if highlight:
+        base[h // 2 - 2:h // 2 + 2, w // 2 - 2:w // 2 + 2] *= highlight
+    ref[rows, cols] = base
+    test = ref * (1 + 0.1 * rng.standard_normal(ref.shape)).astype(np.float32)
+    return flip_isolated.prepare(ref), flip_isolated.prepare(test)
+
+
+@pytest.mark.parametrize("shape, box, highlight", [
+    ((160, 200), (slice(60, 100), slice(70, 130)), 1e5),  # a bright highlight: many exposures (as ggx_copper_grazing)
+    ((160, 200), (slice(0, 40), slice(150, 200)), 0.0),  # touches two edges of the image
+    ((120, 120), (slice(50, 51), slice(30, 31)), 3.0),  # one lit pixel
+])
+def test_flip_on_the_lit_box_is_flip_on_the_whole_image(shape, box, highlight):
+    """hdr_flip_map evaluates HDR-FLIP on the box around what is not black (issue 45, item 1):
+    the map and the mean are flip_evaluator's on the whole image, bit for bit."""
+    import flip_evaluator
+    ref, test = _lit_on_black(np.random.default_rng(7), shape, box, highlight)
+    whole, mean, params = flip_evaluator.evaluate(ref.copy(), test.copy(), "HDR", inputsRGB=False, applyMagma=False,
+                                                  computeMeanError=True)
+    whole = np.asarray(whole, np.float32).reshape(shape + (-1,))[..., 0]
+    got = flip_isolated.content_box(ref, test, flip_isolated.filter_radius(params["ppd"]))
+    area = (got[0].stop - got[0].start) * (got[1].stop - got[1].start)
+    assert area <= flip_isolated.CROP_MAX * shape[0] * shape[1]  # the box is what is evaluated, not the whole image
+    assert np.count_nonzero(whole) > 0 and not np.any(whole[~_inside(shape, got)])  # FLIP's own map is 0 off the box
+    fmap, value = flip_isolated.hdr_flip_map(flip_evaluator, ref, test)
+    assert np.array_equal(fmap, whole)
+    assert value == float(mean)
+
+
+def _inside(shape, box):
+    mask = np.zeros(shape, bool)
+    mask[box] = True
+    return mask
+
+
+def test_flip_on_images_with_little_black_is_evaluated_whole():
+    """No box to gain (an image lit almost everywhere): FLIP on the whole image, as it is."""
+    import flip_evaluator
+    ref, test = _lit_on_black(np.random.default_rng(8), (64, 64), (slice(2, 62), slice(1, 64)))
+    whole, mean, _ = flip_evaluator.evaluate(ref.copy(), test.copy(), "HDR", inputsRGB=False, applyMagma=False,
+                                             computeMeanError=True)
+    fmap, value = flip_isolated.hdr_flip_map(flip_evaluator, ref, test)
+    assert np.array_equal(fmap, np.asarray(whole, np.float32).reshape(64, 64, -1)[..., 0]) and value == float(mean)
+
+
 def test_block_size_pools_enough_samples_for_heavy_tails():
     assert compare.block_size(64, (512, 512)) == 32  # 32^2 * 64 = 65536
     assert compare.block_size(256, (64, 64)) == 16
