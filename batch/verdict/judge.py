@@ -359,5 +359,6 @@ def sweep_point(job, record):
             entry = {"scene": job["scene_name"], "backend": job["backend"], "mode": job["mode"],
                      "versions": record.get("versions"), "film": (job.get("backend_options") or {}).get("film")}
             point["test"]["known"] = sorted(d.id for d in known.applicable(known.load(job["verdict"].get("known")), entry)
-                                            if d.explains("noise test") and zt.rejudge(d.scale, d.scale_se, d.observer))
+                                            if d.explains("noise test") and not d.shadowing
+                                            and zt.rejudge(d.scale, d.scale_se, d.observer))
     return point

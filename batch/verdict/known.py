@@ -9,8 +9,14 @@ observer (exporters/colorimetry.py: how the renderer's film integrates spectra) 
 1931 ground truth. For the noise test, "expected" is the reference as that observer's film would
 have seen it: the reference plus its observer layer (batch/verdict/observer_layers.py, rendered from
 the same paths as the CMF-film reference; the reference's own observer needs none); a reference
-without a layer for the observer cannot re-judge the noise test, which then keeps its verdict. A
-check is re-judged under the model:
+without a layer for the observer cannot re-judge the noise test, which then keeps its verdict.
+``shadowing`` ("separable" or "height-correlated") models a renderer whose microfacets have another
+Smith shadowing-masking than the IR's separable G1 G1 (pbrt-v4 has only the height-correlated G2):
+the GGX probe judges every plate with the other form too (its ``alternatives``, key
+probes/ggx.py ``shadowing_key``), and a deviation with ``shadowing`` re-judges that result; no other
+check carries the form (the noise test's reference was rendered with the IR's), so such a deviation
+explains the GGX probe's checks only, and may not name an observer as well. A check is re-judged
+under the model:
 
   plain check fails, check under the model passes  -> known   (fails exactly as recorded)
   plain check passes, check under the model fails  -> fixed   (the recorded deviation would have
@@ -29,6 +35,7 @@ from pathlib import Path
 
 DEFAULT_FILE = Path(__file__).resolve().parents[2] / "known_deviations.toml"
 REQUIRED = ("id", "backend", "checks", "evidence", "explanation", "date")
+SHADOWING_FORMS = ("separable", "height-correlated")  # as probes/ggx.py SHADOWING_FORMS (a test keeps them equal)
 
 
 class KnownDeviationsError(ValueError):
@@ -50,6 +57,7 @@ class Deviation:
     scale: float = 1.0
     scale_se: float = 0.0
     observer: str = None
+    shadowing: str = None  # the renderer's Smith form, judged by the GGX probe (module docstring)
 
     def applies(self, scene, backend, mode, version, film=None):
         def any_match(value, patterns):
@@ -133,6 +141,12 @@ def _problem(entry):
         from ...exporters import colorimetry
         if not isinstance(observer, str) or observer not in colorimetry.OBSERVERS:
             return "observer", f"unknown observer {observer!r} (known: {', '.join(colorimetry.OBSERVERS)})"
+    shadowing = entry.get("shadowing")
+    if shadowing is not None:
+        if shadowing not in SHADOWING_FORMS:
+            return "shadowing", f"unknown Smith form {shadowing!r} (known: {', '.join(SHADOWING_FORMS)})"
+        if observer is not None:
+            return "shadowing", "a deviation carries an observer or a shadowing form, not both (no check judges both)"
     return None
 
 

@@ -4,6 +4,7 @@ light normalisation; what pbrt-v4 cannot express named per object and field; hos
 golden files. Rendering the exports with pbrt itself is tests/backends/test_pbrt.py's part."""
 import copy
 import json
+import math
 import re
 import shlex
 
@@ -12,7 +13,7 @@ import pytest
 
 import scene_fuzz
 from conftest import ALL_SCENES, ROOT, metrics, run_batch
-from spectral_bench.exporters import dispersion, ir, names, pbrt_writer, spectra
+from spectral_bench.exporters import dispersion, ir, mesh_io, names, pbrt_writer, spectra
 
 GOLDEN_PBRT = ROOT / "golden" / "pbrt"
 # the canonical scenes pbrt-v4 can express exactly (the rest: test_unsupported_canonical_scenes)
@@ -414,10 +415,6 @@ def _soft_spot(sc):
                      "beam_width": 20.0, "intensity": {"type": "constant", "value": 1.0}}]
 
 
-def _floor_from_behind(sc):
-    _obj(sc, "floor")["shape"]["to_world"][2][3] = 10.0  # the floor above the camera, its front up
-
-
 def _needs_only(sc):
     sc["needs"] = sorted({*sc.get("needs", []), "polarization"})
 
@@ -431,7 +428,6 @@ def _needs_only(sc):
     (_polarizer, "copper_camera", "polarizer"),
     (_stokes, "render", "output"),
     (_soft_spot, "soft_spot", "beam_width"),
-    (_floor_from_behind, "floor", "bsdf.type"),
     (_needs_only, "scene", "needs")])
 def test_what_pbrt_cannot_express_is_named_by_object_and_field_and_left_out(golden, tmp_path, edit, obj, field):
     sc = copy.deepcopy(golden["ggx_copper_50"])
@@ -565,3 +561,133 @@ def test_an_emitter_with_a_bsdf_reflects_and_emits(golden, tmp_path):
     assert spectrum(light, "L")[1].tolist() == [0.25, 0.25]
     assert light["scale"] == ("float", [pytest.approx(y_sum([360, 830], [0.25, 0.25]), rel=1e-8)])
     assert spectrum(next(d for d in blk if d[0] == "Material")[2], "reflectance")[1].tolist() == [0.3, 0.3]
+
+
+# -- one-sided surfaces and the shadowing form: written by a stated modelling ---------------------------
+def _backing(parsed_block):
+    """(material, points N x 3, triangles M x 3) of the black backing in an object's block."""
+    shapes = [d for d in parsed_block if d[0] == "Shape"]
+    mats = [d for d in parsed_block if d[0] == "Material"]
+    assert len(shapes) == 2 and len(mats) == 2, parsed_block
+    backing = next(s for s in shapes if len(s[2]["P"][1]) == 24)
+    material = mats[[s for s in shapes].index(backing)]
+    return (material, np.array(backing[2]["P"][1]).reshape(-1, 3),
+            np.array(backing[2]["indices"][1]).reshape(-1, 3))
+
+
+def _world(points, transform):
+    m = np.array(transform[1]).reshape(4, 4).T  # the file's Transform is column by column
+    return points @ m[:3, :3].T + m[:3, 3]
+
+
+@pytest.mark.parametrize("name", ["floor", "copper_plate_50"])
+def test_a_one_sided_rectangle_gets_a_black_closed_backing(golden, tmp_path, name):
+    """pbrt-v4's diffuse and conductor reflect on both sides; the IR's rectangle is black behind.
+    Its block carries a black box under the same Transform whose lid is the rectangle: the union
+    is closed (every edge shared by two triangles), so no ray reaches the back without ending on
+    reflectance 0; its depth is BACKING_DEPTH of the shorter side, along the IR's normal."""
+    sc = copy.deepcopy(golden["ggx_copper_50"])
+    obj = _obj(sc, name)
+    blk = _block_of(write(sc, tmp_path), sc, name)
+    (_d, kind, params), points, tris = _backing(blk)
+    assert kind == "diffuse" and spectrum(params, "reflectance")[1].tolist() == [0.0, 0.0]
+    lid = next(d for d in blk if d[0] == "Shape" and len(d[2]["P"][1]) == 12)
+    lid_pts = np.array(lid[2]["P"][1]).reshape(-1, 3)
+    assert points[:4].tolist() == lid_pts.tolist()  # the same numbers: the edges are shared exactly
+    edges = {}
+    for tri in [*tris.tolist(), *np.array(lid[2]["indices"][1]).reshape(-1, 3).tolist()]:
+        for a, b in zip(tri, tri[1:] + tri[:1]):
+            edges[(min(a, b), max(a, b))] = edges.get((min(a, b), max(a, b)), 0) + 1
+    assert sorted(set(edges.values())) == [2]  # closed (lid's diagonal and the box's included)
+    transform = [d for d in blk if d[0] == "Transform"]
+    assert len(transform) == 1 and blk.index(transform[0]) < blk.index(lid)
+    world = _world(points, transform[0])
+    m = np.asarray(obj["shape"]["to_world"], dtype=np.float64)
+    normal = np.linalg.inv(m[:3, :3]).T @ [0.0, 0.0, 1.0]
+    normal /= np.linalg.norm(normal)
+    side = min(np.linalg.norm(m[:3, 0]), np.linalg.norm(m[:3, 1])) * 2
+    np.testing.assert_allclose(world[4:] - world[:4], np.tile(-pbrt_writer.BACKING_DEPTH * side * normal, (4, 1)),
+                               atol=1e-6 * side)
+    text = (tmp_path / "out" / "scene.pbrt").read_text()
+    assert f"# APPROXIMATED: {name}.bsdf.type: one sided " in text and "black closed backing" in text
+    assert (name, "bsdf.type") in [(o, f) for o, f, _m in pbrt_writer.approximations(sc)]
+
+
+def test_a_back_face_the_camera_sees_is_expressed_by_its_black_backing(golden, tmp_path):
+    """The floor above the camera, its front up: the camera sees its back, which the backing
+    makes black as in the IR (no longer unsupported)."""
+    sc = copy.deepcopy(golden["ggx_copper_50"])
+    _obj(sc, "floor")["shape"]["to_world"][2][3] = 10.0
+    assert pbrt_writer.unsupported(sc) == []
+    _backing(_block_of(write(sc, tmp_path), sc, "floor"))
+
+
+def test_an_emitting_one_sided_rectangle_has_its_backing_before_its_area_light(golden, tmp_path):
+    """pbrt attaches an AreaLightSource to every shape after it in the block: the backing comes
+    first (it must not emit), the rectangle's own material, area light and shape after it."""
+    sc = copy.deepcopy(golden["ggx_copper_50"])
+    floor = _obj(sc, "floor")
+    floor["emitter"] = {"type": "area", "radiance": {"type": "constant", "value": 0.25}}
+    blk = _block_of(write(sc, tmp_path), sc, "floor")
+    kinds = [(d[0], d[1]) for d in blk if d[0] in ("Material", "AreaLightSource", "Shape", "Transform")]
+    assert [k[0] for k in kinds] == ["Transform", "Material", "Shape", "Material", "AreaLightSource", "Shape"]
+    assert len(blk[[d[0] for d in blk].index("Shape")][2]["P"][1]) == 24  # the backing, before the light
+    _backing(blk)
+
+
+def test_no_backing_where_pbrt_is_already_exact(golden, tmp_path):
+    """A dielectric reflects and refracts on both sides in the IR too, an object without a BSDF is
+    written as a black diffuse already, and a sphere seen from outside is reached only on its
+    front: none gets a backing or is listed as one sided."""
+    sc = copy.deepcopy(golden["ggx_copper_50"])
+    plate = _obj(sc, "copper_plate_50")
+    plate["bsdf"] = {"type": "dielectric", "int_ior": 1.5}
+    sc["objects"].append({**copy.deepcopy(plate), "name": "no_bsdf", "bsdf": None})
+    one_sided = lambda scene: sorted(o for o, f, _m in pbrt_writer.approximations(scene) if f == "bsdf.type")
+    assert one_sided(sc) == ["floor"]
+    parsed = write(sc, tmp_path)
+    for name in ("copper_plate_50", "no_bsdf"):
+        assert [len(d[2]["P"][1]) for d in _block_of(parsed, sc, name) if d[0] == "Shape"] == [12]
+    assert one_sided(golden["yellow_sphere_F8"]) == ["fluo_floor"]
+
+
+def test_a_mesh_that_is_not_closed_or_a_sphere_around_the_camera_is_listed_not_corrected(golden, tmp_path):
+    prism = copy.deepcopy(golden["dispersion_prism"])
+    name = next(o["name"] for o in prism["objects"] if o["shape"]["type"] == "mesh")
+    _obj(prism, name)["bsdf"] = {"type": "diffuse", "reflectance": {"type": "constant", "value": 0.5}}
+    _obj(prism, name).pop("roughness", None)
+    verts, faces = mesh_io.load_mesh(_obj(prism, name)["shape"], prism.get("_base_dir"))
+    listed = lambda sc: [(o, f) for o, f, m in pbrt_writer.approximations(sc) if "not corrected" in m]
+    assert listed(prism) == []  # the prism is closed
+    _obj(prism, name)["shape"] = {**_obj(prism, name)["shape"], "vertices": np.asarray(verts).tolist(),
+                                  "faces": np.asarray(faces)[1:].tolist()}  # one face gone
+    assert listed(prism) == [(name, "bsdf.type")]
+    sc = copy.deepcopy(golden["yellow_sphere_F8"])
+    sphere = next(o for o in sc["objects"] if o["shape"]["type"] == "sphere")
+    assert listed(sc) == []
+    sphere["shape"]["center"] = np.asarray(sc["camera"]["to_world"])[:3, 3].tolist()
+    sphere["shape"]["radius"] = 0.5
+    assert listed(sc) == [(sphere["name"], "bsdf.type")]
+
+
+@pytest.mark.parametrize("alpha", [0.05, 0.2, 0.5])
+def test_the_shadowing_form_is_listed_with_its_ratio_at_grazing(golden, tmp_path, alpha):
+    """pbrt-v4 has only the height-correlated G2; the IR's is the separable G1 G1. The writer lists
+    the object and field with G2 / (G1 G1) at 80 degrees, which the verdict's own Smith terms
+    (batch/verdict/optics.py) give independently."""
+    from spectral_bench.batch.verdict import optics
+    c = np.array([math.cos(math.radians(pbrt_writer.GRAZING_DEG))])
+    expected = float(optics.shadowing("ggx", c, c, alpha, "height-correlated")[0]
+                     / optics.shadowing("ggx", c, c, alpha, "separable")[0])
+    assert pbrt_writer.shadowing_ratio(alpha, pbrt_writer.GRAZING_DEG) == pytest.approx(expected, rel=1e-12)
+    assert expected > 1.0003  # not 1: the 4 digits listed tell it from equal G for every alpha here
+    sc = copy.deepcopy(golden["ggx_copper_grazing"])
+    plate = next(o for o in sc["objects"] if (o.get("bsdf") or {}).get("roughness"))
+    plate["bsdf"]["roughness"]["alpha"] = alpha
+    found = [(o, f, m) for o, f, m in pbrt_writer.approximations(sc) if f == "bsdf.roughness"]
+    assert [(o, f) for o, f, _m in found] == [(plate["name"], "bsdf.roughness")]
+    assert f"G2 / (G1 G1) = {expected:.4f} at alpha {alpha:g}" in found[0][2]
+    pbrt_writer.write(sc, tmp_path / "out")
+    assert f"# APPROXIMATED: {plate['name']}.bsdf.roughness: shadowing: " in (tmp_path / "out" / "scene.pbrt").read_text()
+    plate["bsdf"]["roughness"]["alpha"] = 0.0  # smooth: no shadowing term, nothing listed
+    assert not [f for _o, f, _m in pbrt_writer.approximations(sc) if f == "bsdf.roughness"]

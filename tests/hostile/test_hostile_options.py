@@ -105,7 +105,7 @@ KNOWN_ENTRY = {"id": '"dim"', "backend": '"mitsuba"', "checks": '["noise test"]'
 @pytest.mark.parametrize("field, value", [
     ("scale", "nan"), ("scale", "0"), ("scale", "-1.0"), ("scale", "inf"), ("scale", "true"), ("scale", '"1.0"'),
     ("scale_se", "-0.01"), ("scale_se", "nan"), ("scale_se", "1.5"), ("observer", '"nosuch"'),
-    ("checks", '"noise test"'), ("checks", "[]"), ("scenes", "[1]"), ("backend", '""'),
+    ("checks", '"noise test"'), ("checks", "[]"), ("scenes", "[1]"), ("backend", '""'), ("shadowing", '"smooth"'),
 ])
 def test_a_known_deviation_with_an_implausible_parameter_is_named(tmp_path, run_batch_here, field, value):
     """--known FILE whose one entry has a parameter no renderer's deviation can have (a factor that

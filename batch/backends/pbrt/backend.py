@@ -145,7 +145,10 @@ class PbrtBackend:
     def export(self, scene, out_dir):
         path = Path(pbrt_writer.write(scene, out_dir))
         r = scene["render"]
-        (path.parent / SIZE_FILE).write_text(json.dumps({"width": int(r["width"]), "height": int(r["height"])}))
+        (path.parent / SIZE_FILE).write_text(json.dumps({
+            "width": int(r["width"]), "height": int(r["height"]),
+            # what the writer expressed by a stated modelling: the job's record lists it (``approximated``)
+            "approximated": [f"{o}.{f}: {m}" for o, f, m in pbrt_writer.approximations(scene)]}))
         return path
 
     def render(self, path, mode, spp, out_exr, passes=1, seed=0, timeout=1800, log_path=None):
@@ -163,12 +166,13 @@ class PbrtBackend:
         try:
             size = json.loads((path.parent / SIZE_FILE).read_text())
             expect = (int(size["width"]), int(size["height"]))
-        except (OSError, ValueError, KeyError, TypeError):
-            expect = None
+            approximated = [str(a) for a in size.get("approximated") or []]
+        except (OSError, ValueError, KeyError, TypeError, AttributeError):
+            expect, approximated = None, []
         versions = {"pbrt_exe": str(self.pbrt)}
         return passes_mod.OneProcessPerPass(
             lambda spp, seed, out, timeout, log: self._pass(path, spp, seed, out, timeout, log, expect, versions),
-            log, {"versions": versions})
+            log, {"versions": versions, "approximated": approximated})
 
     def _pass(self, scene, spp, seed, out, timeout, log, expect, versions):
         out = Path(out).resolve()
