@@ -80,7 +80,7 @@ def test_the_checker_sees_what_it_must_refuse(tmp_path):
     from spectral_bench.exporters import pbrt_writer
     pbrt = pbrt_writer.write(scene, tmp_path / "p")
     scene_fuzz.check_pbrt(pbrt, scene)
-    pbrt.write_text(pbrt.read_text().replace("# floor", "# floor\nShape \"sphere\""))
+    pbrt.write_text(pbrt.read_text().replace("# floor\n", "# floor\nShape \"sphere\"\n", 1))  # the object's comment, not its backing's
     with pytest.raises(AssertionError, match="shape was injected"):
         scene_fuzz.check_pbrt(pbrt, scene)
     pbrt.write_text(pbrt.read_text().replace("WorldBegin", "WorldBegin\nInclude \"/etc/passwd\""))
