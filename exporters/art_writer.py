@@ -34,12 +34,11 @@ in the environment multiplies every emitter's and the environment's brightness b
 error of the ART route, which the ART render tests must detect), and the .arm says so in a
 comment. Unset, nothing changes.
 """
-import os
 from pathlib import Path
 
 import numpy as np
 
-from . import dispersion, fluorescence, ir, mesh_io, names, spectra
+from . import dispersion, fluorescence, ir, mesh_io, names, planted, spectra
 
 # ART's own CIE illuminant tables are raw CIE data (D65 = 100 at 560 nm): the IR's scale s
 # (1.0 at 560 nm) becomes s / (raw table value at 560 nm): s / 100 for A and the D series, s / 11.76
@@ -56,16 +55,7 @@ TEST_HOOK = "SPECTRAL_BENCH_TEST_ART_ILLUMINANT_SCALE"
 def planted_scale():
     """The test hook's factor on every emitter (1.0 when unset); a value that is not a positive
     number is an error naming the variable."""
-    text = os.environ.get(TEST_HOOK)
-    if not text:
-        return 1.0
-    try:
-        value = float(text)
-    except ValueError:
-        value = float("nan")
-    if not (value > 0 and np.isfinite(value)):
-        raise ValueError(f"{TEST_HOOK}={text!r}: expected a positive number (a test hook's planted factor)")
-    return value
+    return planted.scale(TEST_HOOK)
 
 
 def _num(x):

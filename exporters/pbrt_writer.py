@@ -84,12 +84,11 @@ names.file_stem. Test hook (planted error, like ART's): ``SPECTRAL_BENCH_TEST_PB
 multiplies every light's scale by F and the file says so in a comment.
 """
 import math
-import os
 from pathlib import Path
 
 import numpy as np
 
-from . import dispersion, ir, mesh_io, names, spectra
+from . import dispersion, ir, mesh_io, names, planted, spectra
 
 FILM = {"nbuckets": 47, "lambdamin": 360.0, "lambdamax": 830.0}  # 47 box buckets of 10 nm
 SAMPLER = "independent"
@@ -108,16 +107,7 @@ _CAMERA_FLIP = np.diag([1.0, 1.0, -1.0, 1.0])
 
 def planted_scale():
     """The test hook's factor on every light (1.0 when unset); not a positive number: an error."""
-    text = os.environ.get(TEST_HOOK)
-    if not text:
-        return 1.0
-    try:
-        value = float(text)
-    except ValueError:
-        value = float("nan")
-    if not (value > 0 and math.isfinite(value)):
-        raise ValueError(f"{TEST_HOOK}={text!r}: expected a positive number (a test hook's planted factor)")
-    return value
+    return planted.scale(TEST_HOOK)
 
 
 def _num(x):
