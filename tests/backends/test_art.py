@@ -1,6 +1,6 @@
 """ART: the .arm writer (golden files, structure, what ART cannot express, radiometric factors),
-scripts/build_art.sh's refusals, and, where ART is built or installed, renders judged like any
-other backend's.
+scripts/build_art.sh's second run (its refusals: test_build_scripts.py), and, where ART is built
+or installed, renders judged like any other backend's.
 
 The render tests need ART 2.1.2 (not in any package registry): scripts/build_art.sh SRC builds it
 from its source into .art/ (.ci/run does when ../shared/art/ holds the source) and writes
@@ -16,17 +16,16 @@ RANDOM_TEST_ALPHA, benchmarks/TESTS.md): the runs' noise tests through --alpha, 
 through the probes' alpha (random_run_env), the Brewster probes in this process likewise; the
 planted run is judged at the same alpha, so its power is the power at the alpha the suite uses."""
 import copy
-import io
 import json
 import os
 import re
 import shutil
 import subprocess
-import tarfile
 
 import numpy as np
 import pytest
 
+import build_scripts
 from conftest import ALL_SCENES, RANDOM_TEST_ALPHA, ROOT, metrics, random_run_env, run_batch, write_scene
 from spectral_bench.batch import backends, exr, spectral_exr
 from spectral_bench.batch.backends.art import backend as art_backend
@@ -38,7 +37,6 @@ EXEC = ["-e", f"art={ARTIST}"] if os.environ.get("ART_ARTIST") else []  # else t
 needs_artist = pytest.mark.skipif(not ARTIST, reason=(
     "no ART: no .art/env.json (scripts/build_art.sh SRC builds ART from its source; .ci/run does when "
     "../shared/art/ holds it), no artist on PATH, no ART_ARTIST: ART renders not run"))
-BUILD_ART = ROOT / "scripts" / "build_art.sh"
 # an emitter's or the environment's brightness in a written .arm (named illuminant or sampled spectrum)
 EMITTED = re.compile(r"(?:LAMBERT_EMITTER|UNIFORM_ENVIRONMENT_MATERIAL)\((?:CONST_COLOUR_PSSPECTRUM\(.*?PSS_END\)|\w+(?:\([^()]*\))?)"
                      r"\s*,\s*([0-9.e+-]+)\)", re.S)
@@ -148,98 +146,6 @@ def test_art46_observer_is_the_backends_band_film(tmp_path):
             assert (np.abs(model - truth) / np.abs(truth)).max() > 5e-4, (centre, model, truth)
 
 
-# -- scripts/build_art.sh: a wrong source is a clear error (exit 2), before anything is installed ----------------------
-def _build_art(*args):
-    return subprocess.run(["bash", str(BUILD_ART), *map(str, args)], capture_output=True, text=True, timeout=120)
-
-
-def test_build_art_refuses_a_missing_or_wrong_source_naming_it(tmp_path):
-    """Missing, not ART (a folder or a tarball of another CMake project), a corrupt tarball: exit 2
-    with a message naming the source; the given PREFIX gets no install and no env file."""
-    other = tmp_path / "other"
-    (other / "Source").mkdir(parents=True)
-    (other / "CMakeLists.txt").write_text("cmake_minimum_required(VERSION 3.0)\nproject (NOTART)\n")
-    with tarfile.open(tmp_path / "other.tar.gz", "w:gz") as t:
-        t.add(other, arcname="other")
-    good_start = (tmp_path / "other.tar.gz").read_bytes()
-    (tmp_path / "corrupt.tar.gz").write_bytes(good_start[: len(good_start) // 2])  # a truncated download
-    (tmp_path / "noise.tar.gz").write_bytes(bytes(range(256)) * 8)
-    cases = {tmp_path / "missing.tar.gz": "does not exist", other: "is not ART's source",
-             tmp_path / "other.tar.gz": "does not hold ART's source", tmp_path / "corrupt.tar.gz": "not a readable tarball",
-             tmp_path / "noise.tar.gz": "not a readable tarball"}
-    for src, words in cases.items():
-        proc = _build_art(src, tmp_path / "prefix")
-        assert proc.returncode == 2, (src, proc.stderr)
-        assert words in proc.stderr and str(src.name) in proc.stderr, (src, proc.stderr)
-        assert not (tmp_path / "prefix" / "bin").exists()
-    assert _build_art().returncode == 2 and "usage" in _build_art().stderr
-
-
-def _not_art_tarball(path):
-    with tarfile.open(path, "w:gz") as t:
-        info = tarfile.TarInfo("other/CMakeLists.txt")
-        data = b"project (NOTART)\n"
-        info.size = len(data)
-        t.addfile(info, io.BytesIO(data))
-    return path
-
-
-def test_build_art_a_name_beginning_with_a_dash_is_data_and_a_failed_unpack_leaves_nothing(tmp_path):
-    """SRC beginning with '-': a file of that name is a source like any (here not ART's: exit 2
-    naming it), a name that is no file is an option the script does not take (exit 2, usage), and
-    so is such a PREFIX; a tarball tar cannot read leaves no half-unpacked PREFIX/.build/src.new."""
-    _not_art_tarball(tmp_path / "-other.tar.gz")
-    prefix = tmp_path / "prefix"
-    proc = subprocess.run(["bash", str(BUILD_ART), "-other.tar.gz", prefix], capture_output=True, text=True,
-                          timeout=120, cwd=tmp_path)
-    assert proc.returncode == 2 and "does not hold ART's source" in proc.stderr and "-other.tar.gz" in proc.stderr, proc.stderr
-    for args, named in ((["--help"], "--help"), (["-x", prefix], "-x"), ([tmp_path / "-other.tar.gz", "--prefix"], "--prefix")):
-        proc = _build_art(*args)
-        assert proc.returncode == 2 and "usage" in proc.stderr and f"'{named}' is not an option" in proc.stderr, (args, proc.stderr)
-    assert not (tmp_path / "--prefix").exists()
-    whole = (tmp_path / "-other.tar.gz").read_bytes()
-    (tmp_path / "cut.tar.gz").write_bytes(whole[: len(whole) // 2])
-    proc = _build_art(tmp_path / "cut.tar.gz", prefix)
-    assert proc.returncode == 2 and "not a readable tarball" in proc.stderr, proc.stderr
-    assert not (prefix / ".build" / "src.new").exists(), sorted(p.name for p in (prefix / ".build").iterdir())
-
-
-@pytest.mark.skipif(os.geteuid() != 0, reason="only root's tar keeps a tarball's owners and setuid bits")
-def test_build_art_unpacks_a_tarball_as_its_own_files_not_the_tarballs_owners(tmp_path):
-    """As root, a source tarball whose files belong to uid 12345 with setuid and setgid bits
-    unpacks as root's files without them. The script then stops where a machine without dpkg and
-    cmake stops it (exit 3, naming cmake), leaving the unpacked source to look at: PATH holds only
-    the tools it needs up to there."""
-    src = tmp_path / "ART-src.tar"
-    with tarfile.open(src, "w") as t:
-        def add(name, data=None, mode=0o644):
-            info = tarfile.TarInfo(name)
-            info.uid = info.gid = 12345
-            info.uname = info.gname = "stranger"
-            if data is None:
-                info.type, info.mode = tarfile.DIRTYPE, 0o755
-                t.addfile(info)
-            else:
-                info.mode, info.size = mode, len(data)
-                t.addfile(info, io.BytesIO(data))
-        for folder in ("ART-src", "ART-src/Source", "ART-src/ART_Resources"):
-            add(folder)
-        add("ART-src/CMakeLists.txt", b"project (ART)\n")
-        add("ART-src/Source/tool", b"#!/bin/sh\n", mode=0o6755)
-    bin_dir = tmp_path / "bin"
-    bin_dir.mkdir()
-    for tool in ("dirname", "basename", "mkdir", "sha256sum", "cut", "cat", "rm", "tar", "head", "tr", "grep", "mv"):
-        (bin_dir / tool).symlink_to(shutil.which(tool))
-    proc = subprocess.run([shutil.which("bash"), str(BUILD_ART), src, tmp_path / "prefix"], capture_output=True,
-                          text=True, timeout=120, env={"PATH": str(bin_dir)})
-    assert proc.returncode == 3 and "'cmake' is missing" in proc.stderr, proc.stderr
-    unpacked = tmp_path / "prefix" / ".build" / "src" / "ART-src"
-    for path in (unpacked, unpacked / "Source", unpacked / "Source" / "tool", unpacked / "CMakeLists.txt"):
-        st = path.lstat()
-        assert (st.st_uid, st.st_gid) == (0, 0), (path, st.st_uid, st.st_gid)
-        assert not st.st_mode & 0o7000, (path, oct(st.st_mode))
-
-
 @pytest.mark.skipif(not (art_backend.built_art() and art_backend.ENV_FILE.is_file()),
                     reason="ART not built with scripts/build_art.sh here (.art/env.json): nothing to rebuild")
 def test_build_art_second_run_over_a_finished_build_does_no_work():
@@ -249,7 +155,7 @@ def test_build_art_second_run_over_a_finished_build_does_no_work():
     if not os.path.exists(record["source"]):
         pytest.skip(f"the source ART was built from ({record['source']}) is gone")
     prefix = os.path.dirname(os.path.dirname(record["artist"]))
-    proc = _build_art(record["source"], prefix)
+    proc = build_scripts.run(build_scripts.ART, record["source"], prefix)
     assert proc.returncode == 0, proc.stderr
     assert "no work to do" in open(os.path.join(prefix, ".build", "build.log")).read()
     assert json.loads(art_backend.ENV_FILE.read_text()) == record
