@@ -15,7 +15,6 @@ linear sRGB by batch/spectral_exr.py as the IR defines colour (exporters/colorim
 and, for Stokes output, S0.R ... S3.B.
 ART's own sRGB EXR is not used: it maps out-of-gamut colours into the gamut.
 """
-import json
 import os
 import re
 import shutil
@@ -28,7 +27,7 @@ import numpy as np
 from ....exporters import art_writer
 from ....exporters.colorimetry import ART_BANDS_NM as ART_BANDS  # (first centre - width / 2, width, count)
 from ... import spectral_exr
-from .. import passes as passes_mod
+from .. import builds, passes as passes_mod
 from ..passes import BackendFailure
 
 NATIVE = {"spectral", "polarization", "dispersion", "fluorescence"}  # dispersion: CONST_SELLMEIER_DISPERSION_6;
@@ -45,25 +44,16 @@ def built_art(env_file=None):
     """(artist, {variable: value}) from scripts/build_art.sh's env file (default ENV_FILE), or None
     when there is none, it is unreadable or its artist is gone (a build deleted since): then PATH
     is searched."""
-    try:
-        record = json.loads(Path(env_file or ENV_FILE).read_text())
-        artist, env = Path(record["artist"]), record["env"]
-    except (OSError, ValueError, KeyError, TypeError):
+    found = builds.built_program(env_file or ENV_FILE, "artist")
+    if found is None or not isinstance(found[1].get("env"), dict):
         return None
-    if not (artist.is_file() and os.access(artist, os.X_OK)) or not isinstance(env, dict):
-        return None
-    return artist, {str(k): str(v) for k, v in env.items()}
+    return found[0], {str(k): str(v) for k, v in found[1]["env"].items()}
 
 
 def find_artist(executable=None):
     """The artist to run: ``executable`` when given, else the built one (env file), else PATH."""
-    if executable:
-        return Path(executable) if Path(executable).is_file() else None
-    built = built_art()
-    if built:
-        return built[0]
-    found = shutil.which("artist")
-    return Path(found) if found else None
+    built = None if executable else built_art()
+    return builds.find_program(executable, built and built[0], "artist")
 
 
 def artist_env(artist):
@@ -125,9 +115,7 @@ class ArtBackend:
 
     def availability(self):
         if self.artist is None:
-            where = self.executable or f"{ENV_FILE.parent.name}/{ENV_FILE.name} or PATH"
-            return False, (f"artist (ART 2.1.2) not found in {where}: build it with scripts/build_art.sh SRC "
-                           "(ART's source), or give it with -e art=PATH, the settings file's exec, or PATH")
+            return False, builds.not_found("artist", "ART 2.1.2", self.executable, ENV_FILE, "scripts/build_art.sh", "art")
         return True, ""
 
     def mode_for(self, scene):

@@ -42,7 +42,7 @@ import numpy as np
 
 from ....exporters import pbrt_writer
 from ... import exr, spectral_exr
-from .. import passes as passes_mod
+from .. import builds, passes as passes_mod
 from ..passes import BackendFailure
 
 # written by scripts/build_pbrt.sh; SPECTRAL_BENCH_PBRT_ENV names another (.ci/run: one for the tests only)
@@ -57,23 +57,13 @@ SIZE_FILE = ".render_size.json"  # written beside the export: the resolution the
 def built_pbrt(env_file=None):
     """The pbrt executable from scripts/build_pbrt.sh's env file (default ENV_FILE), or None when
     there is none, it is unreadable or its pbrt is gone (a build deleted since): then PATH is searched."""
-    try:
-        record = json.loads(Path(env_file or ENV_FILE).read_text())
-        pbrt = Path(record["pbrt"])
-    except (OSError, ValueError, KeyError, TypeError):
-        return None
-    return pbrt if pbrt.is_file() and os.access(pbrt, os.X_OK) else None
+    found = builds.built_program(env_file or ENV_FILE, "pbrt")
+    return found and found[0]
 
 
 def find_pbrt(executable=None):
     """The pbrt to run: ``executable`` when given, else the built one (env file), else PATH."""
-    if executable:
-        return Path(executable) if Path(executable).is_file() else None
-    built = built_pbrt()
-    if built:
-        return built
-    found = shutil.which("pbrt")
-    return Path(found) if found else None
+    return builds.find_program(executable, None if executable else built_pbrt(), "pbrt")
 
 
 def occupancy(buckets, spp):
@@ -131,9 +121,7 @@ class PbrtBackend:
 
     def availability(self):
         if self.pbrt is None:
-            where = self.executable or f"{ENV_FILE.parent.name}/{ENV_FILE.name} or PATH"
-            return False, (f"pbrt (pbrt-v4) not found in {where}: build it with scripts/build_pbrt.sh SRC "
-                           "(pbrt-v4's source), or give it with -e pbrt=PATH, the settings file's exec, or PATH")
+            return False, builds.not_found("pbrt", "pbrt-v4", self.executable, ENV_FILE, "scripts/build_pbrt.sh", "pbrt")
         return True, ""
 
     def mode_for(self, scene):
