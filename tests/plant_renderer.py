@@ -56,6 +56,8 @@ import OpenEXR
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "examples" / "your_renderer"))
+sys.path.insert(0, str(HERE))
+import render_cache  # noqa: E402 - with SPECTRAL_BENCH_TEST_RENDER_CACHE set, each base render is made once
 import toy_renderer  # noqa: E402
 
 VERSION = "plant_renderer 1.0"
@@ -316,11 +318,14 @@ def main(argv=None):
     plants = dict(args.plant)
     xml = Path(args.scene)
     planted_xml = plant_scene(xml, plants)
+    def base(seed):  # the render the output plants start from: the same for every renderer of that scene and seed
+        return render_cache.memo(lambda: render(planted_xml, xml, args, plants, seed), planted_xml,
+                                 args.format, args.film, args.spp, seed, plants.get("polariser"))
     try:
-        names, img = render(planted_xml, xml, args, plants, args.seed)
+        names, img = base(args.seed)
         if "correlated" in plants:  # passes that share part of their noise
             a = float(plants["correlated"])
-            img = a * render(planted_xml, xml, args, plants, SHARED_SEED)[1] + (1 - a) * img
+            img = a * base(SHARED_SEED)[1] + (1 - a) * img
     finally:
         if planted_xml != xml:
             planted_xml.unlink()

@@ -17,6 +17,7 @@ give -1.5 to +1.1 se). The fitting itself on synthetic images: tests/diagnosis/t
 """
 import json
 import math
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -30,6 +31,9 @@ import pkg_bootstrap  # noqa: E402
 
 pkg_bootstrap.package()
 from spectral_bench.batch import records  # noqa: E402
+
+sys.path.insert(0, str(ROOT / "tests"))
+import render_cache  # noqa: E402
 from spectral_bench.batch.verdict import known  # noqa: E402
 
 RUN = ROOT / "batch" / "run.py"
@@ -45,19 +49,32 @@ OTHERS = (("polarizing_plane_0", "plant_polariser", "0.125", 256), ("polarizing_
           ("macbeth_chart_D65", "plant_observer", "0.125", 256))
 
 
-def batch(out, *args):
+def batch(out, *args, cache=None):
+    """A batch run of the planted renderers; with ``cache`` (a folder), renderers that plant on the
+    output of the same scene, samples and seed share one render (tests/render_cache.py: the same
+    image, bit for bit, that each would have rendered)."""
+    env = dict(os.environ, **{render_cache.ENV: str(cache)}) if cache else None
     proc = subprocess.run([sys.executable, str(RUN), "--renderers", str(PLANTS), "--scale", "0.25", *args,
-                           "-o", str(out)], capture_output=True, text=True, timeout=1800, cwd=ROOT)
+                           "-o", str(out)], capture_output=True, text=True, timeout=1800, cwd=ROOT, env=env)
     data = json.loads((out / "metrics.json").read_text())
     return proc, data
 
 
 @pytest.fixture(scope="module")
-def runs(tmp_path_factory):
+def shared_renders(tmp_path_factory):
+    """The module's render cache: the copper run's seven renderers render three images a pass (the
+    CMF film's scale and emitter plants one, Mitsuba's film's sRGB, flip, stain and none one, the
+    alpha plant its own), and the 16 spp sRGB and black runs one (issue 45)."""
+    return tmp_path_factory.mktemp("render_cache")
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory, shared_renders):
     base = tmp_path_factory.mktemp("diagnosis")
     out = {}
     copper = [a for r in COPPER for a in ("-r", r)]
-    proc, data = batch(base / "copper", *copper, "-s", "ggx_copper_50", "--spp", "256", "--junit", str(base / "junit.xml"))
+    proc, data = batch(base / "copper", *copper, "-s", "ggx_copper_50", "--spp", "256", "--junit", str(base / "junit.xml"),
+                       cache=shared_renders)
     assert proc.returncode == 1, proc.stdout[-3000:] + proc.stderr[-3000:]  # failures, and one ok
     problems = records.validate(data)
     assert not problems, problems
@@ -65,7 +82,8 @@ def runs(tmp_path_factory):
     out["_copper"] = base / "copper"
     out["_junit"] = base / "junit.xml"
     for scene, renderer, scale, spp in OTHERS:
-        proc, data = batch(base / renderer, "-r", renderer, "-s", scene, "--scale", scale, "--spp", str(spp))
+        proc, data = batch(base / renderer, "-r", renderer, "-s", scene, "--scale", scale, "--spp", str(spp),
+                           cache=shared_renders)
         assert proc.returncode == 1, proc.stdout[-3000:] + proc.stderr[-3000:]
         assert not records.validate(data)
         out.update({r["backend"]: r for r in data["runs"]})
@@ -148,7 +166,7 @@ def _params_text(text):
 
 
 @pytest.mark.slow  # renders (or builds .blend files) through the real entry point: the full suite, not the fast subset
-def test_no_confident_diagnosis_from_one_block(tmp_path):
+def test_no_confident_diagnosis_from_one_block(tmp_path, shared_renders):
     """Issue 40: ggx_copper_50 at 32x32 and 32 spp is one noise-test block, 3 residuals (R, G, B,
     one cluster). A constant grey render was 'likely: per-channel scale ... +- 0.000000, explains
     100 %', a black one got a proposed known deviation of scale 0, and the per-pass sRGB curve at 4
@@ -159,7 +177,7 @@ def test_no_confident_diagnosis_from_one_block(tmp_path):
     runs = {}
     for scale, spp, renderers in (("0.0625", "32", ("plant_grey", "plant_black")), ("0.25", "4", ("plant_srgb",))):
         proc, data = batch(tmp_path / f"out{spp}", *[a for r in renderers for a in ("-r", r)], "-s", "ggx_copper_50",
-                           "--scale", scale, "--spp", spp, "--no-flip")
+                           "--scale", scale, "--spp", spp, "--no-flip", cache=shared_renders)
         assert proc.returncode == 1 and not records.validate(data), proc.stdout[-3000:] + proc.stderr[-3000:]
         runs.update({r["backend"]: r for r in data["runs"]})
     for name in ("plant_grey", "plant_black", "plant_srgb"):
@@ -180,15 +198,26 @@ def test_no_confident_diagnosis_from_one_block(tmp_path):
             assert float(se) > 0, (name, run["reason"])
 
 
+@pytest.fixture(scope="module")
+def copper_16spp(tmp_path_factory, shared_renders):
+    """ggx_copper_50 at 128x128 and 16 spp through the per-pass sRGB curve and the black render, in
+    one batch run (the two tests below; the black plant scales the same render by 0)."""
+    out = tmp_path_factory.mktemp("copper_16spp") / "out"
+    proc, data = batch(out, "-r", "plant_srgb", "-r", "plant_black", "-s", "ggx_copper_50", "--spp", "16", "--no-flip",
+                       cache=shared_renders)
+    assert proc.returncode == 1 and not records.validate(data), proc.stdout[-3000:] + proc.stderr[-3000:]
+    assert sorted(r["backend"] for r in data["runs"]) == ["plant_black", "plant_srgb"]
+    return {r["backend"]: r for r in data["runs"]}
+
+
 @pytest.mark.slow
-def test_a_model_that_does_not_fully_explain_says_what_it_leaves(tmp_path):
+def test_a_model_that_does_not_fully_explain_says_what_it_leaves(copper_16spp):
     """Issue 40: the per-pass sRGB curve at 128x128 and 16 spp read 'no model explains it (best:
     sRGB transfer applied, explains 100.0 %)'. The curve of each noisy pass is not the curve of
     their mean, so something is left; the text now gives the share to the digit that differs from
     100 % and the residual's chi-square against what noise alone gives, with its p."""
     import re
-    proc, data = batch(tmp_path / "out", "-r", "plant_srgb", "-s", "ggx_copper_50", "--spp", "16", "--no-flip")
-    (run,) = data["runs"]
+    run = copper_16spp["plant_srgb"]
     diag = run["diagnosis"]
     best = diag["models"][0]
     assert run["status"] == "failed" and diag["likely"] is None and not best["fully_explains"], diag["text"]
@@ -204,14 +233,13 @@ def test_a_model_that_does_not_fully_explain_says_what_it_leaves(tmp_path):
 
 
 @pytest.mark.slow  # renders (or builds .blend files) through the real entry point: the full suite, not the fast subset
-def test_a_black_render_gets_no_proposed_known_deviation(tmp_path):
+def test_a_black_render_gets_no_proposed_known_deviation(copper_16spp):
     """Issue 40: a black render (every pixel 0) at 128x128 and 16 spp, many blocks: a uniform scale
     of about 1e-16 fits it exactly and was printed "scale 0.000000 +- 0.000000" with a ready
     known_deviations.toml entry of that scale. A proposed entry needs a finite, physically
     plausible scale (diagnosis PLAUSIBLE_SCALE); and the printed figures keep their digits."""
     from spectral_bench.batch.verdict import diagnosis
-    proc, data = batch(tmp_path / "out", "-r", "plant_black", "-s", "ggx_copper_50", "--spp", "16", "--no-flip")
-    (run,) = data["runs"]
+    run = copper_16spp["plant_black"]
     diag = run["diagnosis"]
     assert run["status"] == "failed" and "known_deviation" not in diag, diag.get("known_deviation")
     for m in diag["models"]:

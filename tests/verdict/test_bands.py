@@ -4,9 +4,12 @@ colour accordingly (box bands through their histospline, exporters/colorimetry.p
 judges every Lambertian patch per band. A metamer (two neighbouring bands 2 % off in opposite
 directions: the same R, G, B within noise) must fail here, naming the bands, while every RGB check
 passes; the untouched renderer passes."""
+import os
+
 import numpy as np
 import pytest
 
+import render_cache
 from conftest import ROOT, metrics, run_batch
 
 EXAMPLE = ROOT / "examples" / "your_renderer"
@@ -70,11 +73,24 @@ def test_a_bad_band_declaration_names_the_renderer_and_key(tmp_path, extra, word
 @pytest.fixture(scope="module")
 def chart_runs(tmp_path_factory):
     """macbeth_chart_D65 at its default settings through the example renderer, untouched and with
-    the planted metamer, in one run."""
-    out = tmp_path_factory.mktemp("bands") / "out"
-    proc = run_batch("--renderers", EXAMPLE / "toy.toml", "--renderers", EXAMPLE / "toy_brighter.toml",
-                     "-r", "toy_spectral", "-r", "toy_spectral_metamer", "-s", "macbeth_chart_D65", "--no-flip",
-                     "-o", out, timeout=1800)
+    the planted metamer, in one run. The two render the same seeds, so the metamer's passes are the
+    untouched passes with the swap applied to the output: the example's declarations (its TOML
+    files, every word but the script) run through tests/toy_cached.py, which renders each pass once
+    and hands the second renderer the same image (bit for bit what it would have rendered; 2 of the
+    4 renders of 620x420 at 64 spp in 94 bands saved, issue 45)."""
+    base = tmp_path_factory.mktemp("bands")
+    script = (ROOT / "tests" / "toy_cached.py").as_posix()
+    tomls = []
+    for name in ("toy.toml", "toy_brighter.toml"):
+        text = (EXAMPLE / name).read_text()
+        assert "{here}/toy_renderer.py" in text, name
+        (base / name).write_text(text.replace("{here}/toy_renderer.py", script))
+        tomls += ["--renderers", base / name]
+    env = dict(os.environ, **{render_cache.ENV: str(base / "cache")})
+    out = base / "out"
+    proc = run_batch(*tomls, "-r", "toy_spectral", "-r", "toy_spectral_metamer", "-s", "macbeth_chart_D65", "--no-flip",
+                     "-o", out, timeout=1800, env=env)
+    assert len(list((base / "cache").glob("*.pickle"))) == 2  # one render per pass, shared by the two renderers
     return proc, out, {r["backend"]: r for r in metrics(out)["runs"]}
 
 
