@@ -144,19 +144,26 @@ def test_the_block_arrays_of_the_probes_sit_beside_the_images(batch_run):
 
 
 
-def _probe_variant(golden, name, tmp_path, change, form="separable", batch_run=None):
-    """Render ``name`` changed by ``change`` at its default settings; judge it with the GGX
-    probe of the unchanged scene (assuming the Smith form ``form``). Given ``batch_run`` (and no
-    change), the batch run's render of the scene is judged instead of rendering it again."""
+def _probe_variant(golden, name, tmp_path, change, form="separable", batch_run=None, records=None):
+    """Render ``name`` changed by ``change`` at the module's settings (full resolution, SPP, 2
+    passes: the batch run's); judge it with the GGX probe of the unchanged scene at those samples
+    (assuming the Smith form ``form``), as the runner judges a run at --spp SPP. Given ``batch_run``
+    (and no change), the batch run's render of the scene is judged instead of rendering it again.
+    ``records``, a dict, gets the probe's records by their last word (blocks, scale)."""
     from spectral_bench.batch.verdict.probes import Measurement, ggx
+    truth = golden[name]
     if batch_run is not None:
         assert change is None
         names, img, se = _batch_render(batch_run, golden, name)
     else:
         sc = copy.deepcopy(golden[name])
         change(sc)
-        _, names, img, se = render_with_noise(sc, tmp_path, sc["render"]["spp"])
-    found = ggx.plates(Measurement(golden[name], names, img, se, None, 2, ("mitsuba3",)), form=form)
+        _, names, img, se = render_with_noise(sc, tmp_path, SPP)
+        truth = copy.deepcopy(truth)
+        truth["render"]["spp"] = SPP  # the probe's blocks for the samples rendered (compare.block_size)
+    found = ggx.plates(Measurement(truth, names, img, se, None, 2, ("mitsuba3",)), form=form)
+    if records is not None:
+        records.update({p["name"].rsplit(" ", 1)[-1]: p for p in found})
     # judged as the runner does: the known deviation of Mitsuba's film (its observer) may explain
     # a failure, so a detection must fail under that observer too
     return {p["name"].rsplit(" ", 1)[-1]: (p["pass"], p["alternatives"]["mitsuba3"]["pass"]) for p in found}
@@ -182,10 +189,15 @@ def test_ggx_probe_detects_alpha_0_22_for_0_2(golden, tmp_path):
 
 @pytest.mark.slow
 def test_ggx_probe_detects_a_one_percent_brighter_light(golden, tmp_path):
+    from spectral_bench.batch.verdict import stats
+
     def brighter(sc):
         next(o for o in sc["objects"] if o.get("emitter"))["emitter"]["radiance"]["scale"] *= 1.01
-    verdict = _probe_variant(golden, "ggx_copper_50_isolated", tmp_path, brighter)
+    found = {}
+    verdict = _probe_variant(golden, "ggx_copper_50_isolated", tmp_path, brighter, records=found)
     assert verdict["scale"] == (False, False), verdict
+    # the power at SPP: the scale probe sees a 1 % scale with 90 % power (its own detectable)
+    assert stats.detectable_scale(found["scale"]["stat"]) < 0.01, stats.detectable_scale(found["scale"]["stat"])
 
 
 @pytest.mark.slow
