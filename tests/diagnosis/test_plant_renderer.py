@@ -65,3 +65,44 @@ def test_output_plant_changes_the_image(plant, value):
     img = rng.uniform(0.1, 0.9, (16, 16, len(names)))
     out = plant_renderer.plant_output(names, img, [(plant, value)])
     assert out.shape == img.shape and not np.allclose(out, img)
+
+
+def test_the_render_cache_gives_back_the_same_arrays_and_keys_on_everything_a_render_reads(tmp_path, monkeypatch):
+    """tests/render_cache.py (the planted renderers' shared base render): off unless the variable
+    is set; on, a second call with the same scene folder and parts reads the first call's result
+    back as the same arrays (float64 whether stored as float32 or not), and a change of the
+    scene file, of a file beside it or of a part is another key. No rendering: a counting stand-in."""
+    import render_cache
+    scene = tmp_path / "export" / "scene.xml"
+    (scene.parent / "spectra").mkdir(parents=True)
+    scene.write_text("<scene/>")
+    (scene.parent / "spectra" / "a.spd").write_text("400 1\n700 1\n")
+    (scene.parent / ".render_size.json").write_text("{}")  # the runner's hidden files are not the scene
+    calls = []
+    rng = np.random.default_rng(3)
+    exact = rng.random((4, 5, 3)).astype(np.float32).astype(np.float64)  # a float32 film's values
+    inexact = rng.random((4, 5, 3))
+
+    def render():
+        calls.append(1)
+        return ["R", "G", "B"], (exact.copy(), inexact.copy())
+
+    monkeypatch.delenv(render_cache.ENV, raising=False)
+    render_cache.memo(render, scene, "rgb", 4, 0)
+    render_cache.memo(render, scene, "rgb", 4, 0)
+    assert len(calls) == 2  # off: every call renders
+    monkeypatch.setenv(render_cache.ENV, str(tmp_path / "cache"))
+    first = render_cache.memo(render, scene, "rgb", 4, 0)
+    (scene.parent / ".render_size.json").write_text('{"w": 1}')
+    again = render_cache.memo(render, scene, "rgb", 4, 0)
+    assert len(calls) == 3 and again[0] == ["R", "G", "B"]
+    for a, b in zip(first[1], again[1]):
+        assert b.dtype == np.float64 and np.array_equal(a, b)
+    render_cache.memo(render, scene, "rgb", 4, 1)  # another seed
+    assert len(calls) == 4
+    (scene.parent / "spectra" / "a.spd").write_text("400 1\n700 2\n")  # a spectrum the scene reads
+    render_cache.memo(render, scene, "rgb", 4, 0)
+    assert len(calls) == 5
+    scene.write_text("<scene></scene>")
+    render_cache.memo(render, scene, "rgb", 4, 0)
+    assert len(calls) == 6
