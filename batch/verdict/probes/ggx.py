@@ -28,7 +28,7 @@ import numpy as np
 
 from ....exporters import colorimetry, spectra
 from .. import compare, optics, raycast, stats
-from .common import MIN_PIXELS, probe as _probe, remembered
+from .common import MIN_PIXELS, lerp, probe as _probe, remembered
 
 LIGHT_NODES = 16   # Gauss-Legendre nodes per axis of a light
 FOOTPRINT = 2      # Gauss-Legendre nodes per axis of a pixel
@@ -157,11 +157,11 @@ def _light_terms(p, wo, cos_o, normal, light):
 def _colours(terms, table):
     """The Fresnel-weighted light's colour at each (point, node) (P x N x 3): the table sampled
     uniformly in cos(w_i . h) (``fresnel_colour_table``), linearly interpolated by arithmetic
-    (np.interp's lerp, the search done by index)."""
+    (np.interp's lerp, the search done by index): ``lerp``."""
     cos_grid, rgb = table
     x = terms["cos_d"] * (len(cos_grid) - 1)
     i = np.minimum(x.astype(np.intp), len(cos_grid) - 2)
-    return rgb[i] + (x - i)[..., None] * (rgb[1:] - rgb[:-1])[i]
+    return lerp(rgb, i, x - i)
 
 
 def plate_radiance(points, w_o, normal, bsdf, lights, tables, form=SHADOWING, cache=None):

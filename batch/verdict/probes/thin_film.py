@@ -24,7 +24,7 @@ import numpy as np
 
 from ....exporters import colorimetry, spectra
 from .. import airy, raycast, stats
-from .common import MIN_PIXELS, probe as _probe, remembered
+from .common import MIN_PIXELS, lerp, probe as _probe, remembered
 
 THETA_TABLE = 4097      # colour as a function of the angle of incidence, linearly interpolated
 # Tiles of 4 x 4 image pixels (tiles with fewer than 8 usable pixels are left out): the film's
@@ -170,7 +170,7 @@ def expected_images(scene, index, width, height, observers=(colorimetry.GROUND_T
         i, f, ok = rays
         shape = (r1 - r0, sub, width, sub)
         for o, (_theta_grid, rgb_grid) in tables.items():
-            rgb = rgb_grid[i] + f[..., None] * (rgb_grid[1:] - rgb_grid[:-1])[i]
+            rgb = lerp(rgb_grid, i, f)
             images[o][r0:r1] = rgb.reshape(shape + (3,)).mean(axis=(1, 3))
         mask[r0:r1] &= ok
     return images, mask
