@@ -8,8 +8,9 @@ of the default plan (``batch/run.py -r mitsuba``, in the suite's order, so that 
 leaves for the next, e.g. the Fresnel probe's geometry, is left as in the run) is judged again
 through the runner's own ``_judge_render``, FLIP as the run's default (``auto``: where the verdict
 is not ``ok``) computed in this process. Prints each job's CPU seconds (process time) and, with
-``--top``, the functions with most cumulative time over all jobs; ``--json FILE`` writes the
-entries judged again (compare them with the run's metrics.json: the same verdicts).
+``--top``, the functions with most cumulative and own time over all jobs; writes the entries
+judged again as the folder's metrics.json (``compare_records.py`` compares two such folders, or
+one with the run: the same verdicts), ``--save FILE`` the profile for pstats.
 """
 import argparse
 import cProfile
@@ -83,6 +84,9 @@ def main(argv=None):
         prof.dump_stats(str(args.save))
     if args.json:
         args.json.write_text(json.dumps(results, default=str))
+    from spectral_bench.batch import records
+    records.write(out, metrics.get("started", ""), opts, results)  # compare_records.py reads it
+    print(f"judged again into {out} (metrics.json: benchmarks/compare_records.py {args.run} {out})")
     return 0
 
 
