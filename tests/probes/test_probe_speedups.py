@@ -83,3 +83,34 @@ def test_emitted_each_is_one_emitted_call_per_spectrum_bit_for_bit():
             plain[k:k + 64] = np.trapz(p * light(l_i)[None, :], l_i, axis=1)
         assert np.array_equal(got, plain)
         assert np.array_equal(fluo.emitted(fl, light, wl), plain)
+
+
+def test_ggx_block_moments_are_each_blocks_own_bit_for_bit():
+    from spectral_bench.batch.verdict import compare
+    from spectral_bench.batch.verdict.probes import ggx
+    rng = np.random.default_rng(45)
+    h, w = 90, 75
+    measured = rng.random((h, w, 3)).astype(np.float32)  # renders are float32, the expected float64
+    expected = rng.random((h, w, 3))
+    yy, xx = np.mgrid[:h, :w]
+    mask = (yy - 40) ** 2 + (xx - 35) ** 2 < 33 ** 2  # a plate's edge cuts blocks of many sizes
+    edges = (compare.block_edges(h, 16), compare.block_edges(w, 16))  # blocks of 16 to 31 pixels a side
+    y_row = np.array([0.2126, 0.7152, 0.0722])
+    blocks = ggx.block_pixels(mask, edges)
+    meas, exp, se, n, rows = ggx.block_moments(measured, expected, blocks, y_row)
+    k = 0
+    for y0, y1 in zip(edges[0][:-1], edges[0][1:]):  # the loop ggx._judge ran before issue 45
+        for x0, x1 in zip(edges[1][:-1], edges[1][1:]):
+            sel = mask[y0:y1, x0:x1]
+            if sel.sum() < ggx.MIN_PIXELS:
+                continue
+            m_px = measured[y0:y1, x0:x1][sel].astype(np.float64)
+            e_px = expected[y0:y1, x0:x1][sel]
+            resid = m_px - e_px
+            assert n[k] == len(m_px)
+            assert np.array_equal(meas[k], m_px.mean(axis=0)) and np.array_equal(exp[k], e_px.mean(axis=0))
+            assert np.array_equal(se[k], resid.std(axis=0, ddof=1) / np.sqrt(len(m_px)))
+            assert rows[k] == (m_px.mean(axis=0) @ y_row, e_px.mean(axis=0) @ y_row,
+                               float((resid @ y_row).std(ddof=1) / np.sqrt(len(m_px))))
+            k += 1
+    assert k == len(blocks) and len(set(n.tolist())) >= 5 and n.max() >= 256
