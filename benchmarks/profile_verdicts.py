@@ -1,6 +1,7 @@
 """The verdicts phase of a kept default run, judged again job by job under cProfile (issue 45 item 1).
 
     .venv/bin/python benchmarks/profile_verdicts.py RUN_FOLDER [--top 25] [-s SCENE ...] [--out DIR]
+    .venv/bin/python benchmarks/profile_verdicts.py --smoke   # one tiny run, judged again, compared
 
 RUN_FOLDER is a run kept by ``bench_fixed_cost.py --default --keep DIR``. Its renders (and
 exports) are copied into a new folder (``--out``, default a temporary one) and each render job
@@ -24,6 +25,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 import pkg_bootstrap  # noqa: E402
 
 pkg_bootstrap.package()
@@ -31,9 +33,28 @@ from spectral_bench.batch import cli  # noqa: E402
 from spectral_bench.batch.jobs import job as job_mod, plan as planning, runner  # noqa: E402
 
 
+def smoke():
+    """One tiny run of the runner (as a user runs it), judged again and compared with itself."""
+    import subprocess
+    import compare_records
+    root = Path(__file__).resolve().parents[1]
+    tiny = ["-r", "mitsuba", "--scale", "0.25", "--spp", "4", "-s", "ggx_copper_50"]
+    with tempfile.TemporaryDirectory() as tmp:
+        run, again = Path(tmp) / "run", Path(tmp) / "again"
+        subprocess.run([sys.executable, str(root / "batch" / "run.py"), *tiny, "-o", str(run)], cwd=root, check=True,
+                       stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
+        main([str(run), "--out", str(again), "--top", "5", "--run-args", " ".join(tiny)])
+        return compare_records.main([__file__, str(run), str(again)])
+
+
 def main(argv=None):
+    argv = sys.argv[1:] if argv is None else argv
+    if argv == ["--smoke"]:
+        return smoke()
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("run", type=Path)
+    ap.add_argument("--run-args", default="-r mitsuba",
+                    help="the batch/run.py options the run was made with (default: the default suite's)")
     ap.add_argument("--top", type=int, default=0)
     ap.add_argument("-s", "--scene", action="append", default=[])
     ap.add_argument("--out", type=Path)
@@ -43,7 +64,7 @@ def main(argv=None):
     out = args.out or Path(tempfile.mkdtemp(prefix="rejudge-"))
     metrics = json.loads((args.run / "metrics.json").read_text())
     entries = {r["job"]: r for r in metrics["runs"] if isinstance(r, dict) and r.get("job")}
-    opts = cli.parse(["-r", "mitsuba", "--out", str(out)])
+    opts = cli.parse([*args.run_args.split(), "--out", str(out)])
     _, scenes = runner.plan(opts)
     made = {"mitsuba": runner.make_backend("mitsuba", opts)}
     jobs, _ = planning.main_jobs(scenes, made, opts, out, planning.verdict_settings(opts))
