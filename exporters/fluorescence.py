@@ -111,14 +111,22 @@ def emitted(fl, radiance, l_o, step=0.05):
     """integral of P(l_i, l_o) L(l_i) dl_i at each l_o (trapezoid on a ``step`` nm grid; P and
     the IR's spectra are piecewise linear, so the rule's own error is far below any render's
     noise). ``radiance(wavelengths)`` is the incident spectral radiance."""
+    return emitted_each(fl, [radiance], l_o, step)[0]
+
+
+def emitted_each(fl, radiances, l_o, step=0.05):
+    """``emitted`` for each of several incident spectra ``radiances``, P tabulated once for all:
+    the same numbers as one ``emitted`` call each (issue 45 item 1: the sphere-on-floor probe
+    integrates a dozen spectra against one P, whose table was most of each call)."""
     l_i = _fine(step=step)
     l_o = np.atleast_1d(np.asarray(l_o, dtype=np.float64))
-    L = np.asarray(radiance(l_i), dtype=np.float64)
-    out = np.empty(l_o.shape)
+    lights = [np.asarray(radiance(l_i), dtype=np.float64) for radiance in radiances]
+    outs = [np.empty(l_o.shape) for _ in lights]
     for k in range(0, l_o.size, 64):  # chunks keep the P block small
         p = reradiation(fl, l_i[None, :], l_o[k:k + 64, None])
-        out[k:k + 64] = np.trapz(p * L[None, :], l_i, axis=1)
-    return out
+        for L, out in zip(lights, outs):
+            out[k:k + 64] = np.trapz(p * L[None, :], l_i, axis=1)
+    return outs
 
 
 def quantum_yield(fl, reflectance):

@@ -59,8 +59,17 @@ def hit_rectangle(shape, origin, dirs, margin=1.0):
     d_local = dirs @ inv[:3, :3].T
     with np.errstate(divide="ignore", invalid="ignore"):
         t = -o_local[..., 2] / d_local[..., 2]
-    p = o_local + np.where(np.isfinite(t), t, 0.0)[..., None] * d_local
-    inside = (np.abs(p[..., 0]) <= margin) & (np.abs(p[..., 1]) <= margin) & (t > 1e-9)
+    # the hit point's local x and y alone (its z is 0), in place: the same numbers as
+    # o_local + t * d_local per component, 2.5x faster (issue 45 item 1; the probes cast up to
+    # 513 x 513 rays at every object; tests/probes/test_probe_speedups.py pins it)
+    tt = np.where(np.isfinite(t), t, 0.0)
+    x = tt * d_local[..., 0]
+    x += o_local[..., 0]
+    inside = np.abs(x, out=x) <= margin
+    y = np.multiply(tt, d_local[..., 1], out=tt)
+    y += o_local[..., 1]
+    inside &= np.abs(y, out=y) <= margin
+    inside &= t > 1e-9
     return np.where(inside, t, np.inf)
 
 

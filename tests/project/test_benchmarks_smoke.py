@@ -47,6 +47,7 @@ SMOKE = {  # script -> (arguments that make it run in seconds, what its output m
     "pbrt_writer_checks.py": (["--smoke"], TABLE + r"|Not measured: no pbrt-v4"),
     "plugin_lane_estimators.py": ([], r"variance one-lane / mixture"),
     "power_by_scene.py": (["-s", "ggx_copper_50"], TABLE),
+    "profile_verdicts.py": (["--smoke"], r"1 jobs compared, 0 differences"),
     "reference_colour_change.py": (["--smoke", "{tmp}"], TABLE),
     "reference_storage.py": (["--smoke"], TABLE),
     "rgb_microfacet_check.py": (["--smoke", "--spp", "4", "--passes", "2"], TABLE),

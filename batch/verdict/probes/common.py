@@ -68,3 +68,16 @@ def probe(name, expected, measured, error, unit, passed, **extra):
            "pass": None if passed is None else bool(passed)}
     out.update(extra)
     return out
+
+
+def lerp(table, i, f):
+    """table[i] + f * (table[i + 1] - table[i]) per index ``i`` (any shape) into the rows of
+    ``table`` (K x C), with ``f`` of i's shape: the same numbers, bit for bit, as the fancy-indexed
+    ``table[i] + f[..., None] * (table[1:] - table[:-1])[i]`` (IEEE addition and multiplication
+    commute), gathered with np.take into one array computed in place: measured 4x faster on
+    8192 x 256 indices (issue 45 item 1; tests/probes/test_probe_speedups.py pins it to the
+    fancy-indexed form)."""
+    out = np.take(table[1:] - table[:-1], i, axis=0)
+    out *= f[..., None]
+    out += np.take(table, i, axis=0)
+    return out

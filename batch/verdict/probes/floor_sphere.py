@@ -191,15 +191,19 @@ def _spectra(sphere_bsdf, floor_bsdf, radiance, shares):
         nxt = step(bound)
         bound = nxt + v * contraction / (1 - contraction) * np.max(np.abs(nxt - bound) / v)
 
-    def k(values):
-        fn = lambda x: np.interp(x, grid, values)  # noqa: E731
-        out = np.clip(np.asarray(spectra.evaluate(sphere_bsdf["reflectance"], wl), dtype=np.float64), 0, None) * fn(wl)
-        return out + (fluo.emitted(fl, fn, wl) if fl is not None else 0.0)
+    def k_each(values):
+        """K[X] for each spectrum X of ``values`` (on the grid): the sphere's reflection of X plus
+        its fluorescence (one table of P for all: fluo.emitted_each)."""
+        fns = [lambda x, v=v: np.interp(x, grid, v) for v in values]
+        emitted = fluo.emitted_each(fl, fns, wl) if fl is not None else [0.0] * len(fns)
+        return [np.clip(np.asarray(spectra.evaluate(sphere_bsdf["reflectance"], wl), dtype=np.float64), 0, None)
+                * fn(wl) + e for fn, e in zip(fns, emitted)]
     # outside the square Q_R the floor sees the sphere in at most s_R of its cosine-weighted
     # hemisphere: its radiance is at most rho_f (L + s_R (B - L)^+)
-    ups = {big: k(rho_f * (light + big_share * np.clip(bound - light, 0, None)))
-           for big, big_share in shares}
-    return k(light), k(rho_f * light), k(rho_f * bound), ups, contraction
+    ks = k_each([light, rho_f * light, rho_f * bound]
+                + [rho_f * (light + big_share * np.clip(bound - light, 0, None)) for _big, big_share in shares])
+    ups = {big: ks[3 + j] for j, (big, _share) in enumerate(shares)}
+    return ks[0], ks[1], ks[2], ups, contraction
 
 
 def _weights(obs):
@@ -280,6 +284,19 @@ def _pixel_shares(scene, si, fi, mask, k=FOOTPRINT):
     return f_sum, sums
 
 
+@remembered(size=4)
+def _centre_shares(camera, shapes, si, fi, w, h):
+    """(mask of the sphere's whole pixels, floor_shares at their centres): the geometry alone (the
+    camera's fields that raycast reads, the two shapes, the image size). The four scenes of the
+    default suite with this probe (yellow_sphere_F8 and three fluorescent spheres) share it, so
+    the later ones take it from the first (issue 45 item 1: 0.7 s of each one's ~2 s of CPU);
+    the same arguments give the same arrays, so the verdicts are those computed anew."""
+    scene = {"camera": camera, "objects": [{"shape": sh} for sh in shapes]}
+    mask = raycast.pixels_inside(camera, w, h, scene["objects"], si)
+    f, per = _pixel_shares(scene, si, fi, mask, 1)
+    return mask, f, per
+
+
 def sphere_on_floor(m):
     scene, image = m.scene, m.image
     found = applies(scene)
@@ -293,14 +310,14 @@ def sphere_on_floor(m):
     shares_r = [(big, share) for big, share, _sq in _squares(scene, si, fi)]
     a, u_lo, u_hi, ups, contraction = _spectra(sphere["bsdf"], objs[fi]["bsdf"], env["radiance"], shares_r)
     h, w = image.shape[:2]
-    mask = raycast.pixels_inside(scene["camera"], w, h, objs, si)
+    camera = {k: scene["camera"][k] for k in ("to_world", "fov", "fov_axis") if k in scene["camera"]}  # what raycast reads
+    mask, f, per = _centre_shares(camera, [o["shape"] for o in objs], si, fi, w, h)
     sphere_pixels = int(mask.sum())
     if contraction >= 1.0:
         return [_probe(name, None, None, None, "relative", None, pixels=int(mask.sum()),
                        why=f"no bound on the floor's radiance (contraction {contraction:.3f} >= 1)")]
     # which pixels are judged: chosen on the interval at each pixel's centre (the scene alone
     # decides); their bounds then from the footprint's mean
-    f, per = _pixel_shares(scene, si, fi, mask, 1)
     lo, hi = _channels(a, u_lo, u_hi, ups, f, per, colorimetry.GROUND_TRUTH)
     narrow = np.any((lo > 0) & (hi - lo <= WIDTH_MAX * lo), axis=1)
     chosen = np.zeros_like(mask)

@@ -24,7 +24,7 @@ import numpy as np
 
 from ....exporters import colorimetry, spectra
 from .. import airy, raycast, stats
-from .common import MIN_PIXELS, probe as _probe, remembered
+from .common import MIN_PIXELS, lerp, probe as _probe, remembered
 
 THETA_TABLE = 4097      # colour as a function of the angle of incidence, linearly interpolated
 # Tiles of 4 x 4 image pixels (tiles with fewer than 8 usable pixels are left out): the film's
@@ -170,7 +170,7 @@ def expected_images(scene, index, width, height, observers=(colorimetry.GROUND_T
         i, f, ok = rays
         shape = (r1 - r0, sub, width, sub)
         for o, (_theta_grid, rgb_grid) in tables.items():
-            rgb = rgb_grid[i] + f[..., None] * (rgb_grid[1:] - rgb_grid[:-1])[i]
+            rgb = lerp(rgb_grid, i, f)
             images[o][r0:r1] = rgb.reshape(shape + (3,)).mean(axis=(1, 3))
         mask[r0:r1] &= ok
     return images, mask
@@ -198,17 +198,28 @@ def environment_pixels(scene, width, height):
     return free[:-1, :-1] & free[1:, :-1] & free[:-1, 1:] & free[1:, 1:] & centre
 
 
+def tile_moments(rgb, expected, blocks):
+    """Per tile (in ``blocks``' order) and channel: the mean measured, the mean expected and the
+    standard error of the mean residual (T x 3 each), and the tiles' pixel counts. The tiles of
+    one pixel count are reduced together (T x n x 3 arrays, axis 1): the same numbers, bit for
+    bit, as each tile's own (n x 3, axis 0) mean and std, 8x faster on a 256 x 256 sphere's 4,000
+    tiles (issue 45 item 1; tests/probes/test_probe_speedups.py pins it to the tile loop)."""
+    n = np.array([len(ys) for ys, _xs in blocks])
+    meas, exp, se = (np.empty((len(blocks), 3)) for _ in range(3))
+    for k in np.unique(n):
+        idx = np.nonzero(n == k)[0]
+        ys, xs = np.stack([blocks[j][0] for j in idx]), np.stack([blocks[j][1] for j in idx])
+        m_px, e_px = rgb[ys, xs], expected[ys, xs]
+        meas[idx], exp[idx] = m_px.mean(axis=1), e_px.mean(axis=1)
+        se[idx] = (m_px - e_px).std(axis=1, ddof=1) / np.sqrt(k)
+    return meas, exp, se, n
+
+
 def _tile_stat(rgb, expected, blocks, alpha):
     """compare_means over every tile and channel: tile means against their standard error from the
     spread of the tile's residuals (independent pixels)."""
-    meas, exp, se, dof = [], [], [], []
-    for ys, xs in blocks:
-        m_px, e_px = rgb[ys, xs], expected[ys, xs]
-        meas.append(m_px.mean(axis=0))
-        exp.append(e_px.mean(axis=0))
-        se.append((m_px - e_px).std(axis=0, ddof=1) / np.sqrt(len(ys)))
-        dof.append(np.full(3, len(ys) - 1.0))
-    return stats.compare_means(np.ravel(meas), np.ravel(exp), np.ravel(se), dof=np.ravel(dof), alpha=alpha)
+    meas, exp, se, n = tile_moments(rgb, expected, blocks)
+    return stats.compare_means(np.ravel(meas), np.ravel(exp), np.ravel(se), dof=np.repeat(n - 1.0, 3), alpha=alpha)
 
 
 def smooth_film(m, alpha=None):

@@ -1,0 +1,116 @@
+"""The probes' faster computations (issue 45 item 1) pinned to the straightforward ones they
+replace, bit for bit, on small cases: the same expected images, so the same verdicts."""
+import numpy as np
+
+from spectral_bench.batch.verdict.probes import common
+
+
+def test_lerp_is_the_fancy_indexed_interpolation_bit_for_bit():
+    rng = np.random.default_rng(45)
+    table = rng.normal(size=(1025, 3))
+    x = rng.random((64, 33)) * (len(table) - 1)
+    x[0, :3] = [0.0, len(table) - 1, len(table) - 1.5]  # both ends of the table
+    i = np.minimum(x.astype(np.intp), len(table) - 2)
+    f = x - i
+    plain = table[i] + f[..., None] * (table[1:] - table[:-1])[i]
+    fast = common.lerp(table, i, f)
+    assert fast.shape == plain.shape == (64, 33, 3)
+    assert np.array_equal(fast.view(np.int64), plain.view(np.int64))
+
+
+def _hit_rectangle_plain(shape, origin, dirs, margin=1.0):
+    """raycast.hit_rectangle as it was written before issue 45: the whole local hit point."""
+    m = np.asarray(shape["to_world"], dtype=np.float64)
+    inv = np.linalg.inv(m)
+    o_local = (inv @ np.append(origin, 1.0))[:3] if np.ndim(origin) == 1 else (origin @ inv[:3, :3].T + inv[:3, 3])
+    d_local = dirs @ inv[:3, :3].T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = -o_local[..., 2] / d_local[..., 2]
+    p = o_local + np.where(np.isfinite(t), t, 0.0)[..., None] * d_local
+    inside = (np.abs(p[..., 0]) <= margin) & (np.abs(p[..., 1]) <= margin) & (t > 1e-9)
+    return np.where(inside, t, np.inf)
+
+
+def test_hit_rectangle_is_the_plain_intersection_bit_for_bit():
+    from spectral_bench.batch.verdict import raycast
+    rng = np.random.default_rng(45)
+    m = np.eye(4)
+    m[:3, :3] = [[2.0, 0.0, 0.0], [0.0, 0.0, -2.0], [0.0, 2.0, 0.0]]  # a floor, turned and shifted
+    m[:3, 3] = [0.1, -0.5, 0.2]
+    shape = {"type": "rectangle", "to_world": m.tolist()}
+    camera = {"to_world": [[1, 0, 0, 0], [0, 1, 0, 1], [0, 0, 1, 5], [0, 0, 0, 1]], "fov": 60}
+    origin, corners = raycast.camera_rays(camera, 40, 30, "corners")
+    points, dirs = rng.normal(size=(30, 40, 3)), rng.normal(size=(30, 40, 3))
+    dirs[0, 0] = [1.0, 0.0, 0.0]  # parallel to the rectangle: no hit
+    for o, d in ((origin, corners), (points, dirs), (origin, dirs)):
+        for margin in (1.0, 0.7):
+            plain = _hit_rectangle_plain(shape, o, d, margin)
+            fast = raycast.hit_rectangle(shape, o, d, margin)
+            assert np.isfinite(plain).any() and not np.isfinite(plain).all()
+            assert np.array_equal(fast, plain)
+
+
+def test_thin_film_tile_moments_are_each_tiles_own_bit_for_bit():
+    from spectral_bench.batch.verdict.probes import thin_film
+    rng = np.random.default_rng(45)
+    rgb, expected = rng.random((48, 40, 3)), rng.random((48, 40, 3))
+    mask = rng.random((48, 40)) < 0.75
+    blocks = thin_film.tiles(mask)
+    counts = {len(ys) for ys, _xs in blocks}
+    assert len(counts) >= 5 and min(counts) >= thin_film.MIN_TILE_PIXELS  # tiles of many sizes
+    meas, exp, se, n = thin_film.tile_moments(rgb, expected, blocks)
+    for k, (ys, xs) in enumerate(blocks):  # the straightforward loop the function replaces
+        m_px, e_px = rgb[ys, xs], expected[ys, xs]
+        assert n[k] == len(ys)
+        assert np.array_equal(meas[k], m_px.mean(axis=0))
+        assert np.array_equal(exp[k], e_px.mean(axis=0))
+        assert np.array_equal(se[k], (m_px - e_px).std(axis=0, ddof=1) / np.sqrt(len(ys)))
+
+
+def test_emitted_each_is_one_emitted_call_per_spectrum_bit_for_bit():
+    from spectral_bench.exporters import fluorescence as fluo
+    fl = {"type": "bands", "absorption_peak": 450.0, "absorption_width": 40.0, "emission_peak": 560.0,
+          "emission_width": 50.0, "strength": 0.01}
+    wl = np.arange(380.0, 781.0, 5.0)
+    lights = [lambda x: np.ones_like(x), lambda x: 1.0 + np.sin(x / 30.0) ** 2, lambda x: x / 500.0]
+    each = fluo.emitted_each(fl, lights, wl)
+    assert len(each) == 3 and np.any(each[0] > 0)
+    l_i = np.arange(fluo.DOMAIN[0], fluo.DOMAIN[1] + 0.025, 0.05)  # emitted's own grid (step 0.05 nm)
+    for light, got in zip(lights, each):  # the loop emitted ran per spectrum before issue 45
+        plain = np.empty(wl.shape)
+        for k in range(0, wl.size, 64):
+            p = fluo.reradiation(fl, l_i[None, :], wl[k:k + 64, None])
+            plain[k:k + 64] = np.trapz(p * light(l_i)[None, :], l_i, axis=1)
+        assert np.array_equal(got, plain)
+        assert np.array_equal(fluo.emitted(fl, light, wl), plain)
+
+
+def test_ggx_block_moments_are_each_blocks_own_bit_for_bit():
+    from spectral_bench.batch.verdict import compare
+    from spectral_bench.batch.verdict.probes import ggx
+    rng = np.random.default_rng(45)
+    h, w = 90, 75
+    measured = rng.random((h, w, 3)).astype(np.float32)  # renders are float32, the expected float64
+    expected = rng.random((h, w, 3))
+    yy, xx = np.mgrid[:h, :w]
+    mask = (yy - 40) ** 2 + (xx - 35) ** 2 < 33 ** 2  # a plate's edge cuts blocks of many sizes
+    edges = (compare.block_edges(h, 16), compare.block_edges(w, 16))  # blocks of 16 to 31 pixels a side
+    y_row = np.array([0.2126, 0.7152, 0.0722])
+    blocks = ggx.block_pixels(mask, edges)
+    meas, exp, se, n, rows = ggx.block_moments(measured, expected, blocks, y_row)
+    k = 0
+    for y0, y1 in zip(edges[0][:-1], edges[0][1:]):  # the loop ggx._judge ran before issue 45
+        for x0, x1 in zip(edges[1][:-1], edges[1][1:]):
+            sel = mask[y0:y1, x0:x1]
+            if sel.sum() < ggx.MIN_PIXELS:
+                continue
+            m_px = measured[y0:y1, x0:x1][sel].astype(np.float64)
+            e_px = expected[y0:y1, x0:x1][sel]
+            resid = m_px - e_px
+            assert n[k] == len(m_px)
+            assert np.array_equal(meas[k], m_px.mean(axis=0)) and np.array_equal(exp[k], e_px.mean(axis=0))
+            assert np.array_equal(se[k], resid.std(axis=0, ddof=1) / np.sqrt(len(m_px)))
+            assert rows[k] == (m_px.mean(axis=0) @ y_row, e_px.mean(axis=0) @ y_row,
+                               float((resid @ y_row).std(ddof=1) / np.sqrt(len(m_px))))
+            k += 1
+    assert k == len(blocks) and len(set(n.tolist())) >= 5 and n.max() >= 256
