@@ -157,11 +157,10 @@ def _lit_on_black(rng, shape, box, highlight=0.0):
     return flip_isolated.prepare(ref), flip_isolated.prepare(test)
 
 
+@pytest.mark.slow  # over ~1 s of CPU each (flip_evaluator, its threads; benchmarks/TESTS.md)
 @pytest.mark.parametrize("shape, box, highlight", [
-    pytest.param((160, 200), (slice(60, 100), slice(70, 130)), 1e5,  # a bright highlight: many exposures (as ggx_copper_grazing)
-                 marks=pytest.mark.slow),  # over ~1 s of CPU (benchmarks/TESTS.md)
-    pytest.param((160, 200), (slice(0, 40), slice(150, 200)), 0.0,  # touches two edges of the image
-                 marks=pytest.mark.slow),
+    ((160, 200), (slice(60, 100), slice(70, 130)), 1e5),  # a bright highlight: many exposures (as ggx_copper_grazing)
+    ((160, 200), (slice(0, 40), slice(150, 200)), 0.0),  # touches two edges of the image
     ((120, 120), (slice(50, 51), slice(30, 31)), 3.0),  # one lit pixel
 ])
 def test_flip_on_the_lit_box_is_flip_on_the_whole_image(shape, box, highlight):
