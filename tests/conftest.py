@@ -226,8 +226,15 @@ def run_bpy(body, timeout=600, env=None):
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
+# The fast subset (`pytest -m "not slow"`) is the tests that cost under about 1 s of CPU each: the
+# test's own process plus the child processes it waits for (batch/run.py, bpy, Mitsuba, Chromium, a
+# renderer; kept render workers' share), a module- or session-scoped fixture's cost counted to every
+# test that uses it. Every test above that is marked slow (`pytestmark = pytest.mark.slow` where a
+# whole module is); each room (tests/<room>/) keeps fast in-process tests of its code
+# (tests/project/test_fast_subset.py; docs/developing.md, benchmarks/TESTS.md: how it is measured).
 def pytest_configure(config):
-    config.addinivalue_line("markers", "slow: renders whole cases or runs long studies; `pytest -m 'not slow'` is the fast subset")
+    config.addinivalue_line("markers", "slow: costs over about 1 s of CPU with its children and shared fixtures (renders, "
+                                       "bpy, batch runs, studies); `pytest -m 'not slow'` is the fast subset")
 
 
 # pytest.ini runs the suite on pytest-xdist workers with `--dist loadscope`, which this file's

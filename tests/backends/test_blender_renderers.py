@@ -14,6 +14,8 @@ import test_extension as ext
 from conftest import ROOT, run_bpy
 from test_extension import extension_zip  # noqa: F401 - the fixture: the extension built without wheels
 
+pytestmark = pytest.mark.slow  # every test here costs over ~1 s of CPU, its children and module fixtures counted (benchmarks/TESTS.md)
+
 TESTS = str(ROOT / "tests")
 TOY = ROOT / "examples" / "your_renderer" / "toy.toml"
 TOY_SCRIPT = ROOT / "examples" / "your_renderer" / "toy_renderer.py"

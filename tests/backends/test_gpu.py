@@ -116,6 +116,7 @@ def test_device_is_a_checked_option(tmp_path):
     assert proc.returncode == 2 and "--device" in proc.stderr and "one of cpu, gpu, auto" in proc.stderr
 
 
+@pytest.mark.slow
 def test_device_gpu_without_cuda_is_a_usage_error(tmp_path, probe, capsys):
     """Where the real probe fails, --device gpu exits 2 naming why, and makes no output folder;
     the reference maker alike (called in this process: its main is the command)."""

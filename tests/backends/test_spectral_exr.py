@@ -328,6 +328,7 @@ def test_spectral_scene_xml_and_refusals(tmp_path):
     assert ms.spectral_variant("llvm_ad_mono") == "llvm_ad_spectral" and ms.spectral_variant("scalar_rgb") == "scalar_spectral"
 
 
+@pytest.mark.slow
 def test_spectral_film_band_is_the_band_average(tmp_path):
     """A constant environment of a known spectrum seen through the spectral film: each 10 nm band
     holds the spectrum's average over the band (specfilm stores the band integral; the module

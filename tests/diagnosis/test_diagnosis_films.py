@@ -70,6 +70,7 @@ def test_film_thickness_fitted(tmp_path):
     assert not any(m["model"] == "thin film missing" and m["fully_explains"] for m in found["models"])
 
 
+@pytest.mark.slow
 def test_dispersion_missing_is_named(tmp_path):
     """The prism's N-BK7 rendered as a plain dielectric of its n at the d line (587.6 nm): the fan
     collapses to one spot; the positions probe fails (its power: the channels' centroids tens of

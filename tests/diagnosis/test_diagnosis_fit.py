@@ -132,6 +132,7 @@ def test_subpixel_shift_fitted():
     within_two_se(top, "dy px", 0.3)
 
 
+@pytest.mark.slow
 def test_stokes_frame_rotation_fitted():
     names, ref = reference(stokes=True)
     rotated = ref.copy()
@@ -145,6 +146,7 @@ def test_stokes_frame_rotation_fitted():
     within_two_se(top, "angle deg", 30.0)
 
 
+@pytest.mark.slow
 def test_s3_sign_and_depolarised():
     names, ref = reference(stokes=True)
     for scale, model in (((1, 1, -1), "S3 sign"), ((0, 0, 0), "depolarised")):

@@ -92,6 +92,7 @@ def warned(scene_ir):
     return out
 
 
+@pytest.mark.slow
 def test_each_scene_of_the_file_is_exported_or_fails_alone_by_name(blend):
     proc = blend["proc"]
     assert proc.returncode == 1, proc.stderr[-3000:]  # two scenes failed, named; the rest exported
@@ -104,6 +105,7 @@ def test_each_scene_of_the_file_is_exported_or_fails_alone_by_name(blend):
         assert (blend["out"] / name / "mitsuba" / "scene.xml").is_file(), name
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scene, file, why", [
     ("missing_sky", "no_such_sky.exr", "' has no pixels (file {path!r}"),
     ("folder_sky", "a_folder.exr", "': {path!r} is a folder, not a regular file: not opened")])  # refused before Blender reads it
@@ -113,6 +115,7 @@ def test_an_environment_image_without_pixels_names_scene_world_and_field(blend, 
             f"image '{scene}_sky" + why.format(path=str(blend["folder"] / file))) in reason, reason
 
 
+@pytest.mark.slow
 def test_seventy_objects_without_material_and_seventy_lights_load(blend):
     objects = exported(blend, "many_objects")
     assert len(objects["objects"]) == 71 and len(objects["warnings"]) >= 70
@@ -120,6 +123,7 @@ def test_seventy_objects_without_material_and_seventy_lights_load(blend):
     assert len(lights["lights"]) == 70 and len(lights["warnings"]) >= 70
 
 
+@pytest.mark.slow
 def test_zero_area_lights_are_dropped_saying_they_emit_nothing(blend):
     for scene, obj, field, what in (("area_size_0", "panel", "data.size", "size 0"),
                                     ("disk_size_y_0", "oval", "data.size_y", "size_y 0"),
@@ -130,6 +134,7 @@ def test_zero_area_lights_are_dropped_saying_they_emit_nothing(blend):
             warned(sc)[(f"{scene}_{obj}", field)]
 
 
+@pytest.mark.slow
 def test_an_area_light_flattened_along_its_normal_keeps_its_area_and_direction(blend):
     sc = exported(blend, "area_flattened")
     panel = next(o for o in sc["objects"] if o["name"] == "area_flattened_panel")
@@ -140,6 +145,7 @@ def test_an_area_light_flattened_along_its_normal_keeps_its_area_and_direction(b
     assert "radiance L = P / (pi A) = 50 / (pi 2) = 7.95775" in warned(sc)[("area_flattened_panel", "data.color")]
 
 
+@pytest.mark.slow
 def test_objects_scaled_to_zero_are_dropped_and_a_flattened_one_keeps_its_geometry(blend):
     sc = exported(blend, "object_scaled_0")
     assert [o["name"] for o in sc["objects"]] == ["object_scaled_0_floor"]
@@ -155,6 +161,7 @@ def test_objects_scaled_to_zero_are_dropped_and_a_flattened_one_keeps_its_geomet
     assert warned(sc)[("degenerate_mesh_sliver", "data")].startswith("every face (2) has zero area in the world"), warned(sc)
 
 
+@pytest.mark.slow
 def test_negative_light_and_world_and_cold_blackbody_are_converted_with_a_warning(blend):
     sc = exported(blend, "negative_light")
     assert [light["name"] for light in sc["lights"]] == ["negative_light_key"]

@@ -21,6 +21,8 @@ from spectral_bench.exporters import colorimetry, ir_json, mitsuba_writer, valid
 sys.path.insert(0, str(ROOT / "scripts"))
 import make_ordinary_blend as blend  # noqa: E402  (no bpy at import: it is imported inside functions)
 
+pytestmark = pytest.mark.slow  # every test here costs over ~1 s of CPU, its children and module fixtures counted (benchmarks/TESTS.md)
+
 
 PLANES = ["plane_world", "plane_point", "plane_spot", "plane_sun", "plane_area", "plane_disk", "plane_blackbody",
           "plane_warm_tint"]

@@ -11,6 +11,8 @@ import pytest
 from conftest import ALL_SCENES, GOLDEN, REFLECTANCE, ROOT
 from spectral_bench.exporters import inline_data, ir_json
 
+pytestmark = pytest.mark.slow  # every test here costs over ~1 s of CPU, its children and module fixtures counted (benchmarks/TESTS.md)
+
 
 def bpy_script(body, timeout=300):
     code = textwrap.dedent(f"""

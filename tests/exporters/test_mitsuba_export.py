@@ -88,6 +88,7 @@ def loaded_exports(golden, tmp_path_factory):
     return results
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ALL_SCENES)
 def test_export_loads_with_mi_load_file_and_renders(golden, loaded_exports, name):
     result = loaded_exports[name]
@@ -109,6 +110,7 @@ def test_mitsuba_command_line_renders_the_export(golden, tmp_path):
     assert img.shape == (32, 32, 3) and img.mean() > 0
 
 
+@pytest.mark.slow
 def test_batch_exec_option_uses_the_mitsuba_executable(golden, tmp_path):
     exe = Path(sys.executable).with_name("mitsuba")
     out = tmp_path / "out"

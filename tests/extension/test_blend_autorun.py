@@ -24,6 +24,8 @@ import pytest
 
 from conftest import ROOT
 
+pytestmark = pytest.mark.slow  # every test here costs over ~1 s of CPU, its children and module fixtures counted (benchmarks/TESTS.md)
+
 SCENE = "ggx_copper_50"
 MARKERS = {"text", "driver_namespace", "driver_import", "driver_node_tree"}
 

@@ -16,6 +16,7 @@ from spectral_bench.batch import exr
 TESTS = str(ROOT / "tests")
 
 
+@pytest.mark.slow
 def test_invalid_annotations_give_messages_not_exceptions():
     out = run_bpy("""
         from spectral_bench.addon import validation
@@ -41,6 +42,7 @@ def test_invalid_annotations_give_messages_not_exceptions():
     assert ok == []
 
 
+@pytest.mark.slow
 def test_sampled_spectrum_from_file_and_table(tmp_path):
     spd = tmp_path / "red.spd"
     spd.write_text("# wavelength value\n400 0.05\n500, 0.06\n600 0.5\n700 0.6\n")
@@ -440,6 +442,7 @@ def test_stokes_components_load_into_images(tmp_path):
     assert np.abs(expected).max() > 0  # S3 of this scene is not all zero: the comparison means something
 
 
+@pytest.mark.slow
 def test_backends_listed_from_the_runner_and_toggled():
     out = run_bpy("""
         from spectral_bench.addon import benchmark
@@ -462,6 +465,7 @@ def test_backends_listed_from_the_runner_and_toggled():
     assert "nope" in out["bad"]
 
 
+@pytest.mark.slow
 def test_register_unregister_leaves_no_trace():
     out = run_bpy("""
         import spectral_bench

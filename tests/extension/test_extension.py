@@ -235,6 +235,7 @@ def test_manifest_rejected_when_broken(manifest_checks):
     assert manifest_checks["broken"] != 0
 
 
+@pytest.mark.slow
 def test_install_enable_export_unregister(extension_zip, tmp_path):
     import zipfile
     names = zipfile.ZipFile(extension_zip).namelist()

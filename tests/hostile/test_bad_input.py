@@ -98,6 +98,7 @@ def mixed_run(golden, tmp_path_factory):
     return {"twin_a": a, "twin_b": b}, out, proc
 
 
+@pytest.mark.slow
 def test_batch_goes_on_after_bad_scenes_and_exit_status_says_so(mixed_run):
     _, out, proc = mixed_run
     assert proc.returncode == 1, proc.stderr[-2000:]
@@ -119,6 +120,7 @@ def test_existing_results_are_never_overwritten(golden, tmp_path):
     assert json.loads((out / "metrics.json").read_text()) == {"runs": ["earlier"]}
 
 
+@pytest.mark.slow
 def test_two_inputs_with_one_scene_name_keep_apart(mixed_run):
     """Outputs are written per scene name: the second scene of a name fails with the reason, the
     first renders, nothing is mixed."""

@@ -14,6 +14,8 @@ import exr_craft
 import run_fuzz
 from conftest import HAND_MADE, run_batch
 
+pytestmark = pytest.mark.slow  # every test here costs over ~1 s of CPU, its children and module fixtures counted (benchmarks/TESTS.md)
+
 
 TINY = ("-r", "mitsuba", "-s", "ggx_copper_50", "--scale", "0.125", "--spp", "4", "--no-flip")
 

@@ -39,6 +39,7 @@ def test_scenes_the_schema_admits_fail_by_name_or_export_safely(scene):
     assert _one(scene) in ("invalid", "exported")
 
 
+@pytest.mark.slow
 @fuzz(300)
 @given(st.one_of(st.text(), st.sampled_from(scene_fuzz.HOSTILE_TEXT)))
 def test_comment_text_cannot_end_or_escape_a_comment(text):

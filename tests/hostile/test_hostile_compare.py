@@ -69,6 +69,7 @@ def _sha(path):
 
 
 # -- compare_runs: its output folder ---------------------------------------------------------------
+@pytest.mark.slow
 def test_the_same_output_twice_deletes_nothing(tmp_path):
     """Run twice with the same -o DIR: the second is refused (exit 2, naming DIR), DIR and all in it
     as they were. Without -o: NEW/compare, then NEW/compare-2; the first comparison untouched."""
@@ -171,7 +172,7 @@ def _bomb(folder):
     ("old", lambda f: _edit(f, 0, pass_times="fast"), "OLD's pass_times is not"),
     ("old", lambda f: _edit(f, 0, probes=5), "OLD's probes is int, not a list"),
     ("new", lambda f: _edit(f, 0, probes={"p": 1}), "NEW's probes is dict, not a list"),
-    ("old", _bomb, "dataWindow: 20000x20000, expected 16x16"),
+    pytest.param("old", _bomb, "dataWindow: 20000x20000, expected 16x16", marks=pytest.mark.slow),  # ~1 s of CPU
 ], ids=["garbage_exr", "missing_baseline_image", "one_pass", "absurd_pass_times", "pass_times_text",
         "probes_int", "probes_dict", "exr_bomb"])
 def test_what_cannot_be_judged_exits_3_and_is_never_same(tmp_path, which, change, words):
@@ -284,6 +285,7 @@ def test_declared_renderer_writing_a_bomb_fails_its_pass_naming_it(tmp_path):
 
 
 # -- --junit never over the run's own files ------------------------------------------------------------
+@pytest.mark.slow
 def test_junit_inside_the_run_folder_is_refused(tmp_path):
     """--junit OUT/metrics.json (or any file below OUT but a new top-level *.xml): exit 2 naming
     --junit, nothing rendered, nothing written; with --resume the finished run's files untouched."""
@@ -312,6 +314,7 @@ def make_references(*args, limit=None, umask=0o022):
                            *map(str, args)], capture_output=True, text=True, timeout=600, cwd=ROOT, preexec_fn=child)
 
 
+@pytest.mark.slow
 def test_truncated_pass_record_is_named_and_rendered_again(tmp_path):
     """A done.json cut short (a crash while it was written): named, its pass rendered again, the
     reference written (exit 0), readable by every user (0644 under umask 022), not a traceback."""

@@ -135,6 +135,7 @@ def test_a_mesh_that_is_no_mesh_fails_its_scene_alone(tmp_path):
     assert (out / "summary.md").is_file()
 
 
+@pytest.mark.slow
 def test_a_run_whose_every_scene_failed_writes_its_results_and_exits_1(tmp_path):
     bad1, bad2 = tmp_path / "a.json", tmp_path / "b.json"
     bad1.write_bytes(b"\xff")

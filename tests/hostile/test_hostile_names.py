@@ -133,6 +133,7 @@ def test_free_text_cannot_leave_its_comment_in_any_format(golden, tmp_path):
     assert "injected" not in (cfg.parent / "scene.scn").read_text().replace("# floor?scene.lights.injected", "")
 
 
+@pytest.mark.slow
 def test_a_hostile_scene_among_good_ones_fails_alone_and_nothing_leaves_out(golden, tmp_path):
     """The issue's report: an object named ../../../../<folder>/light wrote outside OUT, a case
     with a newline injected code into the .arm. Now the bad scene fails naming its field, the good
@@ -164,6 +165,7 @@ def test_a_hostile_scene_among_good_ones_fails_alone_and_nothing_leaves_out(gold
     assert not (tmp_path / "escaped").exists()
 
 
+@pytest.mark.slow
 def test_blender_names_become_safe_ids_with_their_label(tmp_path):
     from test_blender_ir import bpy_script
     out = bpy_script("""

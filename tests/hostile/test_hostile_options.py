@@ -80,6 +80,7 @@ def test_settings_files_accumulate_later_wins(tmp_path):
     assert opts["scene"] == ["ggx_glass"] and opts["spp"] == 8 and opts["alpha"] == 0.05
 
 
+@pytest.mark.slow
 def test_bad_options_exit_2_through_the_real_command_line(tmp_path):
     bad = tmp_path / "s.toml"
     bad.write_text('spp = "4"\n')
@@ -141,6 +142,7 @@ def test_a_run_where_nothing_ran_exits_4(tmp_path):
 
 
 # -- claiming the output folder -------------------------------------------------------------------
+@pytest.mark.slow
 def test_a_folder_in_use_by_another_run_is_refused(tmp_path):
     out = tmp_path / "o"
     out.mkdir()
@@ -218,6 +220,7 @@ def test_resume_needs_exec_again_and_keeps_finished_renders(tmp_path):
 
 
 # -- clusters -------------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_an_unreachable_scheduler_fails_within_the_timeout(tmp_path):
     # port 1 refuses every connection: any timeout ends in the same error, the shortest costs least
     # (--cluster-timeout takes any number > 0)
@@ -226,6 +229,7 @@ def test_an_unreachable_scheduler_fails_within_the_timeout(tmp_path):
     assert proc.returncode == 2 and "cannot reach the Dask scheduler" in proc.stderr, proc.stderr[-2000:]
 
 
+@pytest.mark.slow
 def test_a_scheduler_without_workers_fails_within_the_timeout(tmp_path):
     from distributed import LocalCluster
     with LocalCluster(n_workers=0, processes=False, protocol="tcp://", host="127.0.0.1",
@@ -237,6 +241,7 @@ def test_a_scheduler_without_workers_fails_within_the_timeout(tmp_path):
     assert proc.returncode == 2 and "no Dask worker joined" in proc.stderr, proc.stderr[-2000:]
 
 
+@pytest.mark.slow
 def test_a_plaintext_remote_scheduler_is_warned_about(tmp_path):
     # TEST-NET-1 (RFC 5737): never routed, so the connection fails; the warning comes first
     proc = run_batch("-i", GOOD, "-r", "mitsuba", *TINY, "--cluster", "tcp://192.0.2.1:8786", "--cluster-timeout", "0.1",
@@ -245,6 +250,7 @@ def test_a_plaintext_remote_scheduler_is_warned_about(tmp_path):
     assert proc.returncode == 2
 
 
+@pytest.mark.slow
 def test_a_local_cluster_listens_on_loopback_without_a_dashboard():
     """local:N: scheduler, workers and the scheduler's HTTP server on 127.0.0.1; the dashboard
     (here Dask's page for it) only with --dashboard."""
@@ -276,6 +282,7 @@ def test_a_local_cluster_listens_on_loopback_without_a_dashboard():
         engine.close()
 
 
+@pytest.mark.slow
 def test_a_local_cluster_takes_no_client_but_the_runs_own():
     """local:N is TLS with the run's own temporary credentials: a plain connection (tcp:// to the
     same port) and one with credentials of its own (another user's self-signed CA) are refused by

@@ -229,6 +229,7 @@ def _maker(*args):
                           capture_output=True, text=True, timeout=600, cwd=ROOT)
 
 
+@pytest.mark.slow
 def test_make_references_never_replaces_a_reference_unasked(tmp_path):
     """An existing reference (current or not) is left as it is and named unless --replace asks."""
     name = "ggx_copper_50_isolated"
@@ -257,6 +258,7 @@ def test_make_references_replace_writes_a_hashed_pair(tmp_path, golden):
     assert found.ref is not None and found.problems == []
 
 
+@pytest.mark.slow
 def test_two_makers_of_one_scene_take_turns(tmp_path):
     """While another process holds the scene's lock, a maker writes nothing for that scene and says so."""
     name = "ggx_copper_50_isolated"
@@ -280,6 +282,7 @@ def test_two_makers_of_one_scene_take_turns(tmp_path):
     assert not (out / f"{name}.exr").exists() and not (out / f"{name}.json").exists()
 
 
+@pytest.mark.slow
 def test_the_results_panel_draws_every_reference_problem(tmp_path):
     out_dir = tmp_path / "outputs"
     out_dir.mkdir()

@@ -16,6 +16,8 @@ import pytest
 from conftest import GOLDEN, ROOT, run_batch, write_hand_made_metrics
 from test_declared_renderer import FAKE
 
+pytestmark = pytest.mark.slow  # every test here costs over ~1 s of CPU, its children and module fixtures counted (benchmarks/TESTS.md)
+
 GOOD = GOLDEN / "ggx_copper_50_isolated.json"
 TINY = ("--scale", 0.0625, "--spp", 4, "--passes", 2, "--no-flip")
 

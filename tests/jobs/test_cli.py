@@ -62,6 +62,7 @@ def test_unknown_scene_is_reported_not_ignored(tmp_path, run_batch_here):
     assert run["scene"] == "no_such_scene" and run["status"] == "failed"
 
 
+@pytest.mark.slow
 def test_export_only_writes_every_format_per_scene(tmp_path):
     out = tmp_path / "exports"
     proc = run_batch("--export-only", "--format", "mitsuba", "--format", "json", "-o", out)
@@ -74,6 +75,7 @@ def test_export_only_writes_every_format_per_scene(tmp_path):
     assert len(statuses) == 2 * len(ALL_SCENES) and set(statuses.values()) == {"ok"}
 
 
+@pytest.mark.slow
 def test_json_input_runs_like_the_blend(tmp_path):
     out = tmp_path / "o"
     proc = run_batch("-r", "mitsuba", "-i", GOLDEN / "ggx_copper_80.json", "--scale", "0.125", "--spp", "16", "--no-flip", "-o", out)

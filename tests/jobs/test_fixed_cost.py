@@ -156,6 +156,7 @@ def test_spectral_tables_are_remembered_and_read_only(golden):
         first[1][0, 0] = 0.0  # shared by every caller: never written
 
 
+@pytest.mark.slow
 def test_ggx_geometry_kept_across_trial_materials_gives_the_plain_images(golden):
     """The diagnosis's fits reuse the GGX quadrature's geometry between trials (only D, G and the
     Fresnel table change): every trial's image must be the plain computation's, to rounding, in an
@@ -192,6 +193,7 @@ def test_ggx_geometry_kept_across_trial_materials_gives_the_plain_images(golden)
     assert len(cache) == 1  # one geometry for all of them
 
 
+@pytest.mark.slow
 def test_film_geometry_kept_across_trial_thicknesses_gives_the_plain_images(golden):
     """The diagnosis's thickness fit reuses the Airy probe's sub-rays and the film's interfaces
     between trials (only the Airy sum's phase changes): every trial's image and mask must be the

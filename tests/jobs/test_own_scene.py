@@ -56,6 +56,7 @@ def judged(tmp_path_factory):
             "runs": {r["scene"]: r for r in data.entries("runs")}}
 
 
+@pytest.mark.slow
 def test_a_scene_a_probe_fits_is_judged_by_it(judged):
     from spectral_bench.batch.report import results
     run = judged["runs"]["red_sphere"]
@@ -66,6 +67,7 @@ def test_a_scene_a_probe_fits_is_judged_by_it(judged):
     assert run["detectable"]["scale"] < 0.01, run["detectable"]
 
 
+@pytest.mark.slow
 def test_a_probe_less_scene_against_its_own_renderers_reference_says_so_everywhere(judged):
     from spectral_bench.batch.report import results
     run = judged["runs"]["two_spheres"]

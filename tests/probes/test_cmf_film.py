@@ -36,6 +36,7 @@ def scales():
     return out
 
 
+@pytest.mark.slow
 def test_the_cmf_film_meets_the_ground_truth_where_mitsubas_film_is_bright(scales):
     cmf, rgb = scales["cmf"], scales["rgb"]
     se = cmf["stat"]["se"][0]
@@ -46,6 +47,7 @@ def test_the_cmf_film_meets_the_ground_truth_where_mitsubas_film_is_bright(scale
     assert rgb["measured"] - cmf["measured"] == pytest.approx(DEVIATION, abs=3 * se)
 
 
+@pytest.mark.slow
 def test_the_cmf_film_is_three_1nm_cmf_channels(scales):
     xml = scales["cmf_xml"]
     assert 'type="specfilm"' in xml and 'type="hdrfilm"' not in xml and "pixel_format" not in xml

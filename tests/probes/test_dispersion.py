@@ -73,6 +73,7 @@ def _constant_ior_scene(golden, bsdf):
     return sc
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("roughness", [None, {"distribution": "ggx", "alpha": 0.2}])
 def test_plugin_with_a_constant_ior_meets_the_native_dielectric_within_noise(golden, tmp_path, roughness):
     """The plugin keeps one wavelength at every refraction (smooth) or mixes over them (rough);

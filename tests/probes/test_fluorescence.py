@@ -181,6 +181,7 @@ def _max_strength(rho):
     return 1.0 / qy
 
 
+@pytest.mark.slow
 def test_white_furnace_returns_no_more_than_the_incident_energy(tmp_path):
     strength = 0.999 * _max_strength(BAND_ABSORBER)  # quantum yield just below 1: the most allowed
     scene = validate.check(_furnace(BAND_ABSORBER, strength))
@@ -321,6 +322,7 @@ def test_bad_fluorescence_names_scene_object_field(golden, tmp_path, how):
     assert sc["name"] in str(info.value)
 
 
+@pytest.mark.slow
 def test_valid_matrix_form_loads_and_renders_in_mitsuba_but_not_art(golden, tmp_path):
     """The explicit re-radiation matrix: bilinear P, written as the same table; ART's writer
     reports it (this writer maps only CONST_FLUORESCENT_COLOUR's bands)."""

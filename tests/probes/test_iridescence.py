@@ -253,6 +253,7 @@ def test_airy_probe_passes_for_the_scene_and_fails_for_a_film_200nm_thinner(gold
     assert film["pass"] is False and film["error"] > 20 and not film["alternatives"]["mitsuba3"]["pass"], film
 
 
+@pytest.mark.slow
 def test_airy_probe_footprint_and_exclusions(golden):
     """The footprint integral has converged: doubling the sub-rays per side moves no tile's
     expected mean by more than 1e-3 of its value (a quarter of a tile's standard error at the

@@ -127,6 +127,7 @@ def test_polariser_angle_convention_is_counter_clockwise_seen_from_the_camera(go
     assert measured[-30.0] == pytest.approx(0.25 * measured[30.0], rel=0.1)
 
 
+@pytest.mark.slow
 def test_degree_of_polarisation_at_brewster_and_s1_sign(golden, tmp_path):
     sc = copy.deepcopy(golden["polarizing_plane_0"])
     del sc["camera"]["polarizer"]

@@ -14,6 +14,8 @@ from spectral_bench.reference_code import appearance as ap
 
 from test_reference_code import chi_square_of_samples, sph
 
+pytestmark = pytest.mark.slow  # every test here costs over ~1 s of CPU, its children and module fixtures counted (benchmarks/TESTS.md)
+
 SNIPPETS = ROOT / "snippets"
 DRIVER = ROOT / "tests" / "snippets_driver.cpp"
 TOL = 1e-6

@@ -9,8 +9,9 @@ import pytest
 from conftest import metrics, run_batch
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
-pytestmark = pytest.mark.skipif(not CHROMIUM, reason="no chromium: report not checked in a browser "
-                                                      "(scripts/setup.sh installs it as root)")
+pytestmark = [pytest.mark.slow,  # over ~1 s of CPU: a batch run and Chromium (benchmarks/TESTS.md)
+              pytest.mark.skipif(not CHROMIUM, reason="no chromium: report not checked in a browser "
+                                                      "(scripts/setup.sh installs it as root)")]
 
 
 def dump_dom(url):

@@ -44,6 +44,7 @@ def _decode_data_js(path):
     return w, h, layers
 
 
+@pytest.mark.slow
 def test_band_data_is_the_previews_half_floats(run):
     from spectral_bench.batch import spectral_exr
     out, job = run
@@ -73,6 +74,7 @@ def test_record_is_read_defensively():
     assert len(p["points"]) == 3 and [q["fail"] for q in p["points"]] == [False, True, False] and len(p["failing"]) == 1
 
 
+@pytest.mark.slow
 def test_summary_and_junit_name_the_planted_band(run):
     from spectral_bench.batch import records
     from spectral_bench.batch.report import junit, summary
@@ -114,6 +116,7 @@ def srgb(x):
     return 255 * (12.92 * v if v <= 0.0031308 else 1.055 * v ** (1 / 2.4) - 0.055)
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not CHROMIUM, reason="no chromium: the page not checked in a browser (scripts/setup.sh installs it as root)")
 def test_slider_shows_the_bands_data_and_plots_have_every_band(run):
     from spectral_bench.batch import spectral_exr
@@ -149,6 +152,7 @@ def test_slider_shows_the_bands_data_and_plots_have_every_band(run):
     assert planted["red"] <= (PLANT[1] - PLANT[0]) / 5  # only bands inside the planted range are marked
 
 
+@pytest.mark.slow
 def test_hostile_band_record_is_text_and_links_nothing_outside(run, tmp_path):
     """Anyone's metrics.json: a region label of markup, a preview path out of the folder, arrays of
     the wrong kind. The page shows the labels as text, links no preview outside the job's folder
@@ -177,6 +181,7 @@ def test_hostile_band_record_is_text_and_links_nothing_outside(run, tmp_path):
         assert ("spectral_preview.js' data-plots" in page) == linked and "passwd" not in page, preview
 
 
+@pytest.mark.slow
 def test_a_regenerated_report_rewrites_the_data_files_its_page_loads(run, tmp_path):
     """The run folder copied with its times (a report made again elsewhere, later): its view.js and
     spectral_preview.js are newer than their EXRs, but one holds a foreign script and the render
@@ -213,6 +218,7 @@ def spectral_exr_cube(path):
     return spectral_exr.read(path).stokes[0].astype(np.float32)
 
 
+@pytest.mark.slow
 def test_the_data_files_written_as_a_job_finishes_are_the_pages(run, tmp_path):
     """The runner writes a render's data files as its job finishes (batch/jobs/runner.py
     ``page_data``: html.data_files, only the files, issue 45 item 1); the page written at the end

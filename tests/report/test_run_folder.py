@@ -181,6 +181,7 @@ def test_the_real_panel_loads_what_the_reader_names(run, tmp_path):
     assert out[str(bad)] == {"kinds": [], "loaded": dict.fromkeys(("render", "reference", "zscore", "flip", "diff_abs"))}
 
 
+@pytest.mark.slow
 def test_plain_rgb_copies_a_layered_render_and_keeps_an_rgb_one(run, tmp_path):
     out = tmp_path / "copy"
     shutil.copytree(run, out)
@@ -193,6 +194,7 @@ def test_plain_rgb_copies_a_layered_render_and_keeps_an_rgb_one(run, tmp_path):
     assert run_folder.plain_rgb(job.path("zscore")) == job.path("zscore")
 
 
+@pytest.mark.slow
 def test_strict_and_lenient_reads_name_the_problem(run, tmp_path):
     with pytest.raises(run_folder.NotARun, match="no such folder"):
         run_folder.read(tmp_path / "nowhere")

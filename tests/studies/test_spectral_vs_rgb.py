@@ -20,6 +20,7 @@ def study(tmp_path_factory):
     return proc, out
 
 
+@pytest.mark.slow
 def test_a_study_exits_0_with_its_own_words_and_a_map_per_pair(study):
     proc, out = study
     assert proc.returncode == 0, proc.stderr[-3000:]

@@ -118,6 +118,7 @@ def test_a_metamer_fails_the_band_checks_naming_its_bands_and_passes_in_rgb(char
     assert proc.returncode == 1
 
 
+@pytest.mark.slow
 def test_the_lone_fluorescent_sphere_is_judged_band_by_band(tmp_path):
     """fluorescent_sphere_lone through Mitsuba's spectral film route (specfilm of 10 nm boxes with
     the project's fluorescence plugins, batch/backends/mitsuba/spectral.py; two passes): the

@@ -157,6 +157,7 @@ def _lit_on_black(rng, shape, box, highlight=0.0):
     return flip_isolated.prepare(ref), flip_isolated.prepare(test)
 
 
+@pytest.mark.slow  # over ~1 s of CPU each (flip_evaluator, its threads; benchmarks/TESTS.md)
 @pytest.mark.parametrize("shape, box, highlight", [
     ((160, 200), (slice(60, 100), slice(70, 130)), 1e5),  # a bright highlight: many exposures (as ggx_copper_grazing)
     ((160, 200), (slice(0, 40), slice(150, 200)), 0.0),  # touches two edges of the image

@@ -27,6 +27,7 @@ def mitsuba_film_chart(tmp_path_factory):
     return noise_test("macbeth_chart_D65", img, se, 128, passes=4)
 
 
+@pytest.mark.slow
 def test_the_committed_references_carry_layers_for_the_recorded_films():
     from spectral_bench.batch.verdict import observer_layers, references
     for meta in sorted((ROOT / "references").glob("*.json")):
@@ -40,6 +41,7 @@ def test_the_committed_references_carry_layers_for_the_recorded_films():
         assert max(ratio) < 0.1, (meta.stem, ratio)  # the layer adds < 1 % to the variance judged
 
 
+@pytest.mark.slow
 def test_mitsubas_film_fails_against_the_cmf_reference_and_meets_its_layer(mitsuba_film_chart):
     zt = mitsuba_film_chart
     det = zt.detectable()["scale"]

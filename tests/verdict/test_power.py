@@ -62,6 +62,7 @@ def test_help_says_which_scales_are_judged():
     assert "integer" in text and "nearest scale" in text and "exit 2" in text
 
 
+@pytest.mark.slow
 def test_non_dividing_scale_renders_at_the_nearest_judged_one(tmp_path, run_batch_here):
     """--scale 0.125 does not divide 620x420: the chart renders at 0.1 (62x42), said in the log, and
     that render is judged like one asked for at --scale 0.1 (noise test, scale test, detectable
@@ -95,6 +96,7 @@ def _simulate(mu, sigma2, ref_var, spp, scale, rng, correlated=True):
     return compare.ReferenceAt(ref_mean, ref_var, sigma2, 8 * 7), mean, var
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scene,spp", [("ggx_copper_50", 64), ("ggx_glass", 256)])
 def test_planted_errors_of_the_detectable_size_are_detected_90_percent(scene, spp):
     """The stored noise model of the committed reference at 64x64 (its mean as the truth, its

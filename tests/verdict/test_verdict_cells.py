@@ -27,6 +27,8 @@ from markupsafe import escape
 from conftest import ROOT, run_batch, run_bpy
 from spectral_bench.batch import records
 
+pytestmark = pytest.mark.slow  # every test here costs over ~1 s of CPU, its children and module fixtures counted (benchmarks/TESTS.md)
+
 PLANTS = ROOT / "tests" / "data" / "plant_renderers.toml"
 SCENE = "ggx_copper_50"
 SETTINGS = ["-r", "plant_none", "-s", SCENE, "--scale", "0.25", "--spp", "1024", "--no-flip"]

@@ -1,0 +1,47 @@
+"""Issue 45 item 6 in the fast subset: a probe's verdict that flips within noise is "unstable", not
+a change, and one that moved beyond noise is CHANGED. The same run folders and assertions as
+tests/verdict/test_verdict_cells.py's probe test (real EXRs, hand-made records), with
+compare_runs' ``main(argv)`` called in this process instead of two ``batch/compare_runs.py``
+children (2 s of CPU there, well under 1 s here); that module's render tests stay slow."""
+import contextlib
+import io
+import json
+import re
+import types
+
+import pytest
+
+from conftest import ROOT
+from test_verdict_cells import _probe_run
+
+
+def compare_runs(*args):
+    """compare_runs' main() in this process: its exit status and what it printed."""
+    from spectral_bench.batch import compare_runs as cr
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err), contextlib.chdir(ROOT):
+        code = cr.main([str(a) for a in args])
+    return types.SimpleNamespace(returncode=code, stdout=out.getvalue(), stderr=err.getvalue())
+
+
+def test_a_probe_that_flips_within_noise_is_unstable_here_and_one_that_moved_is_changed(tmp_path):
+    old, new, moved = tmp_path / "old", tmp_path / "new", tmp_path / "moved"
+    ro, rn = _probe_run(old, 1, 1.025), _probe_run(new, 2, 1.028)
+    assert (ro["status"], rn["status"]) == ("ok", "failed")  # the premise: the probe's verdict flips
+    cmp = compare_runs(old, new)
+    assert cmp.returncode == 0, cmp.stdout[-3000:] + cmp.stderr[-2000:]
+    (j,) = json.loads((new / "compare" / "compare.json").read_text())["jobs"]
+    det = rn["detectable"]["probes"]["p"]
+    m = re.fullmatch(r"verdict unstable: probe p's deviation ([0-9.]+) % is at its detectable ([0-9.]+) % "
+                     r"\(status ok -> failed, probe p pass -> FAIL; the images agree within noise\)", j["unstable"])
+    assert m and j["changed"] is False, j
+    assert float(m.group(2)) == pytest.approx(100 * det, rel=0.05)
+    assert float(m.group(1)) == pytest.approx(100 * (1.025 + 1.028) / 2 - 100, rel=0.05)  # both runs' own, pooled
+    assert "| unstable | s |" in cmp.stdout
+
+    _probe_run(moved, 3, 1.10)
+    cmp = compare_runs(old, moved)
+    assert cmp.returncode == 1, cmp.stdout[-3000:] + cmp.stderr[-2000:]
+    (j,) = json.loads((moved / "compare" / "compare.json").read_text())["jobs"]
+    assert j["changed"] and j["unstable"] is None and any(c.startswith("probe p moved beyond noise") for c in j["changes"]), j
+    assert "| CHANGED | s |" in cmp.stdout
