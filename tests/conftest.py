@@ -31,7 +31,8 @@ IRIDESCENCE = ["iridescent_sphere_smooth", "iridescent_spheres_film", "iridescen
 DISPERSION = ["dispersion_fringes", "dispersion_prism"]
 FLUORESCENCE = ["fluorescent_sphere_D50_red", "fluorescent_sphere_lone", "fluorescent_sphere_mono_invisible",
                 "fluorescent_sphere_mono_red", "yellow_sphere_F8"]
-ALL_SCENES = sorted(REFLECTANCE + SPECTRAL_ACCURACY + POLARIZATION + IRIDESCENCE + DISPERSION + FLUORESCENCE)
+FURNACE = ["furnace_colorchecker_yellow", "furnace_spiky"]
+ALL_SCENES = sorted(REFLECTANCE + SPECTRAL_ACCURACY + POLARIZATION + IRIDESCENCE + DISPERSION + FLUORESCENCE + FURNACE)
 
 
 # -- the suite's false-alarm budget (issue 45 item 7; benchmarks/TESTS.md) -------------------------

@@ -164,7 +164,7 @@ def diagnose(entry, rendered, names, image, stderr, held, ztest, res_dir):
 # Band positions, degrees of polarisation and a film relative to its environment do not change
 # under a uniform scale: they keep their own figure only.
 RADIANCE_PROBES = ("lambert ", "ggx ", "beckmann ", "brewster ", "reflection ", "prism energy", "lone ",
-                   "environment seen directly")
+                   "environment seen directly", "furnace ")
 
 
 def detectable(ztest, probe_records, alpha=None):

@@ -241,6 +241,28 @@ def _fluorescence_dropped(ev):
     return Fit([], [], chi2, chi2_none, m.size, 0, ok)
 
 
+def _rgb_transport(ev):
+    """The spectral furnace's probe (probes/furnace.py) against what an RGB renderer gets there:
+    rho and Le reduced to linear sRGB channels first (exporters/rgb_reduction.py), then the
+    interreflection series per channel (its ``rgb`` record). No free parameter."""
+    from .. import stats
+    rec = next((r for r in ev.entry.get("probes") or [] if r.get("stat") and r.get("rgb")
+                and r["name"].startswith("furnace ")), None)
+    if rec is None:
+        return None
+    st = rec["stat"]
+    m, e, se = (np.asarray(st[k], dtype=np.float64) for k in ("measured", "expected", "se"))
+    e0 = np.asarray(rec["rgb"]["expected"], dtype=np.float64)
+    chi2_none = float(np.sum(((m - e) / np.maximum(se, 1e-300)) ** 2))
+    chi2 = float(np.sum(((m - e0) / np.maximum(se, 1e-300)) ** 2))
+    ok = stats.compare_means(m, e0, se, dof=st.get("dof"))["pass"]
+    gap = ", ".join(f"{c} {100 * g:+.2f} %" for c, g in zip("RGB", rec["rgb"]["gap"]))
+    # reported, not fitted (k = 0): the render's measured gap to the spectral truth, per channel, in %
+    measured = (100 * (m / e - 1)).tolist()
+    return Fit(measured, (100 * se / np.abs(e)).tolist(), chi2, chi2_none, m.size, 0, ok,
+               note=f"predicted gap to the spectral truth (rgb_reduction first, then the series): {gap}")
+
+
 def _film_setup(ev):
     """(scene, index of the filmed sphere, the render's R, G, B, the probe's tiles, the trial cache) or None."""
     from ..probes import thin_film
@@ -421,6 +443,9 @@ MODELS = [
     Model("fluorescence dropped", FAMILY, (), "probe:lone",
           "the fluorescent material rendered without its re-radiation (rho L alone, the integral of P L dropped)",
           _fluorescence_dropped),
+    Model("RGB transport", FAMILY, ("measured gap R %", "G %", "B %"), "probe:furnace",
+          "rho and Le reduced to RGB channels before the interreflection series (an RGB renderer: per wavelength "
+          "the series 1 / (1 - rho) is convex, so the channel averages miss it)", _rgb_transport),
     Model("thin film missing", FAMILY, (), "probe:airy",
           "the conductor rendered without its thin film (the bare interface's Fresnel reflectance)", _film_missing,
           slow=True),

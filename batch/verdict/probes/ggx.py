@@ -397,3 +397,85 @@ def plates(m, form=SHADOWING):
                           "relative", scale["pass"], z=scale["z"], stat=scale,
                           alternatives={o: a[1] for o, a in alternatives.items()}, **extra))
     return out
+
+
+# -- the white furnace (issue 41 item 2): a perfect conductor's single scattering --------------------
+# Added for the GGX white furnace's truth; the plate probe above does not use it.
+ALBEDO_NODES = (256, 128)  # Gauss-Legendre nodes in u (the distribution's CDF in theta_h) and in phi
+
+
+def _half_vector_rule(kind, alpha, nodes=ALBEDO_NODES, u_breaks=()):
+    """Quadrature over microfacet normals h of the measure D(h) cos_h dw_h (a probability
+    measure: Walter et al. 2007 eq. 4), in the coordinates that make it uniform: u, the CDF of
+    theta_h (GGX: tan^2 = alpha^2 u / (1 - u), Walter et al. 2007 eq. 35; Beckmann: tan^2 =
+    -alpha^2 ln(1 - u), eq. 28) and phi, so that D cos_h dw_h = du dphi / (2 pi). Gauss-Legendre in
+    u (through v, u = 1 - (1 - v)^2; piecewise between ``u_breaks``, where the integrand has a
+    kink) and in phi over [0, pi]
+    (the integrands here are even in phi: the view lies in the xz plane), doubled.
+    Returns (h: N x 3, weights: N), the weights summing to 1."""
+    nu, nphi = nodes
+    # u = 1 - (1 - v)^2: GGX's tan theta_h grows as (1 - u)^(-1/2) at the horizon, which the
+    # integrands carry (o . h / cos_h); in v it is bounded, and Gauss-Legendre converges fast
+    breaks = [1.0 - np.sqrt(1.0 - b) for b in u_breaks if 0.0 < b < 1.0]
+    edges = np.concatenate([[0.0], np.sort(np.asarray(breaks, dtype=np.float64)), [1.0]])
+    x, w = np.polynomial.legendre.leggauss(nu)
+    vs, wvs = [], []
+    for a, b in zip(edges[:-1], edges[1:]):
+        vs.append(a + (x + 1) * (b - a) / 2)
+        wvs.append(w * (b - a) / 2)
+    v, wv = np.concatenate(vs), np.concatenate(wvs)
+    u, wu = 1.0 - (1.0 - v) ** 2, wv * 2.0 * (1.0 - v)
+    xp, wp = np.polynomial.legendre.leggauss(nphi)
+    phi, wphi = (xp + 1) * np.pi / 2, wp * np.pi / 2
+    if kind == "ggx":
+        tan2 = alpha * alpha * u / (1.0 - u)
+    elif kind == "beckmann":
+        tan2 = -alpha * alpha * np.log1p(-u)
+    else:
+        raise ValueError(f"unknown microfacet distribution {kind!r}")
+    cos_h = 1.0 / np.sqrt(1.0 + tan2)
+    sin_h = np.sqrt(np.maximum(1.0 - cos_h * cos_h, 0.0))
+    h = np.stack([np.outer(sin_h, np.cos(phi)), np.outer(sin_h, np.sin(phi)), np.outer(cos_h, np.ones_like(phi))],
+                 axis=-1).reshape(-1, 3)
+    weights = (np.outer(wu, wphi) * 2.0 / (2.0 * np.pi)).reshape(-1)
+    return h, weights
+
+
+def _mirror_break(kind, mu_o, alpha):
+    """The u where the reflected direction reaches the horizon at normal incidence (mu_o = 1:
+    cos_h^2 = 1/2, tan^2 = 1), a kink of the albedo's integrand; none otherwise (its place then
+    depends on phi, and the rule's nodes carry it)."""
+    if abs(mu_o - 1.0) > 1e-15:
+        return ()
+    return (1.0 / (1.0 + alpha * alpha),) if kind == "ggx" else (1.0 - np.exp(-1.0 / (alpha * alpha)),)
+
+
+def directional_albedo(mu_o, alpha, kind="ggx", form=SHADOWING, nodes=ALBEDO_NODES):
+    """E(mu_o, alpha): the single-scattering directional albedo of a perfect conductor (F = 1) with
+    the IR's microfacet BRDF (Walter et al. 2007 eq. 20), seen from cos theta_o = ``mu_o``:
+
+        E = integral f_r cos_i dw_i = integral D(h) G(i, o) (o . h) / cos_o dw_h,
+
+    by dw_i = 4 (o . h) dw_h (Walter et al. 2007 eq. 14), i the mirror of o about h, G the IR's
+    separable Smith form (or ``form``), zero where i falls below the horizon. At alpha = 1 and
+    normal incidence D = 1 / pi and G = 2 mu / (1 + mu), so E = 1 - ln 2 (issue 41)."""
+    h, w = _half_vector_rule(kind, alpha, nodes, _mirror_break(kind, mu_o, alpha))
+    o = np.array([np.sqrt(max(1.0 - mu_o * mu_o, 0.0)), 0.0, mu_o])
+    oh = h @ o
+    cos_i = 2.0 * oh * h[:, 2] - mu_o
+    ok = (oh > 0) & (cos_i > 0)
+    g = optics.shadowing(kind, np.where(ok, cos_i, 1.0), mu_o, alpha, form)
+    return float(np.sum(w * np.where(ok, g * oh / (mu_o * h[:, 2]), 0.0)))
+
+
+def weak_white_furnace(mu_o, alpha, kind="ggx", nodes=ALBEDO_NODES):
+    """Heitz 2014's weak white furnace test ("Understanding the Masking-Shadowing Function in
+    Microfacet-Based BRDFs", JCGT 3(2), eq. 79 / section 7): the integral over the whole sphere of
+    i of G1(o) D(h) / (4 |cos_o|) dw_i is 1 for a consistent pair of D and Smith's Lambda
+    (the projected area of the visible microfacets is the macro surface's). With dw_i = 4 (o . h)
+    dw_h: G1(o) / cos_o integral D(h) (o . h)+ dw_h."""
+    h, w = _half_vector_rule(kind, alpha, nodes)
+    o = np.array([np.sqrt(max(1.0 - mu_o * mu_o, 0.0)), 0.0, mu_o])
+    oh = np.maximum(h @ o, 0.0)
+    g1 = 1.0 / (1.0 + optics.smith_lambda(kind, mu_o, alpha))
+    return float(g1 / mu_o * np.sum(w * oh / h[:, 2]))
