@@ -123,6 +123,20 @@ def _list(values):
     return "[ " + " ".join(_num(v) for v in values) + " ]"
 
 
+def _settled(a):
+    """Values this writer computes (an inverse, a product) rounded to 12 decimal digits of their
+    largest magnitude: linear algebra's last bits differ between machines (BLAS and LAPACK pick
+    kernels by CPU), and a small entry's ninth digit lies at that level (a camera's 1.6479211e-07
+    read 1.64792111e-07 on another machine), so the file would differ by machine. Rounded on a grid
+    1e-12 of the scale, both land on one value, which then prints the same everywhere; the change
+    is 1e-12 of the matrix's scale, far below a float32's 6e-8 that pbrt reads."""
+    a = np.asarray(a, dtype=np.float64)
+    scale = float(np.max(np.abs(a))) if a.size else 0.0
+    if scale == 0.0 or not math.isfinite(scale):
+        return a
+    return np.round(a, 12 - math.ceil(math.log10(scale))) + 0.0  # + 0.0: no -0
+
+
 def _matrix(m):
     """pbrt's Transform takes the matrix column by column (parser: Transpose of the 16 values)."""
     return _list(np.asarray(m, dtype=np.float64).T.reshape(-1))
@@ -328,7 +342,7 @@ class _Writer:
         normal = inv.T @ np.array([0.0, 0.0, 1.0])
         normal /= np.linalg.norm(normal)
         depth = BACKING_DEPTH * min(np.linalg.norm(m @ [2.0, 0.0, 0.0]), np.linalg.norm(m @ [0.0, 2.0, 0.0]))
-        offset = inv @ (-depth * normal)  # in the rectangle's own coordinates
+        offset = _settled(inv @ (-depth * normal))  # in the rectangle's own coordinates
         lid = np.array([[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]])
         points = np.vstack([lid, lid + offset])
         tris = [4, 5, 6, 4, 6, 7]
@@ -345,7 +359,7 @@ class _Writer:
         cam, r = sc["camera"], sc["render"]
         w, h = int(r["width"]), int(r["height"])
         to_world = np.asarray(cam["to_world"], dtype=np.float64) @ _CAMERA_FLIP
-        camera_from_world = np.linalg.inv(to_world)
+        camera_from_world = _settled(np.linalg.inv(to_world))
         if cam.get("fov_axis", "x") == "x":
             window = (-1.0, 1.0, -h / w, h / w)
         else:

@@ -691,3 +691,18 @@ def test_the_shadowing_form_is_listed_with_its_ratio_at_grazing(golden, tmp_path
     assert f"# APPROXIMATED: {plate['name']}.bsdf.roughness: shadowing: " in (tmp_path / "out" / "scene.pbrt").read_text()
     plate["bsdf"]["roughness"]["alpha"] = 0.0  # smooth: no shadowing term, nothing listed
     assert not [f for _o, f, _m in pbrt_writer.approximations(sc) if f == "bsdf.roughness"]
+
+
+def test_computed_matrices_print_the_same_whatever_their_last_bits():
+    """A camera's inverse differs in its last bits between machines (BLAS/LAPACK kernels by CPU);
+    the written text must not: a small entry's ninth digit lies at that level (golden/pbrt once
+    read 1.6479211e-07 on one machine and 1.64792111e-07 on another)."""
+    rng = np.random.default_rng(3)
+    m = rng.normal(size=(4, 4)) * 30.0
+    m[2, 0] = 1.647921105e-07  # a small entry near a ninth-digit boundary
+    scale = np.max(np.abs(m))
+    wobbles = [m + scale * rng.uniform(-4e-16, 4e-16, size=m.shape) for _ in range(200)]
+    # the test's power: unsettled, the wobbles print differently
+    assert len({pbrt_writer._matrix(w) for w in wobbles}) > 1
+    assert {pbrt_writer._matrix(pbrt_writer._settled(w)) for w in wobbles} == {pbrt_writer._matrix(pbrt_writer._settled(m))}
+    assert np.max(np.abs(pbrt_writer._settled(m) - m)) <= 1e-12 * scale
