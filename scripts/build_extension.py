@@ -76,6 +76,7 @@ DEFAULT_REFERENCES = [
     "iridescent_sphere_smooth", "iridescent_spheres_film",               # iridescence
     "macbeth_chart_D65",                                                 # spectral accuracy
     "polarizing_plane_0", "polarizing_plane_90",                         # polarization
+    "furnace_colorchecker_yellow", "furnace_spiky",                      # furnace (64 x 64: 240 kB)
 ]
 # the observer layers the extension carries: Mitsuba's film (the renderer Blender users run here);
 # ART's (art46, 10 MB more) are in the all-references zip

@@ -90,11 +90,19 @@ def test_warnings_and_light_names_do_not_change_the_fingerprint(scene):
 
 
 def test_a_scene_without_lights_or_warnings_is_written_as_before(golden):
-    """The canonical scenes have neither key: their Mitsuba export (golden/, test_mitsuba_export.py)
-    and JSON are what they were."""
-    for sc in golden.values():
-        assert "lights" not in sc and "warnings" not in sc
+    """The canonical scenes have no delta lights and no warnings, so their Mitsuba export (golden/,
+    test_mitsuba_export.py) and JSON are what they were; the one exception is the furnaces' surface
+    emission, which the extension has no spectral annotation for (issue 41): it comes from the
+    Principled BSDF's Emission, converted to D65 and warned, and nothing else is."""
+    for name, sc in golden.items():
+        assert "lights" not in sc
         assert '"lights"' not in ir_json.dumps(sc)
+        if name.startswith("furnace_"):
+            assert [(w["object"], w["field"].rsplit(".", 1)[-1]) for w in sc["warnings"]] == [
+                (f"{name}_sphere", "inputs[Emission Strength]")], sc["warnings"]
+            assert "cie_d65" in sc["warnings"][0]["message"]
+        else:
+            assert "warnings" not in sc, name
     assert json.loads(ir_json.dumps(golden["ggx_copper_50"]))["objects"]
 
 
