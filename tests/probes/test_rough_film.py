@@ -172,6 +172,35 @@ def test_a_mitsuba_render_at_reduced_settings_passes_with_power(golden, tmp_path
     assert all(r["pass"] is False for r in _records(sc, names, img * 1.02).values())
 
 
+@pytest.mark.slow
+def test_a_recorded_deviation_re_judges_the_interval_probe(golden):
+    """batch/verdict/status.py re-judges this probe under a deviation's model (its bounds scaled,
+    or computed with the deviation's observer: stats.rejudge_interval): the reference 2 % brighter
+    fails plainly and is "known" under a model of a 2 % bright renderer; the reference itself passes
+    plainly and is "fixed" under that model (the deviation would have been seen); a model naming an
+    observer uses the record's alternative for it."""
+    from spectral_bench.batch.verdict import known, stats, status
+    scene, names, img = _reduced(golden, "iridescent_spheres_film")
+    dev = known.Deviation(id="bright", backend="mitsuba", checks=["rough film *"], evidence="", explanation="",
+                          date="", scale=1.02)
+
+    def decided(image):
+        recs = list(_records(scene, names, image, ("mitsuba3",)).values())
+        for rec in recs:  # the plain re-judgement is the record's own verdict
+            assert stats.rejudge_interval(rec["interval"]) is rec["pass"]
+            assert stats.rejudge_interval(rec["alternatives"]["mitsuba3"]) is rec["alternatives"]["mitsuba3"]["pass"]
+        entry = {"scene": "iridescent_spheres_film", "backend": "mitsuba", "mode": "llvm_ad_spectral", "probes": recs}
+        return status.decide(entry, [dev])["status"]
+    assert decided(img * 1.02) == "known"
+    assert decided(img) == "fixed"
+    observed = known.Deviation(id="film", backend="mitsuba", checks=["rough film *"], evidence="", explanation="",
+                               date="", observer="mitsuba3")
+    recs = list(_records(scene, names, img, ("mitsuba3",)).values())
+    entry = {"scene": "iridescent_spheres_film", "backend": "mitsuba", "mode": "llvm_ad_spectral", "probes": recs}
+    # the CMF-film reference is about 0.1 % darker than Mitsuba's film would render it: "fixed"
+    assert status.decide(entry, [observed])["status"] == "fixed"
+
+
 # ---- the registry and the label -------------------------------------------------------------------
 
 def test_the_registry_picks_the_probe_for_the_rough_sphere_scenes_only(golden):

@@ -51,10 +51,13 @@ A linear sRGB channel c has weights w_c(l) of both signs, so
     lo_c = R_c - W (w_c+ . L) + T (w_c- . L),     hi_c = R_c - W (w_c- . L) + T (w_c+ . L).
 
 W is a quadrature over the lobe (S_OCC x PHI_OCC nodes of the same rule, each node's direction
-tested against every other object by ray casting: batch/verdict/raycast.py), taken at the four
-corners of a pixel and their largest value used (W is smooth and small where pixels are judged; a
-node's lobe is first tested against each object's bounding cone, and a point whose whole lobe,
-the cone of half-angle 2 atan(alpha S_MAX) about the mirror direction, meets nothing has W = 0).
+tested against every other object by ray casting: batch/verdict/raycast.py), taken at the corners
+of cells of c x c pixels (c = 1 up to W_GRID pixels across, so that its cost does not grow with the
+image) and the largest of a pixel's cell's four corners used (W is smooth and small where pixels
+are judged). A point whose whole lobe (the cone of half-angle 2 atan(alpha S_MAX) about the mirror
+direction: reflecting about a normal tilted by theta_h turns the reflection by at most 2 theta_h)
+meets no object's bounding cone (a sphere's angular radius; a rectangle's plane) has W = 0 without
+casting a ray.
 R is averaged over the pixel's footprint (box filter) by a FOOTPRINT x FOOTPRINT Gauss-Legendre
 rule of sub-rays.
 
@@ -376,9 +379,13 @@ def _judge(px, lo, hi, blocks, alpha):
     tests = len(groups) * 6
     threshold = stats.sidak_threshold(alpha, tests)
     p_all, z_all, out = [], [], {}
+    kept = {"measured": [], "lo": [], "hi": [], "se": [], "dof": []}  # every test's means (stats.rejudge_interval)
     for g_i, g in enumerate(groups):
         m, lo_m, hi_m = px[g].mean(axis=0), lo[g].mean(axis=0), hi[g].mean(axis=0)
         se = (px[g] - lo[g]).std(axis=0, ddof=1) / np.sqrt(len(g))
+        for key, value in (("measured", m), ("lo", lo_m), ("hi", hi_m), ("se", se)):
+            kept[key].append(np.round(value, 10).tolist())
+        kept["dof"].append(len(g) - 1)
         z_hi = (m - hi_m) / np.maximum(se, 1e-300)
         z_lo = (lo_m - m) / np.maximum(se, 1e-300)
         p = np.minimum(stats.one_sided_p(z_hi, len(g) - 1), stats.one_sided_p(z_lo, len(g) - 1))
@@ -395,7 +402,8 @@ def _judge(px, lo, hi, blocks, alpha):
     worst = np.unravel_index(np.argmin(p_all), p_all.shape)
     out.update({"pass": bool(np.all(p_all >= threshold) and np.all(np.isfinite(px))), "p": float(p_all.min()),
                 "threshold": threshold, "tests": tests, "tiles": len(blocks), "z": float(np.max(z_all)),
-                "worst": "region" if worst[0] == 0 else f"tile {worst[0]}", "worst_channel": "RGB"[worst[1]]})
+                "worst": "region" if worst[0] == 0 else f"tile {worst[0]}", "worst_channel": "RGB"[worst[1]],
+                "groups": kept})
     return out
 
 
