@@ -41,6 +41,7 @@ def test_the_rule_integrates_the_visible_normals_to_one(theta_deg):
     assert abs(total - 1) <= rough_film.tail_bound(c, alpha) + 1e-9, total
 
 
+@pytest.mark.slow
 def test_the_table_converges_and_a_nearly_smooth_sphere_is_the_airy_film():
     """The table's rule against one with twice the nodes in s and phi, at the views the probe judges
     (cos theta_o >= COS_MIN): 3e-5 at 70 degrees, 1.5e-4 at 75 (so not judged), far below the
@@ -88,6 +89,26 @@ def test_a_lone_sphere_has_nothing_occluded_and_a_wall_over_the_mirror_direction
     _wi, _d, geo = rough_film._lobe(np.array([1.0]), 0.1, rough_film.S_OCC, rough_film.PHI_OCC)
     assert w_occ[0] == pytest.approx(geo.sum(), rel=1e-12)
     assert w_occ[1] == 0.0
+
+
+@pytest.mark.slow
+def test_the_grown_occluded_weight_bounds_a_finer_rule(golden):
+    """At the corners of iridescent_spheres_film's second sphere (100 x 32 pixels), where W is
+    small (below 0.01, the only places a pixel can be judged), the probe's W (24 x 48 nodes, the
+    occluded nodes' neighbours counted) is at least W from a rule with 3 x the nodes per axis
+    without growing (the occluded region's edges resolved finer): an upper bound, as the interval
+    needs."""
+    from spectral_bench.batch.verdict import raycast
+    sc = golden["iridescent_spheres_film"]
+    origin, d = raycast.camera_rays(sc["camera"], 100, 32, "corners")
+    who, t = raycast.nearest(sc["objects"], origin, d)
+    sel = who == 2
+    p = origin + t[sel][:, None] * d[sel]
+    coarse = rough_film.occluded_weight(sc, 2, p, -d[sel])
+    fine = rough_film.occluded_weight(sc, 2, p, -d[sel], 3 * rough_film.S_OCC, 3 * rough_film.PHI_OCC, grow=False)
+    small = fine < 0.01
+    assert small.sum() > 50 and (fine[small] > 1e-4).sum() > 20  # partly occluded lobes were tested
+    assert np.all(coarse[small] >= fine[small] - 1e-7), np.min(coarse[small] - fine[small])
 
 
 # ---- the probe on the committed references ----------------------------------------------------------

@@ -51,7 +51,10 @@ A linear sRGB channel c has weights w_c(l) of both signs, so
     lo_c = R_c - W (w_c+ . L) + T (w_c- . L),     hi_c = R_c - W (w_c- . L) + T (w_c+ . L).
 
 W is a quadrature over the lobe (S_OCC x PHI_OCC nodes of the same rule, each node's direction
-tested against every other object by ray casting: batch/verdict/raycast.py), taken at the corners
+tested against every other object by ray casting: batch/verdict/raycast.py; a node next to an
+occluded one counts as occluded, so that the occluded region's edge, which the rule resolves only
+to a node, is covered: measured, W so grown is at least the plain rule's W with 3 x the nodes in
+each axis, and about twice it), taken at the corners
 of cells of c x c pixels (c = 1 up to W_GRID pixels across, so that its cost does not grow with the
 image) and the largest of a pixel's cell's four corners used (W is smooth and small where pixels
 are judged). A point whose whole lobe (the cone of half-angle 2 atan(alpha S_MAX) about the mirror
@@ -247,9 +250,10 @@ def _cone_free(points, mirror, others, half):
     return free
 
 
-def occluded_weight(scene, index, points, w_o, n_s=S_OCC, n_phi=PHI_OCC):
+def occluded_weight(scene, index, points, w_o, n_s=S_OCC, n_phi=PHI_OCC, grow=True):
     """W at sphere ``index``'s ``points`` (P x 3) seen along ``w_o`` (P x 3, towards the viewer):
-    the lobe's geometric weight over the directions that meet another object (module docstring)."""
+    the lobe's geometric weight over the directions that meet another object (module docstring);
+    ``grow``: count the occluded nodes' neighbours too (the probe's upper bound)."""
     obj = scene["objects"][index]
     alpha = float(obj["bsdf"]["roughness"]["alpha"])
     centre = np.asarray(obj["shape"]["center"], dtype=np.float64)
@@ -275,7 +279,16 @@ def occluded_weight(scene, index, points, w_o, n_s=S_OCC, n_phi=PHI_OCC):
         wi = wi_local[..., :1] * t1[:, None] + wi_local[..., 1:2] * t2[:, None] + wi_local[..., 2:] * n[k][:, None]
         origin = (points[k] + 1e-7 * n[k])[:, None, :]
         who, _t = raycast.nearest(others, origin, wi)
-        out[k] = np.sum(np.where(who >= 0, geo, 0.0), axis=1)
+        # a node counts as occluded when it or a neighbour in s or phi is (phi wraps): the occluded
+        # region's edge, which the rule resolves to a node, is then covered (an upper bound on W
+        # wherever the region is wider than a node: tests/probes/test_rough_film.py)
+        occ = (who >= 0).reshape(len(k), n_s, n_phi)
+        grown = occ.copy()
+        if grow:
+            grown |= np.roll(occ, 1, axis=2) | np.roll(occ, -1, axis=2)
+            grown[:, 1:] |= occ[:, :-1]
+            grown[:, :-1] |= occ[:, 1:]
+        out[k] = np.sum(np.where(grown.reshape(len(k), -1), geo, 0.0), axis=1)
     return out
 
 
