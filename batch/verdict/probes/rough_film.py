@@ -57,7 +57,9 @@ to a node, is covered: measured, W so grown is at least the plain rule's W with 
 each axis, and about twice it), taken at the corners
 of cells of c x c pixels (c = 1 up to W_GRID pixels across, so that its cost does not grow with the
 image) and the largest of a pixel's cell's four corners used (W is smooth and small where pixels
-are judged). A point whose whole lobe (the cone of half-angle 2 atan(alpha S_MAX) about the mirror
+are judged; measured on iridescent_spheres_film at 800 x 256, c = 4: at 4 points inside each of
+2,360 judged pixels W by a 2 x finer rule without growing is nowhere above the pixel's W, and
+about 1/30 of it at the median). A point whose whole lobe (the cone of half-angle 2 atan(alpha S_MAX) about the mirror
 direction: reflecting about a normal tilted by theta_h turns the reflection by at most 2 theta_h)
 meets no object's bounding cone (a sphere's angular radius; a rectangle's plane) has W = 0 without
 casting a ray.
