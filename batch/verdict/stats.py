@@ -143,6 +143,20 @@ def rejudge(stat, scale=1.0, scale_se=0.0):
     return bool(np.all(p >= stat["threshold"]))
 
 
+def rejudge_interval(stat, scale=1.0, scale_se=0.0):
+    """Would an interval probe's one-sided tests (probes/rough_film.py: per group, the mean
+    ``measured`` against the mean ``lo`` and ``hi`` with standard error ``se``) pass if the bounds
+    were ``scale`` times larger (with that factor's own standard error)? The model of a recorded
+    deviation, as ``rejudge`` is for compare_means results."""
+    g = stat["groups"]
+    m, lo, hi, s = (np.asarray(g[k], dtype=np.float64) for k in ("measured", "lo", "hi", "se"))
+    dof = np.asarray(g["dof"], dtype=np.float64)[:, None]
+    z_hi = (m - scale * hi) / np.maximum(np.sqrt(s**2 + (scale_se * hi) ** 2), 1e-300)
+    z_lo = (scale * lo - m) / np.maximum(np.sqrt(s**2 + (scale_se * lo) ** 2), 1e-300)
+    p = np.minimum(one_sided_p(z_hi, dof), one_sided_p(z_lo, dof))
+    return bool(np.all(p >= stat["threshold"]) and np.all(np.isfinite(m)))
+
+
 def shifted_power(shift, threshold, dof=None):
     """Power of the two-sided test at per-test p ``threshold`` when the statistic (Student's t with
     ``dof``, normal where None or infinite) is shifted by ``shift`` standard errors:

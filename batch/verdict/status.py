@@ -56,6 +56,9 @@ def checks_of(entry, ztest=None):
     for p in entry.get("probes") or []:
         if p.get("stat"):
             out.append(Check(p["name"], p.get("pass"), lambda d, p=p: _rejudge_probe(p, d)))
+        elif isinstance(p.get("interval"), dict) and "groups" in p["interval"]:
+            # an interval probe that keeps its tests' means (probes/rough_film.py)
+            out.append(Check(p["name"], p.get("pass"), lambda d, p=p: _rejudge_interval(p, d)))
         else:
             out.append(Check(p["name"], p.get("pass")))
     return out
@@ -68,6 +71,18 @@ def _rejudge_probe(record, dev):
     stat = record["stat"] if key is None else (record.get("alternatives") or {}).get(key)
     from . import stats  # scipy.stats: imported by the first verdict, not at start-up
     return None if stat is None else stats.rejudge(stat, dev.scale, dev.scale_se)
+
+
+def _rejudge_interval(record, dev):
+    """An interval probe's verdict under a deviation's model: its tests against the bounds computed
+    with the model's observer (``alternatives``), scaled; None without a result for that observer
+    or where the model names a shadowing form (the GGX probe's alone)."""
+    if getattr(dev, "shadowing", None):
+        return None
+    stat = record["interval"] if dev.observer is None else (record.get("alternatives") or {}).get(dev.observer)
+    from . import stats  # scipy.stats: imported by the first verdict, not at start-up
+    return None if not isinstance(stat, dict) or "groups" not in stat else stats.rejudge_interval(stat, dev.scale,
+                                                                                                  dev.scale_se)
 
 
 def decide(entry, deviations=(), ztest=None):
