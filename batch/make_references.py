@@ -4,6 +4,8 @@
                                               [--renderers FILE ...] [--art-ggx] [--scale F]
                                               [--spp 4096 | --factor F] [--passes 8]
                                               [--cluster ADDRESS | local:N] [--replace [--accept]]
+    .venv/bin/python batch/make_references.py --crosscheck NAME [-s SCENE ...] [--references DIR]
+                                              [--spp N | --factor F] [--passes 2] [--detect F] [--no-record]
 
 References change only on request: a scene whose reference (its .exr or .json) is already in the
 output folder is left alone and named, with what is wrong with it if anything (stale, broken), unless
@@ -50,6 +52,15 @@ is rendered and judged and before it is saved; the save itself is the same atomi
 files stay current until it). A search never reads history (only <folder>/<scene>.exr/.json are
 candidates, and a folder holding ``replaced.json`` is refused even when named with --references);
 the extension build leaves history/ out. To restore an old reference, move its two files back.
+
+Cross-checks (``--crosscheck NAME [--references DIR]``, issue 44): each chosen reference is judged
+against a render of its scene by another, independent renderer NAME, on both noises (the block and
+scale tests of ``judge_replacement``, the diagnosis where they differ: batch/verdict/crosscheck.py),
+at the reference's resolution, the scene's spp and 2 passes unless ``--spp``/``--factor``/``--passes``
+say otherwise; the outcome goes into the reference's record (``crosschecks``, tied to the image's
+sha256), written as one step, and no image changes. Agreements are recorded only at the stated
+power (``--detect``, default 0.5 %), disagreements always (a finding); ``--no-record`` writes
+nothing. Exit status 0 when every scene agrees, 1 naming each that does not, 2 for usage.
 
 Observer layers (``--film cmf --layers OBSERVER``, batch/verdict/observer_layers.py) go to
 ``<out>/layers/<scene>/<observer>.exr``, a folder no scene name reaches (a scene name may hold

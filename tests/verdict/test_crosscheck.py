@@ -239,3 +239,12 @@ def test_verdicts_say_who_crosschecked_the_reference_and_a_stale_one_does_not_co
         else:
             assert who not in run["judged_by"] and "crosschecks" not in run["reference"]
             assert any("sha256 differs" in s for s in run["reference"]["crosschecks_not_counted"])
+
+
+@pytest.mark.slow
+def test_the_truth_table_in_the_docs_is_the_registries():
+    """docs/verdict.md's scene -> truth table is what scripts/truth_table.py makes from the probe
+    registry and the references' cross-checks (run --write after a cross-check or a new probe)."""
+    proc = subprocess.run([sys.executable, str(ROOT / "scripts" / "truth_table.py"), "--check"], capture_output=True,
+                          text=True, timeout=600, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr
