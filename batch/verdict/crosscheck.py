@@ -66,7 +66,9 @@ def judge(reference, check, scene, renderer, mode, *, alpha=None, min_samples=No
     ({channel: [check / reference, its standard error]}), ``detectable`` (the uniform scale error
     the test detects with 90 % power, a fraction; None when none up to 100 %), and, when they
     differ, ``diagnosis`` (the verdict's error models: their text and the likely one)."""
-    from . import references
+    from . import compare, references
+    # the runner's samples per block for this scene (its own larger figure where calibrated: the glass spheres)
+    min_samples = compare.min_samples_for(scene.get("name"), min_samples)
     v = references.judge_replacement(reference, check, alpha, min_samples, block, keep=True)
     if not v["comparable"]:
         return {"comparable": False, "agrees": False, "reason": v["reason"]}
