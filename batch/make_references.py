@@ -677,7 +677,7 @@ def crosscheck_usage(args):
         from spectral_bench.batch.verdict import references
         folder = Path(args.references)
         if not folder.is_dir():
-            raise Usage(f"--references {args.references}: no such folder")
+            raise Usage(f"--references {args.references}: " + ("not a folder" if folder.exists() else "no such folder"))
         if references.is_history(folder):
             raise Usage(f"--references {args.references}: a history folder of a replaced reference "
                         f"({references.HISTORY_RECORD}), never current references")

@@ -131,6 +131,9 @@ def test_usage_errors_name_the_option(args, said, capsys):
 
 def test_a_history_folder_is_refused_as_references(tmp_path, capsys):
     from spectral_bench.batch import make_references
+    (tmp_path / "file").write_text("")
+    assert make_references.main(["--crosscheck", "pbrt", "--references", str(tmp_path / "file")]) == 2
+    assert f"--references {tmp_path / 'file'}: not a folder" in capsys.readouterr().err
     (tmp_path / references.HISTORY_RECORD).write_text("{}")
     assert make_references.main(["--crosscheck", "pbrt", "--references", str(tmp_path)]) == 2
     assert "a history folder" in capsys.readouterr().err
