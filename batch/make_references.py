@@ -761,7 +761,12 @@ def crosscheck(args, argv, backend):
         if record.get("status") != "rendered":
             print(f"{job['scene_name']}: pass {job['extra']['pass']} failed: {record.get('reason')}", flush=True)
             return
-        write_done(work / job["folder"] / "done.json", dict(record, job=jobs.job_id(job)))
+        try:
+            write_done(work / job["folder"] / "done.json", dict(record, job=jobs.job_id(job)))
+        except OSError as exc:
+            print(f"{job['scene_name']}: pass {job['extra']['pass']}: cannot record it in {work / job['folder']}: "
+                  f"{exc.strerror or exc}; run the same command again to render it", flush=True)
+            return
         remaining[job["scene_name"]] -= 1
         print(f"{job['label']}: {record['time_s']:.1f} s", flush=True)
         if remaining[job["scene_name"]] == 0:
