@@ -4,6 +4,8 @@
                                               [--renderers FILE ...] [--art-ggx] [--scale F]
                                               [--spp 4096 | --factor F] [--passes 8]
                                               [--cluster ADDRESS | local:N] [--replace [--accept]]
+    .venv/bin/python batch/make_references.py --crosscheck NAME [-s SCENE ...] [--references DIR]
+                                              [--spp N | --factor F] [--passes 2] [--detect F] [--no-record]
 
 References change only on request: a scene whose reference (its .exr or .json) is already in the
 output folder is left alone and named, with what is wrong with it if anything (stale, broken), unless
@@ -50,6 +52,15 @@ is rendered and judged and before it is saved; the save itself is the same atomi
 files stay current until it). A search never reads history (only <folder>/<scene>.exr/.json are
 candidates, and a folder holding ``replaced.json`` is refused even when named with --references);
 the extension build leaves history/ out. To restore an old reference, move its two files back.
+
+Cross-checks (``--crosscheck NAME [--references DIR]``, issue 44): each chosen reference is judged
+against a render of its scene by another, independent renderer NAME, on both noises (the block and
+scale tests of ``judge_replacement``, the diagnosis where they differ: batch/verdict/crosscheck.py),
+at the reference's resolution, the scene's spp and 2 passes unless ``--spp``/``--factor``/``--passes``
+say otherwise; the outcome goes into the reference's record (``crosschecks``, tied to the image's
+sha256), written as one step, and no image changes. Agreements are recorded only at the stated
+power (``--detect``, default 0.5 %), disagreements always (a finding); ``--no-record`` writes
+nothing. Exit status 0 when every scene agrees, 1 naming each that does not, 2 for usage.
 
 Observer layers (``--film cmf --layers OBSERVER``, batch/verdict/observer_layers.py) go to
 ``<out>/layers/<scene>/<observer>.exr``, a folder no scene name reaches (a scene name may hold
@@ -189,15 +200,17 @@ def parser():
                     help="declare renderers that run as a command ([renderers.NAME] tables; repeatable); select one with -r NAME")
     ap.add_argument("--art-ggx", action="store_true",
                     help="-r art: write GGX_MICROFACET_DISTRIBUTION_CONST for an ART build that has GGX")
-    ap.add_argument("--scale", type=T["scale"], default=1.0, metavar="F",
+    ap.add_argument("--scale", type=T["scale"], default=None, metavar="F",
                     help="resolution scale as the runner's --scale (default 1.0: the scene's resolution); the "
                          "reference then judges renders at that resolution or an integer fraction of it")
-    ap.add_argument("--spp", type=T["spp"], default=4096, help="reference samples per pixel in all (default 4096)")
+    ap.add_argument("--spp", type=T["spp"], default=None, help="reference samples per pixel in all (default 4096; "
+                    "--crosscheck: the scene's own)")
     ap.add_argument("--factor", type=cli.int_in(1, 1 << 16), help="reference spp = factor x the scene's spp (instead of --spp)")
-    ap.add_argument("--passes", type=cli.int_in(2, cli.MAX_PASSES), default=8,
-                    help="independent passes (at least 2: their spread is the reference's noise; default 8)")
+    ap.add_argument("--passes", type=cli.int_in(2, cli.MAX_PASSES), default=None,
+                    help="independent passes (at least 2: their spread is the reference's noise; default 8; "
+                         "--crosscheck: 2, as a run's)")
     ap.add_argument("--seed", type=T["seed"], default=1000, help="first seed (distinct from the runner's default 0)")
-    ap.add_argument("--out", type=T["out"], default=str(references.REFERENCE_DIR))
+    ap.add_argument("--out", type=T["out"], default=None, help=f"where references are written (default {references.REFERENCE_DIR})")
     ap.add_argument("--cluster", metavar="ADDRESS", type=T["cluster"], help="a Dask scheduler, or local:N (default: this machine)")
     ap.add_argument("--replace", action="store_true",
                     help="render again scenes whose reference is already in the output folder (default: leave them); "
@@ -209,6 +222,17 @@ def parser():
     ap.add_argument("--block", type=T["block"], help="with --replace: block side in pixels of that test (default: from --min-samples)")
     ap.add_argument("--min-samples", type=T["min_samples"], help="with --replace: samples pooled per block of that test "
                     "(default 65536, as the runner's; larger blocks see smaller uniform changes)")
+    ap.add_argument("--crosscheck", type=T["renderer"], metavar="NAME",
+                    help="judge the references against renders of the same scenes by another, independent renderer NAME "
+                         "(a built-in backend or a declared renderer) on both noises, and record the outcome in each "
+                         "reference's provenance (crosschecks); renders and changes no reference image")
+    ap.add_argument("--references", type=T["out"], metavar="DIR",
+                    help=f"with --crosscheck: the folder whose references are cross-checked (default {references.REFERENCE_DIR})")
+    ap.add_argument("--detect", type=T["detect"], metavar="F",
+                    help="with --crosscheck: the stated power, the uniform relative error a cross-check must detect "
+                         "with 90 %% power (default %g); one that cannot is not recorded (exit status 1)" % 0.005)
+    ap.add_argument("--no-record", action="store_true",
+                    help="with --crosscheck: judge and print only; write nothing into the references' records")
     return ap
 
 
@@ -304,16 +328,36 @@ def main(argv=None):
     pkg_bootstrap.package()
     args = parser().parse_args(argv)
     from spectral_bench.batch import scene_sources
+    from spectral_bench.batch.verdict import references
+    if args.crosscheck is not None:
+        try:
+            crosscheck_usage(args)
+            backend, _name = chosen_backend(args)
+        except Usage as exc:
+            print(f"batch/make_references.py: error: {exc}".replace(f"-r {args.crosscheck}", f"--crosscheck {args.crosscheck}"),
+                  file=sys.stderr, flush=True)
+            return 2
+    else:
+        stray = [o for o, v in (("--references", args.references), ("--detect", args.detect),
+                                ("--no-record", args.no_record)) if v]
+        if stray:
+            print(f"batch/make_references.py: error: {stray[0]}: only with --crosscheck NAME", file=sys.stderr, flush=True)
+            return 2
+        args.out = args.out or str(references.REFERENCE_DIR)
+        args.scale = 1.0 if args.scale is None else args.scale
+        args.spp = 4096 if args.spp is None else args.spp
+        args.passes = args.passes or 8
     if args.migrate_layers:
         return migrate_layers(Path(args.out), args.scene)
-    try:
-        backend, _name = chosen_backend(args)
-    except Usage as exc:
-        print(f"batch/make_references.py: error: {exc}", file=sys.stderr, flush=True)
-        return 2
+    if args.crosscheck is None:
+        try:
+            backend, _name = chosen_backend(args)
+        except Usage as exc:
+            print(f"batch/make_references.py: error: {exc}", file=sys.stderr, flush=True)
+            return 2
     ok, why = backend.availability()
     if not ok:
-        option = "-e" if args.exec else "-r"
+        option = "--crosscheck" if args.crosscheck else "-e" if args.exec else "-r"
         print(f"batch/make_references.py: error: {option} {backend.name}: cannot render here: {why}", file=sys.stderr, flush=True)
         return 2
     args.input = args.input or [str(scene_sources.DEFAULT_BLEND)]
@@ -323,6 +367,8 @@ def main(argv=None):
             print(f"batch/make_references.py: error: {problem}", file=sys.stderr, flush=True)
             return 2
         print(backend.llvm_message(), flush=True)
+    if args.crosscheck is not None:
+        return crosscheck(args, argv, backend)
     out = Path(args.out)
     with contextlib.ExitStack() as held:  # the scenes' locks, released however this ends
         try:
@@ -609,6 +655,192 @@ def _make(args, argv, out, held, backend):
     finally:
         engine.close()
     return 1 if failed or any(remaining.values()) else 0
+
+
+# -- cross-checks (issue 44): the references judged against another renderer --------------------
+CROSSCHECK_PASSES = 2  # a run's default: the cross-check renders at the settings a run judges at
+NOT_WITH_CROSSCHECK = (("-r", "renderer"), ("--replace", "replace"), ("--accept", "accept"), ("--layers", "layers"),
+                       ("--layers-only", "layers_only"), ("--migrate-layers", "migrate_layers"), ("--out", "out"),
+                       ("--scale", "scale"))
+
+
+def crosscheck_usage(args):
+    """--crosscheck's options checked before anything is read or rendered (Usage naming the option)."""
+    for option, key in NOT_WITH_CROSSCHECK:
+        if getattr(args, key):
+            why = ("renders at the reference's own resolution" if key == "scale" else
+                   "reads the references from --references DIR and writes only their records" if key == "out" else
+                   "names the renderer" if key == "renderer" else "changes no reference image")
+            raise Usage(f"{option}: not with --crosscheck {args.crosscheck}, which {why}")
+    args.renderer = args.crosscheck
+    if args.references is not None:
+        from spectral_bench.batch.verdict import references
+        folder = Path(args.references)
+        if not folder.is_dir():
+            raise Usage(f"--references {args.references}: " + ("not a folder" if folder.exists() else "no such folder"))
+        if references.is_history(folder):
+            raise Usage(f"--references {args.references}: a history folder of a replaced reference "
+                        f"({references.HISTORY_RECORD}), never current references")
+    args.passes = args.passes or CROSSCHECK_PASSES
+
+
+def crosscheck(args, argv, backend):
+    """--crosscheck NAME: each chosen scene's reference (in --references DIR) judged against a render
+    by NAME (batch/verdict/crosscheck.py), the outcome printed and, unless --no-record, recorded in
+    the reference's provenance. Exit status 0 when every scene agrees at the stated power, 1 naming
+    each that does not (or could not be cross-checked), 2 for usage (nothing rendered)."""
+    from spectral_bench.batch import scene_sources
+    from spectral_bench.batch.jobs import engines, plan as planning
+    from spectral_bench.batch.verdict import crosscheck as cc, observer_layers, references
+    from spectral_bench.exporters import names as scene_names
+    folder = Path(args.references) if args.references else references.REFERENCE_DIR
+    detect = args.detect if args.detect is not None else cc.DEFAULT_DETECT
+    name = backend.name
+    loaded = list(scene_sources.load(args.input))
+    known = [n for n, _ in loaded]
+    missing = [s for s in args.scene or [] if s not in known]
+    if missing:
+        print(f"batch/make_references.py: error: -s {missing[0]}: no such scene in {', '.join(args.input)}",
+              file=sys.stderr, flush=True)
+        return 2
+    chosen = [(n, sc) for n, sc in loaded if not args.scene or n in args.scene]
+    failed, agreed, plans = [], [], []
+
+    def fail(scene_name, why):
+        failed.append(scene_name)
+        print(f"{scene_name}: NOT cross-checked: {why}", flush=True)
+
+    for scene_name, scene in chosen:
+        if isinstance(scene, Exception):
+            fail(scene_name, str(scene))
+            continue
+        stem = scene_names.file_stem(scene_name)  # a name that is no plain scene name reaches no path
+        ref, bad = references.examine(folder, stem, references.fingerprint(scene))
+        if ref is None or bad:
+            fail(scene_name, f"no usable reference in {folder}: " + (f"{bad['file']}: {bad['problem']}" if bad else "none"))
+            continue
+        if ref.provenance.get("backend") == name:
+            print(f"batch/make_references.py: error: --crosscheck {name}: scene {scene_name}'s reference "
+                  f"{ref.path} was made by {name}: a cross-check needs another, independent renderer", file=sys.stderr, flush=True)
+            return 2
+        observer = observer_layers.own_observer(ref.provenance)
+        if observer not in ("cie1931", None) and name != "mitsuba":
+            fail(scene_name, f"its reference's colour is {observer}'s film, not the scene format's (CIE 1931 at 1 nm) "
+                             f"that {name} is read with: they would differ by the observer; re-make it with --film cmf")
+            continue
+        scale = ref.provenance.get("scale") if isinstance(ref.provenance.get("scale"), (int, float)) else 1.0
+        try:
+            rendered = planning.for_run(scene, {"scale": scale}, judged=False)
+        except Exception as exc:  # noqa: BLE001 - a scale that leaves the IR's bounds fails this scene
+            fail(scene_name, str(exc))
+            continue
+        r = rendered["render"]
+        if (r["height"], r["width"]) != ref.mean.shape[:2]:
+            fail(scene_name, f"its reference {ref.path} is {ref.mean.shape[1]}x{ref.mean.shape[0]}, the scene at its "
+                             f"recorded scale {scale:g} renders {r['width']}x{r['height']}")
+            continue
+        mode, why = backend.mode_for(rendered)
+        if mode is None:
+            if args.scene:
+                fail(scene_name, f"{name} cannot render it: {why}")
+            else:
+                print(f"{scene_name}: skipped: {name} cannot render it: {why}", flush=True)
+            continue
+        spp = args.spp or scene["render"]["spp"] * (args.factor or 1)
+        work = folder / ".work" / ".crosscheck" / scene_names.file_stem(name) / stem
+        todo, per_pass = pass_jobs(scene_name, rendered, backend, mode, spp, args.passes, args.seed, work)
+        plans.append(dict(name=scene_name, scene=rendered, ref=ref, mode=mode, per_pass=per_pass, work=work, todo=todo,
+                          sha=references.sha256_of(ref.path)))
+        if len(todo) < args.passes:
+            print(f"{scene_name}: resuming, {args.passes - len(todo)} of {args.passes} passes already rendered", flush=True)
+    remaining = {p["name"]: len(p["todo"]) for p in plans}
+    command = "batch/make_references.py " + shlex.join(argv if argv is not None else sys.argv[1:])
+
+    def finished(job, record):
+        work = Path(job["out"])
+        if record.get("status") != "rendered":
+            print(f"{job['scene_name']}: pass {job['extra']['pass']} failed: {record.get('reason')}", flush=True)
+            return
+        try:
+            write_done(work / job["folder"] / "done.json", dict(record, job=jobs.job_id(job)))
+        except OSError as exc:
+            print(f"{job['scene_name']}: pass {job['extra']['pass']}: cannot record it in {work / job['folder']}: "
+                  f"{exc.strerror or exc}; run the same command again to render it", flush=True)
+            return
+        remaining[job["scene_name"]] -= 1
+        print(f"{job['label']}: {record['time_s']:.1f} s", flush=True)
+        if remaining[job["scene_name"]] == 0:
+            judge(next(p for p in plans if p["name"] == job["scene_name"]))
+
+    def judge(plan):
+        scene_name, ref = plan["name"], plan["ref"]
+        try:
+            names_, mean, stderr, _seconds, versions = merge(plan["work"], args.passes, tuple(ref.mean.shape[1::-1]))
+        except (OSError, ValueError) as exc:
+            fail(scene_name, f"cannot merge {name}'s passes: {exc}")
+            return
+        first = read_done(plan["work"] / "pass0" / "done.json") or {}
+        spp = plan["per_pass"] * args.passes
+        check = references.Reference(names_, mean, stderr, {"spp": spp, "passes": args.passes, "backend": name}, None)
+        result = cc.judge(ref, check, plan["scene"], name, plan["mode"], alpha=args.alpha, min_samples=args.min_samples,
+                          block=args.block)
+        item = cc.entry(result, renderer=name, mode=plan["mode"], versions=versions, spp=spp, passes=args.passes,
+                        seed=args.seed, resolution=[int(mean.shape[1]), int(mean.shape[0])], reference_sha256=plan["sha"],
+                        fingerprint=ref.provenance.get("fingerprint"), approximated=first.get("approximated"),
+                        command=command)
+        who = cc.renderer_label(name, item["version"])
+        det = result.get("detectable")
+        power = (f"detects {cc.percent(det)} with 90 % power" if det is not None else "detects no uniform error up to 100 %")
+        ratio = ", ".join(f"{c} {v[0]:.5f} +- {v[1]:.5f}" for c, v in (result.get("ratio") or {}).items() if v)
+        if result.get("agrees"):
+            weak = det is None or det > detect
+            print(f"{scene_name}: agrees with {who} ({spp} spp in {args.passes} passes; {power}, stated "
+                  f"{cc.percent(detect)}); {name} / reference: {ratio}", flush=True)
+            if weak:
+                fail(scene_name, f"the cross-check {power}, more than the stated {cc.percent(detect)} (--detect): it "
+                                 "decides nothing at that power and is not recorded; render more samples (--spp, --factor)")
+                shutil.rmtree(plan["work"], ignore_errors=True)
+                return
+            agreed.append(scene_name)
+        else:
+            failed.append(scene_name)
+            print(f"{scene_name}: DIFFERS from {who} beyond noise ({spp} spp in {args.passes} passes; {power})"
+                  + (f"; {name} / reference: {ratio}" if ratio else ""), flush=True)
+            for line in cc.difference_lines(result):
+                print(f"  {line}", flush=True)
+        if not args.no_record:
+            try:
+                path = cc.record(folder, plan["ref"].path.stem, item)
+                print(f"{scene_name}: recorded in {path} ({cc.RECORD_KEY})", flush=True)
+            except (OSError, ValueError) as exc:
+                if scene_name not in failed:
+                    failed.append(scene_name)
+                print(f"{scene_name}: NOT recorded: {exc}", flush=True)
+        shutil.rmtree(plan["work"], ignore_errors=True)
+
+    from spectral_bench.batch.jobs import job as jobs
+    for plan in plans:
+        if not plan["todo"]:
+            judge(plan)  # every pass was already there
+    try:
+        engine = engines.make(args.cluster)
+    except engines.ClusterError as exc:
+        print(f"batch/make_references.py: error: --cluster {args.cluster}: {exc}", file=sys.stderr, flush=True)
+        return 2
+    try:
+        engine.map([j for p in plans for j in p["todo"]], finished)
+    except engines.Interrupted:
+        print(f"interrupted: the finished passes are kept in {folder / '.work' / '.crosscheck'}; run the same command to resume",
+              flush=True)
+        return 130
+    finally:
+        engine.close()
+    for scene_name, left in remaining.items():
+        if left and scene_name not in failed:
+            fail(scene_name, f"{left} of {args.passes} passes of {name} did not render")
+    print(f"cross-check by {name}: {len(agreed)} agree" + (f"; {len(failed)} do not: {', '.join(failed)}" if failed else ""),
+          flush=True)
+    return 1 if failed else 0
 
 
 if __name__ == "__main__":

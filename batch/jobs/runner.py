@@ -18,7 +18,7 @@ from pathlib import Path
 from ...exporters import art_writer, ir_json, pbrt_writer
 from .. import backends, records, scene_sources
 from ..verdict import baseline as baselines, known, status
-from ..report import html as report, summary
+from ..report import html as report, results, summary
 from ..studies import sweep
 from . import engines, job as job_mod, plan as planning
 from .progress import Progress
@@ -208,6 +208,9 @@ class Run:
     def add(self, entry, quiet=False):
         if self.base is not None:  # judged against the previous run too (--baseline); the status stays
             baselines.attach(entry, self.out, self.base, planning.verdict_settings(self.opts))
+        label = results.judged_by(entry)  # what judged it, in the words every reader shows (issue 44)
+        if label:
+            entry["judged_by"] = label
         self.runs.append(entry)
         self.save()
         if not quiet:

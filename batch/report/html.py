@@ -112,7 +112,7 @@ def _summary_rows(runs, anchors, listed=None):
                      "rmse": _fmt(m.get("rmse")), "relmse": _fmt(m.get("relmse")), "mape": _fmt(m.get("mape")),
                      "flip": _text(records.flip_text(r)), "probes": probes or ("none" if r.get("status") in results.JUDGED else ""),
                      "reason": _text(r.get("reason")), "self_check": results.checked_against_itself(r),
-                     "reference_problems": _reference_problems(r)})
+                     "crosschecked": _text(results.crosscheck_note(r)), "reference_problems": _reference_problems(r)})
     return rows
 
 

@@ -1,6 +1,7 @@
 """What a run entry of metrics.json says, in words the summary, the report, JUnit and the Blender
 panel share (reference problems, what judged a render, its mode). Reading a run folder (metrics.json,
 a job's images) is batch/run_folder.py's."""
+from ..verdict import crosscheck
 
 
 def reference_problems(run):
@@ -43,25 +44,50 @@ def reference_maker(run):
     return ", ".join(p for p in parts if p)
 
 
+def crosschecks(run):
+    """The cross-checks of the reference a run entry was judged against that count (issue 44:
+    recorded for this very image; metrics.json ``reference.crosschecks``, batch/verdict/judge.py)."""
+    ref = run.get("reference")
+    items = ref.get("crosschecks") if isinstance(ref, dict) else None
+    return [c for c in items if isinstance(c, dict)] if isinstance(items, list) else []
+
+
 def checked_against_itself(run):
     """True for a judged render whose only judge was a reference made by the same renderer (its
-    backend), with no probe measured: the verdict says whether the renderer changed, not whether it
-    is right."""
+    backend), with no probe measured and no cross-check of that reference by another renderer that
+    agreed with it: the verdict says whether the renderer changed, not whether it is right."""
     ref = run.get("reference")
     return (run.get("status") in JUDGED and probes_measured(run)[0] == 0 and isinstance(ref, dict)
-            and ref.get("backend") is not None and ref.get("backend") == run.get("backend"))
+            and ref.get("backend") is not None and ref.get("backend") == run.get("backend")
+            and not crosscheck.agreed(crosschecks(run)))
+
+
+def crosscheck_note(run):
+    """The cross-checks of a judged run entry's reference in words ("reference cross-checked by
+    pbrt-v4 (detects 0.12 %)"), or "" (the summary's status cell adds it)."""
+    if run.get("status") not in JUDGED or not reference_maker(run):
+        return ""
+    return crosscheck.label(crosschecks(run))
 
 
 def judged_by(run):
-    """One line naming what judged a run entry (summary, report, panel and JUnit say the same)."""
+    """One line naming what judged a run entry (summary, report, panel, JUnit and metrics.json's
+    ``judged_by`` say the same; the runner stores it once per record): the probes measured, who
+    made the reference and who cross-checked it ("reference cross-checked by pbrt-v4 (detects
+    0.12 %)"), or that it was checked against itself."""
     if run.get("status") not in JUDGED:
         return ""
     measured, passed = probes_measured(run)
     maker = reference_maker(run)
     parts = [f"{measured} probe{'s' if measured != 1 else ''} ({passed} passed)" if measured else "no probe"]
     parts.append(f"reference by {maker}" if maker else "no reference")
+    checked = crosscheck_note(run)
+    if checked:
+        parts.append(checked)
     line = "; ".join(parts)
     return f"{line} ({SELF_CHECK})" if checked_against_itself(run) else line
+
+
 def mode_text(run):
     """A run entry's mode as shown: Mitsuba's variant, with its film where it is not Mitsuba's own
     (--film cmf: the scene format's colour)."""

@@ -4,7 +4,8 @@ from pathlib import Path
 from ..markdown import cell as _cell
 from ..records import flip_text, noise_test_text
 from ..verdict.status import rank
-from .results import JUDGED, SELF_CHECK, checked_against_itself, judged_without_reference, mode_text, probes_measured
+from .results import (JUDGED, SELF_CHECK, checked_against_itself, crosscheck_note, judged_without_reference, mode_text,
+                      probes_measured)
 
 
 def _num(x, fmt="{:.4g}"):
@@ -27,7 +28,8 @@ def table(runs):
         res = "x".join(map(str, r["resolution"])) if r.get("resolution") else ""
         reason = _cell(r.get("reason") or "")
         shown = (f"{r['status']} (without reference)" if judged_without_reference(r) else
-                 f"{r['status']} (checked against itself)" if checked_against_itself(r) else r["status"])
+                 f"{r['status']} (checked against itself)" if checked_against_itself(r) else
+                 f"{r['status']} ({crosscheck_note(r)})" if crosscheck_note(r) else r["status"])
         rows.append(f"| {_cell(shown)} | {_cell(r['scene'])} | {_cell(r['backend'])} | {_cell(mode_text(r))} | {_num(r.get('spp'), '{}')} "
                     f"| {res} | {_num(r.get('time_s'), '{:.2f}')} | {_num(m.get('rmse'))} | {_num(m.get('relmse'))} "
                     f"| {_num(m.get('mape'))} | {_cell(flip_text(r))} | {test} | {probes_cell(r)} | {reason[:300]} |")

@@ -10,7 +10,7 @@ import numpy as np
 from .. import exr
 from .. import previews
 from .. import spectral_passes
-from . import compare, flip_isolated, known, observer_layers, probes, references, stats, status
+from . import compare, crosscheck, flip_isolated, known, observer_layers, probes, references, stats, status
 from .probes import bands as band_probes
 
 
@@ -228,6 +228,14 @@ def noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings, la
                           "mode": ref.provenance.get("mode"), "versions": ref.provenance.get("versions"),
                           "date": ref.provenance.get("date"), "observer": observer_layers.own_observer(ref.provenance),
                           "observer_layers": sorted(layers)}
+    # issue 44: the reference's cross-checks by other renderers that belong to this very image count
+    counted, stale = crosscheck.counting(ref.provenance)
+    if counted:
+        entry["reference"]["crosschecks"] = [crosscheck.summary(c) for c in counted]
+    if stale:
+        entry["reference"]["crosschecks_not_counted"] = [
+            f"{crosscheck.renderer_label(c.get('renderer'), c.get('version'))} ({str(c.get('date'))[:10]}): {why}"[:300]
+            for c, why in stale]
     if bad_layers:  # an unusable layer: a reference problem of its file; the reference itself is used
         entry["reference"]["observer_layers_problem"] = "; ".join(why for _f, why in bad_layers.values())
         entry.setdefault("reference_problems", []).extend(observer_layers.reference_problems(ref, bad_layers))
