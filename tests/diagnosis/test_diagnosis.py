@@ -141,7 +141,7 @@ def test_diagnosis_is_shown_where_the_failure_is(runs):
     """The JUnit failure message, the summary, the report's "why" box, and a ready
     known_deviations.toml entry for a model known.py can re-judge (a scale)."""
     cases = {c.get("name").split("/")[0]: c for c in ET.parse(runs["_junit"]).getroot().iter("testcase")}
-    assert "likely: uniform scale scale 1.0" in cases["plant_scale"].find("failure").get("message")
+    assert "likely: uniform scale 1.0" in cases["plant_scale"].find("failure").get("message")
     assert "no model explains it" in cases["plant_stain"].find("failure").get("message")
     assert cases["plant_none"].find("failure") is None
     summary = (runs["_copper"] / "summary.md").read_text()

@@ -81,7 +81,7 @@ def test_uniform_scale_ranked_first_within_two_se():
     top = first(found)
     assert top["model"] == "uniform scale" and top["fully_explains"], found["models"]
     within_two_se(top, "scale", 1.01)
-    assert found["likely"] == "uniform scale" and found["text"].startswith("likely: uniform scale scale 1.0")
+    assert found["likely"] == "uniform scale" and found["text"].startswith("likely: uniform scale 1.0")
     assert "scale = 1.0" in found["known_deviation"] and 'checks = ["noise test"]' in found["known_deviation"]
 
 

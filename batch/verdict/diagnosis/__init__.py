@@ -609,8 +609,8 @@ def short(record):
     """One model of a diagnosis as text: "Stokes frame rotated angle_deg 90.0 +- 0.3, explains 99.6 %"."""
     parts = [record["model"]]
     for name, (v, se) in record["params"].items():
-        if v is not None:
-            parts.append(f"{name} {_fmt(v, se)}")
+        if v is not None:  # "uniform scale 1.02", not "uniform scale scale 1.02"
+            parts.append(_fmt(v, se) if record["model"].endswith(name) else f"{name} {_fmt(v, se)}")
     text = " ".join(parts)
     if record.get("explains") is not None:
         text += f", explains {share(record['explains'])}"
