@@ -144,6 +144,31 @@ def write_done(path, record):
         tmp.unlink(missing_ok=True)
 
 
+def _pass_recorder(remaining, complete):
+    """The scheduler's callback for one rendered pass: it is recorded in its folder's done.json (a
+    run of the same command resumes after it), counted against ``remaining`` {scene: passes left},
+    and ``complete(scene)`` is called when a scene's last pass is in; a failed or unrecordable pass
+    is said and left for the next run."""
+    from spectral_bench.batch.jobs import job as jobs
+
+    def finished(job, record):
+        work = Path(job["out"])
+        if record.get("status") != "rendered":
+            print(f"{job['scene_name']}: pass {job['extra']['pass']} failed: {record.get('reason')}", flush=True)
+            return
+        try:
+            write_done(work / job["folder"] / "done.json", dict(record, job=jobs.job_id(job)))
+        except OSError as exc:
+            print(f"{job['scene_name']}: pass {job['extra']['pass']}: cannot record it in {work / job['folder']}: "
+                  f"{exc.strerror or exc}; run the same command again to render it", flush=True)
+            return
+        remaining[job["scene_name"]] -= 1
+        print(f"{job['label']}: {record['time_s']:.1f} s", flush=True)
+        if remaining[job["scene_name"]] == 0:
+            complete(job["scene_name"])
+    return finished
+
+
 def merge(work, passes, expect=None):
     """(names, mean, standard error of the mean, summed render seconds, versions) of the passes;
     ``expect``: the (width, height) they were rendered at (checked in each EXR's header before its
@@ -511,21 +536,7 @@ def _make(args, argv, out, held, backend):
     remaining = {name: len(todo) for name, *_, todo in plans}
     command = "batch/make_references.py " + shlex.join(argv if argv is not None else sys.argv[1:])
 
-    def finished(job, record):
-        work = Path(job["out"])
-        if record.get("status") != "rendered":
-            print(f"{job['scene_name']}: pass {job['extra']['pass']} failed: {record.get('reason')}", flush=True)
-            return
-        try:
-            write_done(work / job["folder"] / "done.json", dict(record, job=jobs.job_id(job)))
-        except OSError as exc:
-            print(f"{job['scene_name']}: pass {job['extra']['pass']}: cannot record it in {work / job['folder']}: "
-                  f"{exc.strerror or exc}; run the same command again to render it", flush=True)
-            return
-        remaining[job["scene_name"]] -= 1
-        print(f"{job['label']}: {record['time_s']:.1f} s", flush=True)
-        if remaining[job["scene_name"]] == 0:
-            write_reference(next(p for p in plans if p[0] == job["scene_name"]))
+    finished = _pass_recorder(remaining, lambda name: write_reference(next(p for p in plans if p[0] == name)))
 
     def write_reference(plan):
         name = plan[0]
@@ -756,21 +767,7 @@ def crosscheck(args, argv, backend):
     remaining = {p["name"]: len(p["todo"]) for p in plans}
     command = "batch/make_references.py " + shlex.join(argv if argv is not None else sys.argv[1:])
 
-    def finished(job, record):
-        work = Path(job["out"])
-        if record.get("status") != "rendered":
-            print(f"{job['scene_name']}: pass {job['extra']['pass']} failed: {record.get('reason')}", flush=True)
-            return
-        try:
-            write_done(work / job["folder"] / "done.json", dict(record, job=jobs.job_id(job)))
-        except OSError as exc:
-            print(f"{job['scene_name']}: pass {job['extra']['pass']}: cannot record it in {work / job['folder']}: "
-                  f"{exc.strerror or exc}; run the same command again to render it", flush=True)
-            return
-        remaining[job["scene_name"]] -= 1
-        print(f"{job['label']}: {record['time_s']:.1f} s", flush=True)
-        if remaining[job["scene_name"]] == 0:
-            judge(next(p for p in plans if p["name"] == job["scene_name"]))
+    finished = _pass_recorder(remaining, lambda name: judge(next(p for p in plans if p["name"] == name)))
 
     def judge(plan):
         scene_name, ref = plan["name"], plan["ref"]

@@ -1,8 +1,8 @@
 """Issue 45 item 6 in the fast subset: a probe's verdict that flips within noise is "unstable", not
-a change, and one that moved beyond noise is CHANGED. The same run folders and assertions as
-tests/verdict/test_verdict_cells.py's probe test (real EXRs, hand-made records), with
-compare_runs' ``main(argv)`` called in this process instead of two ``batch/compare_runs.py``
-children (2 s of CPU there, well under 1 s here); that module's render tests stay slow."""
+a change, and one that moved beyond noise is CHANGED. The run folders are
+tests/verdict/test_verdict_cells.py's ``_probe_run`` (real EXRs, hand-made records), and
+compare_runs' ``main(argv)`` is called in this process (two ``batch/compare_runs.py`` children cost
+2 s of CPU, well under 1 s here; the child's exit status is tested there on rendered runs)."""
 import contextlib
 import io
 import json
@@ -25,6 +25,10 @@ def compare_runs(*args):
 
 
 def test_a_probe_that_flips_within_noise_is_unstable_here_and_one_that_moved_is_changed(tmp_path):
+    """A probe 2.5 standard errors off passes at alpha 0.01, 2.8 off fails: the same render with
+    other noise flips its status while the images and the probe's residuals agree within noise;
+    compare_runs names it unstable with the probe's deviation against what it detects, exit 0. The
+    probe 10 standard errors off (moved beyond both runs' noise) is CHANGED, exit 1."""
     old, new, moved = tmp_path / "old", tmp_path / "new", tmp_path / "moved"
     ro, rn = _probe_run(old, 1, 1.025), _probe_run(new, 2, 1.028)
     assert (ro["status"], rn["status"]) == ("ok", "failed")  # the premise: the probe's verdict flips
