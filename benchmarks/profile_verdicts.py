@@ -31,6 +31,7 @@ import pkg_bootstrap  # noqa: E402
 pkg_bootstrap.package()
 from spectral_bench.batch import cli  # noqa: E402
 from spectral_bench.batch.jobs import job as job_mod, plan as planning, runner  # noqa: E402
+from spectral_bench.batch.report import results as report_results  # noqa: E402
 
 
 def smoke():
@@ -91,7 +92,7 @@ def main(argv=None):
         prof.disable()
         cpu = time.process_time() - c0
         total += cpu
-        results.append(result)
+        results.append(report_results.label_judged_by(result))  # as the runner stores it
         print(f"{job['scene_name']:32s} {result['status']:8s} {cpu:7.2f} s", flush=True)
     print(f"{'total':32s} {'':8s} {total:7.2f} s")
     if args.top:

@@ -208,9 +208,7 @@ class Run:
     def add(self, entry, quiet=False):
         if self.base is not None:  # judged against the previous run too (--baseline); the status stays
             baselines.attach(entry, self.out, self.base, planning.verdict_settings(self.opts))
-        label = results.judged_by(entry)  # what judged it, in the words every reader shows (issue 44)
-        if label:
-            entry["judged_by"] = label
+        results.label_judged_by(entry)  # what judged it, in the words every reader shows (issue 44)
         self.runs.append(entry)
         self.save()
         if not quiet:

@@ -88,6 +88,16 @@ def judged_by(run):
     return f"{line} ({SELF_CHECK})" if checked_against_itself(run) else line
 
 
+def label_judged_by(entry):
+    """Store ``judged_by`` in a run entry (the runner's record, and any tool that judges a kept
+    render again, e.g. benchmarks/profile_verdicts.py), so that two judgings of one render compare
+    equal; returns the entry."""
+    label = judged_by(entry)
+    if label:
+        entry["judged_by"] = label
+    return entry
+
+
 def mode_text(run):
     """A run entry's mode as shown: Mitsuba's variant, with its film where it is not Mitsuba's own
     (--film cmf: the scene format's colour)."""
