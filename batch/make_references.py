@@ -255,7 +255,7 @@ def parser():
                     help=f"with --crosscheck: the folder whose references are cross-checked (default {references.REFERENCE_DIR})")
     ap.add_argument("--detect", type=T["detect"], metavar="F",
                     help="with --crosscheck: the stated power, the uniform relative error a cross-check must detect "
-                         "with 90 %% power (default %g); one that cannot is not recorded (exit status 1)" % 0.005)
+                         f"with 90 %% power (default {0.005:g}); one that cannot is not recorded (exit status 1)")
     ap.add_argument("--no-record", action="store_true",
                     help="with --crosscheck: judge and print only; write nothing into the references' records")
     return ap

@@ -129,6 +129,14 @@ def test_usage_errors_name_the_option(args, said, capsys):
     assert said in capsys.readouterr().err
 
 
+def test_help_prints_the_crosscheck_options():
+    """--help once raised (a help string %-formatted twice: '90 %% power' became '90 % power',
+    which argparse read as a format)."""
+    from spectral_bench.batch import make_references
+    text = make_references.parser().format_help()
+    assert "--crosscheck NAME" in text and "90 % power (default 0.005)" in " ".join(text.split())
+
+
 def test_a_history_folder_is_refused_as_references(tmp_path, capsys):
     from spectral_bench.batch import make_references
     (tmp_path / "file").write_text("")
