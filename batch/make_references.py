@@ -255,7 +255,7 @@ def parser():
                     help=f"with --crosscheck: the folder whose references are cross-checked (default {references.REFERENCE_DIR})")
     ap.add_argument("--detect", type=T["detect"], metavar="F",
                     help="with --crosscheck: the stated power, the uniform relative error a cross-check must detect "
-                         "with 90 %% power (default %g); one that cannot is not recorded (exit status 1)" % 0.005)
+                         f"with 90 %% power (default {0.005:g}); one that cannot is not recorded (exit status 1)")
     ap.add_argument("--no-record", action="store_true",
                     help="with --crosscheck: judge and print only; write nothing into the references' records")
     return ap
@@ -703,7 +703,8 @@ def crosscheck(args, argv, backend):
     from spectral_bench.batch import scene_sources
     from spectral_bench.batch.jobs import engines, plan as planning
     from spectral_bench.batch.verdict import crosscheck as cc, observer_layers, references
-    from spectral_bench.exporters import names as scene_names
+    from spectral_bench.batch.backends import rgb_common
+    from spectral_bench.exporters import names as scene_names, rgb_scene
     folder = Path(args.references) if args.references else references.REFERENCE_DIR
     detect = args.detect if args.detect is not None else cc.DEFAULT_DETECT
     name = backend.name
@@ -756,6 +757,17 @@ def crosscheck(args, argv, backend):
                 fail(scene_name, f"{name} cannot render it: {why}")
             else:
                 print(f"{scene_name}: skipped: {name} cannot render it: {why}", flush=True)
+            continue
+        inexact = rgb_scene.wavelength_dependent(scene) if isinstance(backend, rgb_common.RgbBackend) else []
+        if inexact:  # an RGB render differs from the spectral truth there by design, not by error
+            why = (f"{name} renders in RGB, exact only where every BSDF is wavelength-independent "
+                   "(docs/backends.md, RGB renderers as cross-checks): "
+                   + "; ".join(f"{o}.{f}: {m}" for o, f, m in inexact[:3])
+                   + (f"; and {len(inexact) - 3} more" if len(inexact) > 3 else ""))
+            if args.scene:
+                fail(scene_name, why)
+            else:
+                print(f"{scene_name}: skipped: {why}", flush=True)
             continue
         spp = args.spp or scene["render"]["spp"] * (args.factor or 1)
         work = folder / ".work" / ".crosscheck" / scene_names.file_stem(name) / stem

@@ -74,6 +74,43 @@ def problems(scene, distributions, light_types=frozenset()):
     return out
 
 
+def _is_constant(value):
+    return isinstance(value, (int, float)) and not isinstance(value, bool) or (
+        isinstance(value, dict) and value.get("type") == "constant")
+
+
+def wavelength_dependent(scene):
+    """[(object, field, why)]: what makes ``scene``'s light transport depend on wavelength, so that
+    an RGB render of it is not exact (empty: it is exact per channel, docs/backends.md "RGB
+    renderers as cross-checks"). Exact needs every BSDF wavelength-independent: a diffuse of
+    constant reflectance, a conductor of constant eta and k, a dielectric of constant IORs, none
+    with a thin film or fluorescence; emitters and the environment may have any spectrum (the
+    image is linear in each). Anything else, an unknown BSDF type included, is named."""
+    out = []
+    for obj in scene.get("objects", []):
+        b, name = obj.get("bsdf"), obj.get("name", "?")
+        if not b:
+            continue
+        kind = b.get("type")
+        fields = {"diffuse": ("reflectance",), "conductor": ("eta", "k"),
+                  "dielectric": ("int_ior", "ext_ior")}.get(kind)
+        if fields is None:
+            out.append((name, "bsdf.type", f"{kind!r}: not known to be wavelength-independent"))
+            continue
+        for field in fields:
+            value = b.get(field, ir.AIR_IOR if field == "ext_ior" else None)
+            if value is None and b.get("material"):
+                out.append((name, f"bsdf.{field}", f"the measured conductor {b['material']!r}"))
+                break
+            if not _is_constant(value):
+                what = value.get("type") if isinstance(value, dict) else type(value).__name__
+                out.append((name, f"bsdf.{field}", f"a {what} spectrum, not a constant"))
+        for field in ("thin_film", "fluorescence"):
+            if b.get(field):
+                out.append((name, f"bsdf.{field}", f"a {field.replace('_', ' ')} depends on wavelength"))
+    return out
+
+
 def rectangle_corners(shape):
     """The IR rectangle's 4 world corners, ordered counter-clockwise about its world normal
     (the transformed local +Z, i.e. inverse-transpose: also right for a mirroring to_world)."""

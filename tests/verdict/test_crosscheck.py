@@ -129,6 +129,45 @@ def test_usage_errors_name_the_option(args, said, capsys):
     assert said in capsys.readouterr().err
 
 
+def test_help_prints_the_crosscheck_options():
+    """--help once raised (a help string %-formatted twice: '90 %% power' became '90 % power',
+    which argparse read as a format)."""
+    from spectral_bench.batch import make_references
+    text = make_references.parser().format_help()
+    assert "--crosscheck NAME" in text and "90 % power (default 0.005)" in " ".join(text.split())
+
+
+def test_rgb_transport_is_exact_only_where_every_bsdf_is_wavelength_independent():
+    """The rule an RGB renderer's cross-check rests on (docs/backends.md, RGB renderers as
+    cross-checks), read from the IR: colourless constant-IOR glass is exact; a measured
+    conductor, a named reflectance, a dispersive IOR, a thin film and an unknown BSDF are not."""
+    from spectral_bench.exporters import rgb_scene
+
+    def ir(name):
+        return json.loads((ROOT / "golden" / "ir" / f"{name}.json").read_text())
+    assert rgb_scene.wavelength_dependent(ir("ggx_glass")) == []
+    assert rgb_scene.wavelength_dependent(ir("beckmann_glass")) == []
+    assert rgb_scene.wavelength_dependent(ir("ggx_copper_50"))[0][:2] == ("copper_plate_50", "bsdf.eta")
+    assert ("patch_cyan", "bsdf.reflectance") in [w[:2] for w in rgb_scene.wavelength_dependent(ir("macbeth_chart_D65"))]
+    assert rgb_scene.wavelength_dependent(ir("dispersion_fringes"))[0][:2] == ("sf11_sphere", "bsdf.int_ior")
+    assert ("smooth_film_sphere", "bsdf.thin_film") in [
+        w[:2] for w in rgb_scene.wavelength_dependent(ir("iridescent_sphere_smooth"))]
+    glass = ir("ggx_glass")
+    next(o for o in glass["objects"] if o["name"] == "glass_sphere")["bsdf"]["type"] = "velvet"
+    assert rgb_scene.wavelength_dependent(glass)[0][:2] == ("glass_sphere", "bsdf.type")
+
+
+def test_an_rgb_renderer_cross_checks_no_wavelength_dependent_scene(capsys):
+    """Cycles on the copper plate: refused before anything renders, naming object and field (exit 1)."""
+    from spectral_bench.batch import make_references
+    rc = make_references.main(["--crosscheck", "cycles", "-i", str(ROOT / "golden" / "ir" / "ggx_copper_50.json"),
+                               "-s", "ggx_copper_50", "--no-record"])
+    out = capsys.readouterr().out
+    assert rc == 1
+    assert "ggx_copper_50: NOT cross-checked: cycles renders in RGB" in out
+    assert "copper_plate_50.bsdf.eta" in out and "pass 1/" not in out
+
+
 def test_a_history_folder_is_refused_as_references(tmp_path, capsys):
     from spectral_bench.batch import make_references
     (tmp_path / "file").write_text("")
