@@ -190,9 +190,10 @@ def main(argv=None):
         say(f"Mitsuba, {form}, against the reference", cc.judge(ref, check, scene, "mitsuba", "llvm_ad_spectral"))
     if args.pbrt_passes:
         from spectral_bench.batch import make_references as mk
-        names, mean, stderr, _s, versions = mk.merge(args.pbrt_passes, 2, tuple(ref.mean.shape[1::-1]))
+        count = len([p for p in args.pbrt_passes.glob("pass*") if (p / "done.json").is_file()])
+        names, mean, stderr, _s, versions = mk.merge(args.pbrt_passes, count, tuple(ref.mean.shape[1::-1]))
         first = json.loads((args.pbrt_passes / "pass0" / "done.json").read_text())
-        pbrt = references.Reference(names, mean, stderr, {"spp": int(first.get("spp", 0)) * 2 or 128, "passes": 2,
+        pbrt = references.Reference(names, mean, stderr, {"spp": int(first["spp"]) * count, "passes": count,
                                                           "backend": "pbrt"}, None)
         say("pbrt-v4 against the reference", cc.judge(ref, pbrt, scene, "pbrt", "spectral"))
         say("pbrt-v4 against Mitsuba with the height-correlated G", cc.judge(hc, pbrt, scene, "pbrt", "spectral"))
