@@ -402,3 +402,27 @@ def test_a_crosscheck_agrees_up_to_a_deviation_only_where_its_model_fits(deviati
     assert cc.label([cc.summary(c) for c in counted]).startswith("reference cross-checked by toy_spectral")
     assert "up to toy-two-percent (detects" in cc.label([cc.summary(c) for c in counted])
     assert cc.counting(meta, known.load(deviating["files"]["wrong"]))[0] == []  # another model: does not count
+
+
+@pytest.mark.slow
+def test_a_run_against_a_reference_crosschecked_up_to_a_deviation_says_so(deviating):
+    """A Mitsuba run judged against that reference (with the run's --known file) carries "up to
+    ID" in judged_by, metrics.json and the summary; with a deviation file whose model differs, the
+    cross-check does not count (metrics.json says why) and the verdict names no cross-check."""
+    assert deviating["got"]["right"][0] == 0
+    base = deviating["dev"].parent
+    for key in ("right", "wrong"):
+        out = base / f"run-{key}"
+        proc = run_batch("-r", "mitsuba", "-s", SCENE, "--scale", "0.1", "--film", "cmf", "--references",
+                         deviating["dev"], "--known", deviating["files"][key], "-o", out, "--flip", "off")
+        assert (out / "metrics.json").is_file(), proc.stdout + proc.stderr
+        (run,) = metrics(out)["runs"]
+        if key == "right":
+            assert "reference cross-checked by toy_spectral" in run["judged_by"], run["judged_by"]
+            assert "up to toy-two-percent (detects" in run["judged_by"]
+            assert run["reference"]["crosschecks"][0]["agrees_under"] == "toy-two-percent"
+            assert "up to toy-two-percent" in (out / "summary.md").read_text()
+        else:
+            # (macbeth's probes still judge it: not "checked against itself", but no cross-check is named)
+            assert "crosschecks" not in run["reference"] and "cross-checked" not in run["judged_by"]
+            assert any("no longer record" in w for w in run["reference"]["crosschecks_not_counted"])
