@@ -701,6 +701,14 @@ def crosscheck_usage(args):
         if references.is_history(folder):
             raise Usage(f"--references {args.references}: a history folder of a replaced reference "
                         f"({references.HISTORY_RECORD}), never current references")
+    if args.known is not None:
+        from spectral_bench.batch.verdict import known
+        if not Path(args.known).is_file():
+            raise Usage(f"--known {args.known}: " + ("not a file" if Path(args.known).exists() else "no such file"))
+        try:
+            known.load(args.known)
+        except (known.KnownDeviationsError, OSError, UnicodeDecodeError) as exc:
+            raise Usage(f"--known {args.known}: {exc}") from exc
     args.passes = args.passes or CROSSCHECK_PASSES
 
 
@@ -718,14 +726,7 @@ def crosscheck(args, argv, backend):
     folder = Path(args.references) if args.references else references.REFERENCE_DIR
     detect = args.detect if args.detect is not None else cc.DEFAULT_DETECT
     name = backend.name
-    try:
-        deviations = known_mod.load(args.known)
-    except (known_mod.KnownDeviationsError, OSError) as exc:
-        print(f"batch/make_references.py: error: --known: {exc}", file=sys.stderr, flush=True)
-        return 2
-    if args.known and not Path(args.known).is_file():
-        print(f"batch/make_references.py: error: --known {args.known}: no such file", file=sys.stderr, flush=True)
-        return 2
+    deviations = known_mod.load(args.known)  # checked by crosscheck_usage
     loaded = list(scene_sources.load(args.input))
     known = [n for n, _ in loaded]
     missing = [s for s in args.scene or [] if s not in known]

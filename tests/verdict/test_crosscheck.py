@@ -164,6 +164,8 @@ def test_record_changes_only_the_crosschecks_atomically(tmp_path):
     (["--references", "references"], "--references: only with --crosscheck NAME"),
     (["--no-record"], "--no-record: only with --crosscheck NAME"),
     (["--known", "k.toml"], "--known: only with --crosscheck NAME"),
+    (["--crosscheck", "pbrt", "--known", "/nonexistent/k.toml"], "--known /nonexistent/k.toml: no such file"),
+    (["--crosscheck", "pbrt", "--known", str(ROOT / "README.md")], "--known " + str(ROOT / "README.md") + ": "),
 ])
 def test_usage_errors_name_the_option(args, said, capsys):
     from spectral_bench.batch import make_references
