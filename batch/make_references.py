@@ -6,6 +6,7 @@
                                               [--cluster ADDRESS | local:N] [--replace [--accept]]
     .venv/bin/python batch/make_references.py --crosscheck NAME [-s SCENE ...] [--references DIR]
                                               [--spp N | --factor F] [--passes 2] [--detect F] [--no-record]
+                                              [--known FILE]
 
 References change only on request: a scene whose reference (its .exr or .json) is already in the
 output folder is left alone and named, with what is wrong with it if anything (stale, broken), unless
@@ -60,7 +61,13 @@ at the reference's resolution, the scene's spp and 2 passes unless ``--spp``/``-
 say otherwise; the outcome goes into the reference's record (``crosschecks``, tied to the image's
 sha256), written as one step, and no image changes. Agreements are recorded only at the stated
 power (``--detect``, default 0.5 %), disagreements always (a finding); ``--no-record`` writes
-nothing. Exit status 0 when every scene agrees, 1 naming each that does not, 2 for usage.
+nothing. A renderer that differs from the reference by exactly what a recorded deviation of that
+renderer predicts (``--known FILE``, default known_deviations.toml: its scale model applied to the
+noise test, as the verdict applies it for ``known``) agrees *up to* that deviation: recorded with
+its id (``agrees_under``) and the power of the test under its model; a deviation whose model does
+not fit leaves it differing. The passes of a cross-check that differs are kept (the same command
+judges them again without rendering, e.g. once a deviation is recorded). Exit status 0 when every
+scene agrees, 1 naming each that does not, 2 for usage.
 
 Observer layers (``--film cmf --layers OBSERVER``, batch/verdict/observer_layers.py) go to
 ``<out>/layers/<scene>/<observer>.exr``, a folder no scene name reaches (a scene name may hold
@@ -258,6 +265,8 @@ def parser():
                          f"with 90 %% power (default {0.005:g}); one that cannot is not recorded (exit status 1)")
     ap.add_argument("--no-record", action="store_true",
                     help="with --crosscheck: judge and print only; write nothing into the references' records")
+    ap.add_argument("--known", type=T["known"], metavar="FILE",
+                    help="with --crosscheck: the known deviations a renderer may agree up to (default: known_deviations.toml)")
     return ap
 
 
@@ -364,7 +373,7 @@ def main(argv=None):
             return 2
     else:
         stray = [o for o, v in (("--references", args.references), ("--detect", args.detect),
-                                ("--no-record", args.no_record)) if v]
+                                ("--no-record", args.no_record), ("--known", args.known)) if v]
         if stray:
             print(f"batch/make_references.py: error: {stray[0]}: only with --crosscheck NAME", file=sys.stderr, flush=True)
             return 2
@@ -692,6 +701,14 @@ def crosscheck_usage(args):
         if references.is_history(folder):
             raise Usage(f"--references {args.references}: a history folder of a replaced reference "
                         f"({references.HISTORY_RECORD}), never current references")
+    if args.known is not None:
+        from spectral_bench.batch.verdict import known
+        if not Path(args.known).is_file():
+            raise Usage(f"--known {args.known}: " + ("not a file" if Path(args.known).exists() else "no such file"))
+        try:
+            known.load(args.known)
+        except (known.KnownDeviationsError, OSError, UnicodeDecodeError) as exc:
+            raise Usage(f"--known {args.known}: {exc}") from exc
     args.passes = args.passes or CROSSCHECK_PASSES
 
 
@@ -705,9 +722,11 @@ def crosscheck(args, argv, backend):
     from spectral_bench.batch.verdict import crosscheck as cc, observer_layers, references
     from spectral_bench.batch.backends import rgb_common
     from spectral_bench.exporters import names as scene_names, rgb_scene
+    from spectral_bench.batch.verdict import known as known_mod
     folder = Path(args.references) if args.references else references.REFERENCE_DIR
     detect = args.detect if args.detect is not None else cc.DEFAULT_DETECT
     name = backend.name
+    deviations = known_mod.load(args.known)  # checked by crosscheck_usage
     loaded = list(scene_sources.load(args.input))
     known = [n for n, _ in loaded]
     missing = [s for s in args.scene or [] if s not in known]
@@ -791,8 +810,9 @@ def crosscheck(args, argv, backend):
         first = read_done(plan["work"] / "pass0" / "done.json") or {}
         spp = plan["per_pass"] * args.passes
         check = references.Reference(names_, mean, stderr, {"spp": spp, "passes": args.passes, "backend": name}, None)
+        film = getattr(backend, "film", None) if name == "mitsuba" else ""
         result = cc.judge(ref, check, plan["scene"], name, plan["mode"], alpha=args.alpha, min_samples=args.min_samples,
-                          block=args.block)
+                          block=args.block, deviations=deviations, versions=versions, film=film)
         item = cc.entry(result, renderer=name, mode=plan["mode"], versions=versions, spp=spp, passes=args.passes,
                         seed=args.seed, resolution=[int(mean.shape[1]), int(mean.shape[0])], reference_sha256=plan["sha"],
                         fingerprint=ref.provenance.get("fingerprint"), approximated=first.get("approximated"),
@@ -801,10 +821,18 @@ def crosscheck(args, argv, backend):
         det = result.get("detectable")
         power = (f"detects {cc.percent(det)} with 90 % power" if det is not None else "detects no uniform error up to 100 %")
         ratio = ", ".join(f"{c} {v[0]:.5f} +- {v[1]:.5f}" for c, v in (result.get("ratio") or {}).items() if v)
+        under = result.get("agrees_under")
+        if under:
+            power += " under its model"
         if result.get("agrees"):
             weak = det is None or det > detect
-            print(f"{scene_name}: agrees with {who} ({spp} spp in {args.passes} passes; {power}, stated "
+            print(f"{scene_name}: agrees with {who}" + (f" up to the known deviation {under} (scale "
+                  f"{result['deviation']['scale']:g} +- {result['deviation']['scale_se']:g})" if under else "")
+                  + f" ({spp} spp in {args.passes} passes; {power}, stated "
                   f"{cc.percent(detect)}); {name} / reference: {ratio}", flush=True)
+            if under:
+                for line in cc.difference_lines(result):
+                    print(f"  plainly: {line}", flush=True)
             if weak:
                 fail(scene_name, f"the cross-check {power}, more than the stated {cc.percent(detect)} (--detect): it "
                                  "decides nothing at that power and is not recorded; render more samples (--spp, --factor)")
@@ -825,6 +853,10 @@ def crosscheck(args, argv, backend):
                 if scene_name not in failed:
                     failed.append(scene_name)
                 print(f"{scene_name}: NOT recorded: {exc}", flush=True)
+        if scene_name in failed:  # a disagreement is a finding: its passes stay, the same command re-judges them
+            print(f"{scene_name}: {name}'s passes kept in {plan['work']} (the same command judges them again "
+                  "without rendering; remove the folder to render anew)", flush=True)
+            return
         shutil.rmtree(plan["work"], ignore_errors=True)
 
     from spectral_bench.batch.jobs import job as jobs

@@ -2,7 +2,8 @@
 each canonical scene, the analytic probes that measure it (batch/verdict/probes PROBES, each run on
 the scene's committed reference image at its resolution: a probe that applies and has pixels enough
 to measure counts, with its number of checks) and the cross-checks of its reference that count
-(batch/verdict/crosscheck.py ``counting``: the renderer, what it detects, agreed or not).
+(batch/verdict/crosscheck.py ``counting``: the renderer, what it detects, agreed or not, and the
+recorded deviation it agreed up to, if any).
 
     .venv/bin/python scripts/truth_table.py            # print the table
     .venv/bin/python scripts/truth_table.py --write    # put it into docs/verdict.md between its markers
@@ -43,7 +44,8 @@ def probe_names(scene, ref):
 
 def rows():
     from spectral_bench.batch import scene_sources
-    from spectral_bench.batch.verdict import crosscheck, references
+    from spectral_bench.batch.verdict import crosscheck, known, references
+    deviations = known.load()  # a cross-check that agreed under a deviation counts while it is recorded
     out = []
     # the canonical scenes as golden/ir holds them (scripts/update_golden.py: scenes.blend's extraction)
     for name, scene in scene_sources.load([str(p) for p in sorted((ROOT / "golden" / "ir").glob("*.json"))]):
@@ -51,9 +53,10 @@ def rows():
             raise SystemExit(f"{name}: {scene}")
         ref = references.search(name, scene=scene).ref
         names = probe_names(scene, ref) if ref is not None else []
-        counted, _stale = crosscheck.counting(ref.provenance) if ref is not None else ([], [])
+        counted, _stale = crosscheck.counting(ref.provenance, deviations) if ref is not None else ([], [])
         checks = [f"{crosscheck.renderer_label(c.get('renderer'), c.get('version'))}: "
-                  + (f"agrees, detects {crosscheck.percent(c['detectable'])}" if c.get("agrees") else "DIFFERS")
+                  + ((f"agrees up to `{c['agrees_under']}`" if c.get("agrees_under") else "agrees")
+                     + f", detects {crosscheck.percent(c['detectable'])}" if c.get("agrees") else "DIFFERS")
                   + f" ({str(c.get('date'))[:10]})" for c in counted]
         maker = ref.provenance.get("backend") if ref is not None else None
         if names or any(c.get("agrees") for c in counted):

@@ -71,7 +71,8 @@ def render_verdict(entry, scene, rendered, image, res_dir, settings, deviations)
         if unusable:
             entry["reference_problem"] = unusable
         else:
-            ztest = noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings, later, auto, held)
+            ztest = noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings, later, auto, held,
+                               deviations=deviations)
         observers = sorted({d.observer for d in known.applicable(deviations, entry) if d.observer})
         spectral = _spectral_bands(entry, Path(image).parent)
         entry["probes"] = probes.evaluate(rendered, names, test_all, reference=None if unusable else ref,
@@ -214,7 +215,8 @@ def detectable(ztest, probe_records, alpha=None):
     return out
 
 
-def noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings, later=None, auto=None, held=None):
+def noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings, later=None, auto=None, held=None,
+               deviations=None):
     """The noise test against the reference, on the render's own noise (entry["test"]); the
     diff, z-score and FLIP images. Returns the in-memory test (for re-judging) or None.
     ``later``: a list that receives what finishes FLIP (call it), which then computes meanwhile;
@@ -222,14 +224,15 @@ def noise_test(entry, ref, names, test_all, stderr, res_dir, image, settings, la
     start instead (call it with a list for its finisher, once the status says FLIP is wanted).
     ``held``: a dict that receives what was compared (the reference at this resolution ``at``;
     ``picked``: the shared channel names, the render and its standard error on them), for the
-    diagnosis."""
+    diagnosis. ``deviations``: the run's known deviations; a cross-check of the reference that agreed
+    only under one counts while that one is still recorded with the same model (crosscheck.counting)."""
     layers, bad_layers = observer_layers.check(ref)
     entry["reference"] = {"path": str(ref.path), "spp": ref.spp, "backend": ref.provenance.get("backend"),
                           "mode": ref.provenance.get("mode"), "versions": ref.provenance.get("versions"),
                           "date": ref.provenance.get("date"), "observer": observer_layers.own_observer(ref.provenance),
                           "observer_layers": sorted(layers)}
     # issue 44: the reference's cross-checks by other renderers that belong to this very image count
-    counted, stale = crosscheck.counting(ref.provenance)
+    counted, stale = crosscheck.counting(ref.provenance, deviations)
     if counted:
         entry["reference"]["crosschecks"] = [crosscheck.summary(c) for c in counted]
     if stale:

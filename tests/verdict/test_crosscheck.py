@@ -81,6 +81,47 @@ def test_a_disagreeing_crosscheck_is_said_and_does_not_vouch():
     assert results.checked_against_itself(run)
 
 
+def _deviation(**kw):
+    from spectral_bench.batch.verdict import known
+    d = dict(id="pbrt-dev", backend="pbrt", checks=["noise test"], evidence="e", explanation="x", date="2026-12-05",
+             scale=1.0047, scale_se=0.0008)
+    d.update(kw)
+    return known.Deviation(**d)
+
+
+def test_a_crosscheck_that_agreed_under_a_deviation_names_it_and_counts_while_it_is_recorded():
+    """An entry that agreed only under a recorded deviation says so in the verdict ("up to ID");
+    it counts while the deviation file records that id with the model it was judged under, and not
+    once the deviation is gone or re-measured (its scale changed)."""
+    prov = provenance(agrees_under="pbrt-dev", deviation={"id": "pbrt-dev", "scale": 1.0047, "scale_se": 0.0008},
+                      detectable=0.0028)
+    counted, stale = cc.counting(prov, [_deviation()])
+    assert len(counted) == 1 and not stale
+    run = {"status": "ok", "backend": "mitsuba", "probes": [],
+           "reference": {"backend": "mitsuba", "crosschecks": [cc.summary(c) for c in counted]}}
+    assert results.crosscheck_note(run) == "reference cross-checked by pbrt-v4 up to pbrt-dev (detects 0.28 %)"
+    assert not results.checked_against_itself(run)
+    for devs in ([], [_deviation(scale=1.003)], [_deviation(scale_se=0.002)], [_deviation(id="other")]):
+        counted, stale = cc.counting(prov, devs)
+        assert counted == [] and "no longer record" in stale[0][1], devs
+    assert len(cc.counting(prov)[0]) == 1  # deviations not given: not checked (the record alone)
+
+
+def test_only_scale_models_of_the_noise_test_for_that_renderer_explain_a_crosscheck():
+    job = {"scene": "ggx_glass", "backend": "pbrt", "mode": "spectral47", "versions": {"pbrt": "4 (built)"}, "film": ""}
+    good = _deviation(scenes=["ggx_glass"], versions=["*pbrt 4 *"])
+    others = [_deviation(id="probe", checks=["ggx *"]), _deviation(id="art", backend="art"),
+              _deviation(id="scene", scenes=["ggx_copper_80"]), _deviation(id="obs", observer="mitsuba3"),
+              _deviation(id="g2", shadowing="height-correlated", scale=1.0, scale_se=0.0)]
+    assert [d.id for d in cc.explaining([*others, good], job)] == ["pbrt-dev"]
+    assert cc.explaining([], job) == []
+    # the model as the test applies it: to the reference where the cross-check is the tested image,
+    # inverted where the reference is (finer than the cross-check)
+    assert cc.model_for_test(good, True) == (1.0047, 0.0008)
+    s, se = cc.model_for_test(good, False)
+    assert s == pytest.approx(1 / 1.0047) and se == pytest.approx(0.0008 / 1.0047**2)
+
+
 def test_hostile_crosscheck_records_are_shown_as_text_never_raise():
     for bad in (None, 3, "x", [1, "a"], {"crosschecks": "no"}):
         prov = {"exr_sha256": "a" * 64, "fingerprint": "f" * 64, "crosschecks": bad}
@@ -122,6 +163,9 @@ def test_record_changes_only_the_crosschecks_atomically(tmp_path):
     (["--crosscheck", "pbrt", "--references", "/nonexistent/refs"], "--references /nonexistent/refs: no such folder"),
     (["--references", "references"], "--references: only with --crosscheck NAME"),
     (["--no-record"], "--no-record: only with --crosscheck NAME"),
+    (["--known", "k.toml"], "--known: only with --crosscheck NAME"),
+    (["--crosscheck", "pbrt", "--known", "/nonexistent/k.toml"], "--known /nonexistent/k.toml: no such file"),
+    (["--crosscheck", "pbrt", "--known", str(ROOT / "README.md")], "--known " + str(ROOT / "README.md") + ": "),
 ])
 def test_usage_errors_name_the_option(args, said, capsys):
     from spectral_bench.batch import make_references
@@ -197,7 +241,7 @@ def scaled_copy(src, dst, factor, keep_crosschecks):
     """The reference of SCENE in ``src`` copied to ``dst`` with its image (mean and noise) times
     ``factor``, its record's sha256 that of the new image (as a re-made reference's would be);
     ``keep_crosschecks``: the old record's cross-checks stay in it (made against the old image)."""
-    dst.mkdir()
+    dst.mkdir(exist_ok=True)
     ref, bad = references.examine(src, SCENE)
     assert bad is None
     meta = json.loads((src / f"{SCENE}.json").read_text())
@@ -290,3 +334,97 @@ def test_the_truth_table_in_the_docs_is_the_registries():
     proc = subprocess.run([sys.executable, str(ROOT / "scripts" / "truth_table.py"), "--check"], capture_output=True,
                           text=True, timeout=600, cwd=ROOT)
     assert proc.returncode == 0, proc.stderr
+
+
+# -- agreement up to a recorded deviation (a scale model of the cross-checking renderer) ---------------
+DEVIATION = """
+[[deviation]]
+id = "toy-two-percent"
+backend = "toy_spectral"
+scenes = ["{scene}"]
+checks = ["noise test"]
+scale = {scale}
+scale_se = 0.0005
+evidence = "planted by the test: the reference divided by 1.02"
+explanation = "test"
+date = "2026-12-05"
+"""
+
+
+@pytest.fixture(scope="module")
+def deviating(tmp_path_factory):
+    """One cross-check render by the toy renderer (a tenth of the resolution, 1024 spp) judged,
+    from its kept passes, against a reference made 2 % too dark (so the renderer reads 1.02 times
+    it: what a recorded deviation of scale 1.02 predicts): without the deviation, with a model that
+    does not fit (1.05), with the right one against the reference 1 % too bright besides (planted),
+    and with the right one against the 2 % reference. Returns each (exit status, output) and the folders."""
+    base = tmp_path_factory.mktemp("crosscheck-known")
+    refs, dev = base / "refs", base / "dev"
+    rc, out = make_refs("-s", SCENE, "--scale", "0.1", "--spp", "2048", "--passes", "4", "--film", "cmf", "--out", refs)
+    assert rc == 0, out
+    files = {}
+    for key, scale in (("none", None), ("wrong", 1.05), ("right", 1.02)):
+        files[key] = base / f"{key}.toml"
+        files[key].write_text("" if scale is None else DEVIATION.format(scene=SCENE, scale=scale))
+    args = ("--crosscheck", "toy_spectral", "--renderers", TOY, "-s", SCENE, "--references", dev, "--spp", "1024")
+    got = {}
+    scaled_copy(refs, dev, 1 / 1.02, keep_crosschecks=False)
+    got["none"] = make_refs(*args, "--known", files["none"], "--no-record")
+    got["wrong"] = make_refs(*args, "--known", files["wrong"], "--no-record")
+    scaled_copy(refs, dev, 1.01 / 1.02, keep_crosschecks=False)  # 1 % planted on the reference
+    got["planted"] = make_refs(*args, "--known", files["right"])
+    scaled_copy(refs, dev, 1 / 1.02, keep_crosschecks=False)
+    got["right"] = make_refs(*args, "--known", files["right"])
+    return dict(got=got, dev=dev, files=files)
+
+
+@pytest.mark.slow
+def test_a_crosscheck_agrees_up_to_a_deviation_only_where_its_model_fits(deviating):
+    from spectral_bench.batch.verdict import known
+    got = deviating["got"]
+    rc, out = got["none"]
+    assert rc == 1 and f"{SCENE}: DIFFERS from" in out, out
+    assert "passes kept" in out
+    rc, out = got["wrong"]  # judged again from the kept passes: no new render
+    assert rc == 1 and "resuming, 2 of 2 passes already rendered" in out, out
+    assert "the known deviation toy-two-percent (scale 1.05 +- 0.0005) does not fit" in out
+    rc, out = got["planted"]  # the reference 1 % too bright besides: fails even under the deviation
+    assert rc == 1 and f"{SCENE}: DIFFERS from" in out and "does not fit" in out, out
+    rc, out = got["right"]
+    assert rc == 0 and f"{SCENE}: agrees with" in out and "up to the known deviation toy-two-percent" in out, out
+    meta = json.loads((deviating["dev"] / f"{SCENE}.json").read_text())
+    (item,) = [c for c in meta["crosschecks"] if c["reference_sha256"] == meta["exr_sha256"]]
+    assert item["agrees"] is True and item["agrees_under"] == "toy-two-percent"
+    assert item["deviation"] == {"id": "toy-two-percent", "scale": 1.02, "scale_se": 0.0005}
+    # its power under the model: the planted 1 % is above what it detects (and the stated 0.5 %)
+    assert item["detectable"] <= cc.DEFAULT_DETECT < 0.01, item
+    assert item["detectable"] >= item["detectable_plain"] * 0.99  # the model's uncertainty costs power
+    assert item["difference"]  # the plain difference stays in the record
+    counted, _ = cc.counting(meta, known.load(deviating["files"]["right"]))
+    assert cc.label([cc.summary(c) for c in counted]).startswith("reference cross-checked by toy_spectral")
+    assert "up to toy-two-percent (detects" in cc.label([cc.summary(c) for c in counted])
+    assert cc.counting(meta, known.load(deviating["files"]["wrong"]))[0] == []  # another model: does not count
+
+
+@pytest.mark.slow
+def test_a_run_against_a_reference_crosschecked_up_to_a_deviation_says_so(deviating):
+    """A Mitsuba run judged against that reference (with the run's --known file) carries "up to
+    ID" in judged_by, metrics.json and the summary; with a deviation file whose model differs, the
+    cross-check does not count (metrics.json says why) and the verdict names no cross-check."""
+    assert deviating["got"]["right"][0] == 0
+    base = deviating["dev"].parent
+    for key in ("right", "wrong"):
+        out = base / f"run-{key}"
+        proc = run_batch("-r", "mitsuba", "-s", SCENE, "--scale", "0.1", "--film", "cmf", "--references",
+                         deviating["dev"], "--known", deviating["files"][key], "-o", out, "--flip", "off")
+        assert (out / "metrics.json").is_file(), proc.stdout + proc.stderr
+        (run,) = metrics(out)["runs"]
+        if key == "right":
+            assert "reference cross-checked by toy_spectral" in run["judged_by"], run["judged_by"]
+            assert "up to toy-two-percent (detects" in run["judged_by"]
+            assert run["reference"]["crosschecks"][0]["agrees_under"] == "toy-two-percent"
+            assert "up to toy-two-percent" in (out / "summary.md").read_text()
+        else:
+            # (macbeth's probes still judge it: not "checked against itself", but no cross-check is named)
+            assert "crosschecks" not in run["reference"] and "cross-checked" not in run["judged_by"]
+            assert any("no longer record" in w for w in run["reference"]["crosschecks_not_counted"])
