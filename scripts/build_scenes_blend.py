@@ -441,6 +441,31 @@ def build_furnace():
         add_camera(scene, f"{name}_camera", origin=(0, 0, 0), target=(0, 1, 0))
 
 
+# The GGX white furnace (issue 41 item 2): a lone rough sphere of a perfect conductor under a uniform
+# environment, so that L = E(mu_o, alpha) L_env at every pixel (batch/verdict/probes/white_furnace.py).
+# A perfect conductor is eta 0, k 1: a purely imaginary index reflects totally, Fresnel exactly 1 at
+# every angle (Born and Wolf 14.2; Mitsuba's, pbrt-v4's and Cycles' conductor formulas all give 1).
+WHITE_FURNACE_ALPHAS = (0.1, 0.3, 0.6, 1.0)
+WHITE_FURNACE_SPP = 128
+
+
+def build_white_furnace(sphere):
+    """Four scenes, one sphere each (in one scene the spheres would light each other: no closed
+    form), GGX alpha 0.1, 0.3, 0.6 and 1.0, under a uniform D65 environment."""
+    for alpha in WHITE_FURNACE_ALPHAS:
+        tag = f"{round(alpha * 100):03d}"
+        name = f"furnace_ggx_{tag}"
+        scene = new_scene(name, "furnace", WHITE_FURNACE_SPP,
+                          f"A lone sphere of a perfect conductor (eta 0, k 1: Fresnel 1) with GGX alpha {alpha:g} "
+                          "under a uniform D65 environment, nothing else: L = E(mu_o, alpha) L_env, E the "
+                          "single-scattering directional albedo", resolution=(128, 128))
+        scene.world = uniform_world(f"uniform_d65_{name}", "NAMED", "cie_d65")
+        mat = material(f"perfect_conductor_ggx_{tag}", "CONDUCTOR", conductor_named=False, eta=0.0, k=1.0,
+                       distribution="GGX", alpha=alpha)
+        add_object(scene, f"{name}_sphere", sphere, mat, "SPHERE")
+        add_camera(scene, f"{name}_camera", origin=(0, -4, 0))
+
+
 def build():
     bpy.ops.wm.read_factory_settings(use_empty=True)
     pkg_bootstrap.package().register()
@@ -508,6 +533,7 @@ def build():
     build_dispersion(square, sphere)
     build_fluorescence(square, sphere)
     build_furnace()
+    build_white_furnace(sphere)
     for s in list(bpy.data.scenes):
         if not s.spectral_bench.case or s.name == "Scene":
             bpy.data.scenes.remove(s)

@@ -31,7 +31,8 @@ IRIDESCENCE = ["iridescent_sphere_smooth", "iridescent_spheres_film", "iridescen
 DISPERSION = ["dispersion_fringes", "dispersion_prism"]
 FLUORESCENCE = ["fluorescent_sphere_D50_red", "fluorescent_sphere_lone", "fluorescent_sphere_mono_invisible",
                 "fluorescent_sphere_mono_red", "yellow_sphere_F8"]
-FURNACE = ["furnace_colorchecker_yellow", "furnace_spiky"]
+FURNACE = ["furnace_colorchecker_yellow", "furnace_ggx_010", "furnace_ggx_030", "furnace_ggx_060", "furnace_ggx_100",
+           "furnace_spiky"]
 ALL_SCENES = sorted(REFLECTANCE + SPECTRAL_ACCURACY + POLARIZATION + IRIDESCENCE + DISPERSION + FLUORESCENCE + FURNACE)
 
 

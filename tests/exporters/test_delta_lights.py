@@ -97,7 +97,7 @@ def test_a_scene_without_lights_or_warnings_is_written_as_before(golden):
     for name, sc in golden.items():
         assert "lights" not in sc
         assert '"lights"' not in ir_json.dumps(sc)
-        if name.startswith("furnace_"):
+        if name.startswith("furnace_") and not name.startswith("furnace_ggx_"):  # the GGX ones emit nothing
             assert [(w["object"], w["field"].rsplit(".", 1)[-1]) for w in sc["warnings"]] == [
                 (f"{name}_sphere", "inputs[Emission Strength]")], sc["warnings"]
             assert "cie_d65" in sc["warnings"][0]["message"]

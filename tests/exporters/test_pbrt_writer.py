@@ -17,7 +17,8 @@ from spectral_bench.exporters import dispersion, ir, mesh_io, names, pbrt_writer
 
 GOLDEN_PBRT = ROOT / "golden" / "pbrt"
 # the canonical scenes pbrt-v4 can express exactly (the rest: test_unsupported_canonical_scenes)
-EXPRESSIBLE = sorted({"dispersion_fringes", "furnace_colorchecker_yellow", "furnace_spiky", "ggx_glass", "macbeth_chart_D50", "macbeth_chart_D65", "yellow_sphere_F8",
+EXPRESSIBLE = sorted({"dispersion_fringes", "furnace_colorchecker_yellow", "furnace_spiky",
+                      *(f"furnace_ggx_{a}" for a in ("010", "030", "060", "100")), "ggx_glass", "macbeth_chart_D50", "macbeth_chart_D65", "yellow_sphere_F8",
                       *(f"ggx_copper_{a}{s}" for a in (50, 60, 70, 80) for s in ("", "_isolated")), "ggx_copper_grazing"})
 
 
@@ -460,7 +461,7 @@ def test_unsupported_canonical_scenes_name_their_fields(golden):
         **{n: ["bsdf.roughness.distribution", "bsdf.thin_film"] for n in (
             "iridescent_spheres_film", "iridescent_spheres_height", "iridescent_spheres_materials")},
         "polarizing_plane_0": ["polarizer"], "polarizing_plane_90": ["polarizer"], "polarizing_spheres": ["output"]}
-    assert len(EXPRESSIBLE) == 16
+    assert len(EXPRESSIBLE) == 20
 
 
 def test_a_ptracer_scene_without_a_collimated_beam_is_path_traced(golden, tmp_path):

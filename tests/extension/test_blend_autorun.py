@@ -206,5 +206,5 @@ def test_reading_a_blend_registers_only_the_annotation_properties():
             "'panels': [n for n in dir(bpy.types) if n.startswith('SPECTRAL_BENCH_PT')]}))")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     out = json.loads(proc.stdout.strip().splitlines()[-1])
-    assert out["scenes"] == 29 and out["props"] is True
+    assert out["scenes"] == 33 and out["props"] is True
     assert out["ops"] == [] and out["panels"] == []

@@ -17,6 +17,8 @@ The catalogue is data, one module per family (a registry like the probes'):
   re-radiated light), thin film missing and its thickness fitted (the Airy probe's tiles).
 
 - materials.py also: dispersion missing (the prism's band positions as one IOR puts them).
+- materials.py also: multiple scattering (the GGX white furnace's missing energy 1 - E, a share of it
+  kept: Kulla and Conty 2017) and the height-correlated Smith form there.
 - noise.py also: too few samples (a render of one pass noisier than its declared spp gives).
 
 Not in the catalogue (issue 34 lists it): per-steradian vs per-area beyond the factor pi (it is
@@ -91,7 +93,8 @@ PLAUSIBLE_SCALE = (1e-3, 1e3)
 EVIDENCE_CHECKS = {"reference": ("noise test",), "probe:ggx": ("ggx *", "beckmann *"),
                    "reference+ggx": ("noise test", "ggx *", "beckmann *"), "probe:lambert": ("lambert *",),
                    "probe:fresnel": ("brewster *", "reflection *"), "probe:lone": ("lone *",),
-                   "probe:airy": ("airy film *",), "probe:prism": ("prism *",)}
+                   "probe:airy": ("airy film *",), "probe:prism": ("prism *",),
+                   "probe:white furnace": ("ggx white furnace *", "beckmann white furnace *")}
 
 
 @dataclass

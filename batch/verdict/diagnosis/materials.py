@@ -263,6 +263,73 @@ def _rgb_transport(ev):
                note=f"predicted gap to the spectral truth (rgb_reduction first, then the series): {gap}")
 
 
+def _white_furnace_record(ev):
+    """The GGX white furnace probe's record (probes/white_furnace.py) with its rings, or None."""
+    return next((r for r in ev.entry.get("probes") or [] if r.get("stat") and r.get("env_rgb") is not None
+                 and " white furnace " in r["name"]), None)
+
+
+def _multiple_scattering(ev):
+    """The white furnace's render as a renderer that keeps a share s of single scattering's
+    missing energy: L = (E + s (1 - E)) L_env per pixel (Kulla and Conty 2017, "Revisiting
+    Physically Based Shading at Imageworks", SIGGRAPH course: the compensation lobe's albedo is
+    1 - E(mu_o) for F = 1; s = 1 is an energy-conserving BSDF, such as Heitz et al. 2016's random
+    walk or Turquin 2019's scaled lobe, "Practical multiple scattering compensation for microfacet
+    models"). Fitted by weighted least squares on the probe's rings of mu_o (disjoint; the region
+    record overlaps them), their rows' means and standard errors as the probe judged them, the
+    standard error of s cluster-robust with a ring's three channels one cluster (least_squares);
+    reported beside s: the region's measured energy over single scattering's, in %."""
+    from .. import stats
+    from . import least_squares
+    rec = _white_furnace_record(ev)
+    if rec is None:
+        return None
+    st = rec["stat"]
+    m, e, se = (np.asarray(st[k], dtype=np.float64) for k in ("measured", "expected", "se"))
+    white = np.asarray(rec["env_rgb"], dtype=np.float64)
+    miss = white[None, :] - e  # the mean (1 - E) L_env of each group
+    rows = slice(1, None)
+    if m[rows].shape[0] < 2:
+        return None
+    w = 1.0 / np.maximum(se, 1e-300)
+
+    def residual(x):
+        return ((m[rows] - e[rows] - x[0] * miss[rows]) * w[rows]).ravel()
+    found = least_squares(residual, [[0.0]], var_ratio="residuals", channels=3)
+    if found is None:
+        return None
+    x, sx, chi2 = found
+    r0 = residual([0.0])
+    predicted = e + x[0] * miss
+    ok = stats.compare_means(m.ravel(), predicted.ravel(), se.ravel(), dof=None if st.get("dof") is None else np.ravel(st["dof"]),
+                             tests=m.size)["pass"]
+    gain = 100 * (float(np.sum(m[0])) / float(np.sum(e[0])) - 1.0)
+    gain_se = 100 * float(np.sqrt(np.sum(se[0] ** 2))) / float(np.sum(e[0]))
+    return Fit([float(x[0]), gain], [float(sx[0]), gain_se], float(chi2), float(r0 @ r0), r0.size, 1, ok,
+               note=f"alpha {rec.get('alpha')}: the region {gain:+.2f} % brighter than single scattering; "
+                    f"1 - E there {100 * (1 - rec['mean_albedo'][0]):.2f} %")
+
+
+def _height_correlated_furnace(ev):
+    """The white furnace judged with the height-correlated Smith G2 = 1 / (1 + Lambda(o) +
+    Lambda(i)) (pbrt-v4's and Cycles' form; the IR's is separable G1 G1): the probe's own
+    alternative, no free parameter."""
+    from ..probes.ggx import SHADOWING_FORMS, shadowing_key
+    rec = _white_furnace_record(ev)
+    if rec is None:
+        return None
+    other = next(f for f in SHADOWING_FORMS if f != rec.get("shadowing"))
+    alt = (rec.get("alternatives") or {}).get(shadowing_key(other))
+    if alt is None:
+        return None
+    st = rec["stat"]
+    m, e, se = (np.asarray(st[k], dtype=np.float64) for k in ("measured", "expected", "se"))
+    e1, se1 = (np.asarray(alt[k], dtype=np.float64) for k in ("expected", "se"))
+    chi2_none = float(np.sum(((m - e) / np.maximum(se, 1e-300)) ** 2))
+    chi2 = float(np.sum(((m - e1) / np.maximum(se1, 1e-300)) ** 2))
+    return Fit([], [], chi2, chi2_none, m.size, 0, bool(alt["pass"]))
+
+
 def _film_setup(ev):
     """(scene, index of the filmed sphere, the render's R, G, B, the probe's tiles, the trial cache) or None."""
     from ..probes import thin_film
@@ -446,6 +513,13 @@ MODELS = [
     Model("RGB transport", FAMILY, ("measured gap R %", "G %", "B %"), "probe:furnace",
           "rho and Le reduced to RGB channels before the interreflection series (an RGB renderer: per wavelength "
           "the series 1 / (1 - rho) is convex, so the channel averages miss it)", _rgb_transport),
+    Model("multiple scattering", FAMILY, ("kept share of 1 - E", "region gain %"), "probe:white furnace",
+          "the renderer keeps multiple scattering between microfacets (Kulla and Conty 2017: a share of the energy "
+          "1 - E that single scattering loses comes back; Cycles' Multiscatter GGX): not wrong, but not the IR's "
+          "single scattering", _multiple_scattering),
+    Model("height-correlated Smith", FAMILY, (), "probe:white furnace",
+          "the renderer's shadowing-masking is the height-correlated G2 = 1 / (1 + Lambda(o) + Lambda(i)), not the "
+          "IR's separable G1 G1 (pbrt-v4, Cycles)", _height_correlated_furnace),
     Model("thin film missing", FAMILY, (), "probe:airy",
           "the conductor rendered without its thin film (the bare interface's Fresnel reflectance)", _film_missing,
           slow=True),

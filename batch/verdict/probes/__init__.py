@@ -16,6 +16,8 @@ a closed form, independently of any renderer (plain numpy; colour-science for CI
   an interval per pixel, judged one-sided where it is narrow).
 - furnace.py: the camera inside a closed diffuse enclosure that emits Le and reflects rho
   (Le (1 - rho^d) / (1 - rho) per wavelength, d the max depth; and what an RGB renderer gets).
+- white_furnace.py: a lone rough sphere of a perfect conductor (Fresnel 1) under a uniform
+  environment (E(mu_o, alpha) L, E the single-scattering directional albedo by quadrature).
 - rough_film.py: rough (Beckmann) conductor spheres, filmed or bare, under a uniform environment
   beside other passive objects (the sky's share exact by a quadrature of the lobe, the other
   objects' light bounded: an interval per pixel, judged one-sided where it is narrow).
@@ -27,13 +29,14 @@ may add an image (an array under one of MAP_KEYS: ggx.py's ``residual_map``); ``
 it out of the record (records are metrics.json's plain data) and hands it over in ``maps``.
 """
 from . import (bands, floor_sphere, fluorescence, fresnel, furnace, ggx, lambert, prism, rough_film, stokes,
-               thin_film)
+               thin_film, white_furnace)
 from .common import MIN_PIXELS, Measurement  # noqa: F401 - part of the interface
 
 # Every probe: a function of one Measurement returning a list of probe records; a probe that does
 # not apply to the scene returns [].
 PROBES = [lambert.patches, fresnel.brewster, ggx.plates, stokes.validity, thin_film.smooth_film, prism.probes,
           fluorescence.lone_sphere, floor_sphere.sphere_on_floor, rough_film.rough_films, furnace.furnace,
+          white_furnace.white_furnace,
           *bands.PROBES]
 
 
