@@ -116,6 +116,10 @@ def material_bsdf(mat):
                                 "ext_ior": _clean(a.film_ext_ior)}
     elif a.kind == "DIELECTRIC":
         out = {"type": "dielectric", "int_ior": _ior(a), "ext_ior": _clean(a.ext_ior)}
+    elif a.kind == "COATED":
+        # the coat takes one IOR (the IR's coated_diffuse has no dispersion model): int_ior itself
+        out = {"type": "coated_diffuse", "reflectance": spectrum(a.reflectance), "int_ior": _clean(a.int_ior),
+               "ext_ior": _clean(a.ext_ior)}
     if a.distribution != "SMOOTH":
         out["roughness"] = {"distribution": a.distribution.lower(), "alpha": _clean(a.alpha)}
     return out
