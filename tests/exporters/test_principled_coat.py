@@ -56,6 +56,9 @@ def exported():
             sc.render.resolution_x = sc.render.resolution_y = {SIZE}
             sc.render.resolution_percentage = 100
             out[name] = extract_blender.extract_scene(sc)
+        # the Model set to Coated Diffuse and nothing else: the base takes Blender's colour, said
+        bpy.data.materials["coat_red"].spectral_bench.kind = "COATED"
+        out["model_only"] = extract_blender.extract_scene(bpy.data.scenes["coat"])
         print(json.dumps(out))
     """)
 
@@ -108,3 +111,13 @@ def test_the_coat_renders_its_closed_form_and_brightens_the_rim_beyond_noise(exp
     expected_diff = predicted.mean() - rho_l.mean()
     assert abs(diff - expected_diff) < 5 * se + 0.002 * abs(diff), (diff, expected_diff, se)
     assert abs(lum_bare.mean() - rho_l.mean()) < 5 * lum_bare.std(ddof=1) / np.sqrt(len(ys)) + 0.002 * rho_l.mean()
+
+
+def test_a_coated_model_without_its_spectrum_takes_blenders_base_colour(exported):
+    sc = exported["model_only"]
+    b = sc["objects"][0]["bsdf"]
+    assert b["type"] == "coated_diffuse" and b["int_ior"] == pytest.approx(1.5046)  # the annotation's IOR
+    assert b["reflectance"] == exported["coat"]["objects"][0]["bsdf"]["reflectance"]  # Blender's base colour
+    msg = _warnings(sc)[("coat_ball", "material[coat_red].spectral_bench.reflectance")]
+    assert "Model Coated Diffuse without a reflectance spectrum" in msg and "not the default 0.5" in msg
+    assert "the Model wins" not in msg

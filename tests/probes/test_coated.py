@@ -176,3 +176,31 @@ def test_mitsuba_passes_the_probe_and_a_coat_of_1_6_fails_it(tmp_path):
     _, names, wrong, _ = render_with_noise(planted_scene, tmp_path / "planted", 64, size=(size, size), passes=1)
     recs = [p for p in probes.evaluate(sc, names, wrong, observers=["mitsuba3"]) if p["name"].startswith("coated ")]
     assert recs[1]["pass"] is False and recs[1]["alternatives"]["mitsuba3"]["pass"] is False, recs[1]
+
+
+# -- the IR and the writers -----------------------------------------------------------------------
+def test_writers_express_the_coat_or_name_object_and_field(tmp_path):
+    """Mitsuba writes plastic (roughplastic with roughness) with nonlinear false and the base as a
+    spectral diffuse_reflectance; pbrt, ART and the RGB backends name the object and field."""
+    from spectral_bench.exporters import art_writer, mitsuba_writer, pbrt_writer, rgb_scene
+    scene = golden()
+    xml = mitsuba_writer.write(scene, tmp_path / "smooth").read_text()
+    assert '<bsdf type="plastic">' in xml and '<boolean name="nonlinear" value="false" />' in xml
+    assert 'name="diffuse_reflectance" filename="spectra/coated_sphere_reflectance.spd"' in xml
+    rough = copy.deepcopy(scene)
+    rough["objects"][0]["bsdf"]["roughness"] = {"distribution": "beckmann", "alpha": 0.2}
+    xml = mitsuba_writer.write(rough, tmp_path / "rough").read_text()
+    assert '<bsdf type="roughplastic">' in xml and '<string name="distribution" value="beckmann" />' in xml
+    assert ("coated_sphere", "bsdf.type") in {(o, f) for o, f, _m in pbrt_writer.unsupported(scene)}
+    assert ("coated_sphere", "bsdf.type") in {(o, f) for o, f, _m in art_writer.unsupported(scene)}
+    found = rgb_scene.problems(scene, frozenset({"ggx"}))
+    assert [(o, f, a) for o, f, _m, a in found] == [("coated_sphere", "bsdf.type", None)]
+
+
+@pytest.mark.parametrize("field, value", [("int_ior", -1.0), ("int_ior", float("inf")), ("ext_ior", 0.0)])
+def test_validation_names_the_coats_field(field, value):
+    from spectral_bench.exporters import validate
+    bsdf = dict(golden()["objects"][0]["bsdf"], **{field: value})
+    assert field in {f for f, _m in validate.bsdf_problems(bsdf)}
+    bright = dict(golden()["objects"][0]["bsdf"], reflectance={"type": "constant", "value": 1.2})
+    assert "reflectance" in {f for f, _m in validate.bsdf_problems(bright)}
