@@ -235,7 +235,7 @@ def build_coated(sphere):
     """A lone smooth coated diffuse sphere (a dielectric coat of IOR 1.5 over the ColorChecker's red
     as its Lambertian base: Mitsuba 3's plastic) in a uniform D65 environment: the coat probe's
     scene (batch/verdict/probes/coated.py)."""
-    scene = new_scene("coated_sphere", "reflectance", 64,
+    scene = new_scene("coated_sphere", "coated", 64,
                       "A lone smooth coated diffuse sphere (coat IOR 1.5 over ColorChecker red) in a uniform D65 "
                       "environment: the coat probe's scene", resolution=(256, 256))
     scene.world = uniform_world("uniform_d65_coated", "NAMED", "cie_d65")
