@@ -120,17 +120,19 @@ def planted_power(record, planted_expected, rings):
 
 
 def test_probe_passes_the_truth_and_fails_a_coat_of_1_6():
+    """32 x 32 pixels of 2 % noise (seeded): the truth passes both records; the rings' best test
+    detects the coat of 1.6 with over 90 % power, and it fails."""
     scene = golden()
-    sc, img, _e, _mask = _synthetic(scene)
+    size = 32
+    sc, img, _e, mask = _synthetic(scene, size=size)
     tiles, rings = _coat_records(sc, img)
     assert tiles["pass"] and rings["pass"], (tiles["z"], rings["z"])
-    assert rings["rings"] >= 12 and tiles["tiles"] >= 100
-    _, wrong, planted, _ = _synthetic(scene, ior=1.6)
-    _, mask = coated.expected_images(sc, 0, 64, 64)
+    assert rings["rings"] >= 12 and tiles["tiles"] >= 20
+    _, wrong, planted, _ = _synthetic(scene, ior=1.6, size=size)
     used = np.zeros_like(mask)
     for ys, xs in coated.thin_film.tiles(mask):
         used[ys, xs] = True
-    power = planted_power(rings, planted, coated.view_rings(sc, 0, 64, 64, used))
+    power = planted_power(rings, planted, coated.view_rings(sc, 0, size, size, used))
     assert power > 0.9, power  # this noise sees the planted coat ...
     tiles, rings = _coat_records(sc, wrong)
     assert rings["pass"] is False, rings["z"]  # ... and it is seen
@@ -140,7 +142,7 @@ def test_probe_names_what_it_cannot_judge():
     scene = golden()
     rough = copy.deepcopy(scene)
     rough["objects"][0]["bsdf"]["roughness"] = {"distribution": "ggx", "alpha": 0.1}
-    sc, img, _e, _m = _synthetic(scene)
+    sc, img, _e, _m = _synthetic(scene, size=16)
     rough["render"] = sc["render"]
     rec = [p for p in probes.evaluate(rough, ["R", "G", "B"], img) if p["name"].startswith("coated ")]
     assert len(rec) == 1 and rec[0]["pass"] is None and "rough" in rec[0]["note"], rec
