@@ -89,7 +89,11 @@ class SPECTRAL_BENCH_PT_material(_Base, bpy.types.Panel):
                 for key in ("cauchy_a", "cauchy_b", "cauchy_c"):
                     self.layout.prop(a, key)
             self.layout.prop(a, "ext_ior")
-        if a.kind in ("CONDUCTOR", "DIELECTRIC"):
+        elif a.kind == "COATED":
+            _draw_spectrum(self.layout, a.reflectance, "Base Reflectance", "material.reflectance")
+            self.layout.prop(a, "int_ior", text="Coat IOR")
+            self.layout.prop(a, "ext_ior")
+        if a.kind in ("CONDUCTOR", "DIELECTRIC", "COATED"):
             self.layout.prop(a, "distribution")
             if a.distribution != "SMOOTH":
                 self.layout.prop(a, "alpha")

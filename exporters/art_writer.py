@@ -141,6 +141,11 @@ class _Writer:
             return self.fluorescent(name, b)
         if b["type"] == "diffuse":
             return f"LAMBERT_REFLECTOR({self.colour(b['reflectance'])})"
+        if b["type"] == "coated_diffuse":
+            self.unsupported.append((name, "bsdf.type", "a coated diffuse (Mitsuba 3's plastic, docs/scene-format.md "
+                                     "6.6): this writer maps no ART surface to it (ART's layered surfaces are another "
+                                     "model, not checked against this closed form)"))
+            return None
         if b.get("thin_film") is not None:
             self.unsupported.append((name, "bsdf.thin_film", "ART has no thin-film interference (upstream "
                                      "ART 2.1.2 has no iridescent surface; thesis 3.3.5)"))

@@ -326,9 +326,57 @@ PRINCIPLED_LOBES = (("Coat Weight", 0.0, "a clear coat"), ("Sheen Weight", 0.0, 
                     ("Diffuse Roughness", 0.0, "rough (Oren-Nayar-like) diffuse"))
 
 
+def f0_from_ior(ior):
+    """Normal-incidence reflectance ((n - 1) / (n + 1))^2 of a dielectric of relative index n."""
+    return ((ior - 1.0) / (ior + 1.0)) ** 2
+
+
+def ior_from_f0(f0):
+    """The relative index whose normal-incidence reflectance is ``f0`` (< 1): (1 + sqrt f0) / (1 - sqrt f0)."""
+    s = math.sqrt(min(max(f0, 0.0), 0.999999))
+    return (1.0 + s) / (1.0 - s)
+
+
+def specular_ior(ior, level):
+    """The index of Principled's specular layer with Specular IOR Level ``level``: Cycles replaces
+    the IOR by the one whose normal-incidence reflectance is 2 level F0(IOR) (level 0.5 keeps it;
+    an IOR below 1 stays below 1). Blender manual, Principled BSDF, "Specular IOR Level"."""
+    if abs(level - 0.5) < 1e-9 or ior <= 0:
+        return ior
+    eta = ior_from_f0(f0_from_ior(ior) * 2.0 * level)
+    return 1.0 / eta if ior < 1.0 else eta
+
+
+COATED_APPROXIMATION = (
+    "Principled is not exactly that model: Blender layers the specular lobe over the diffuse base by albedo "
+    "scaling (the base weighted by one minus the specular layer's directional albedo), the coat by the Fresnel "
+    "transmittances in and out and the series of internal reflections (docs/scene-format.md 6.6); a smooth layer "
+    "under a uniform sky gives F + rho (1 - F) in both, their angular shape under a light differs")
+
+
+def coated(reflectance, ior, level, tint, rough, warn):
+    """Principled's dielectric specular layer over its diffuse base -> the IR's coated_diffuse (the
+    caller adds the roughness): a coat of the IOR Cycles renders (``specular_ior``), outside IOR 1.0
+    as Blender's; the warnings say what is approximated."""
+    eta = specular_ior(ior, level)
+    level_note = "" if abs(level - 0.5) < 1e-9 else (
+        f"; Specular IOR Level {level:.4g} scales its normal-incidence reflectance {f0_from_ior(ior):.4g} by "
+        f"{2 * level:.4g}: a coat of IOR {eta:.6g}")
+    warn("inputs[Specular IOR Level]",
+         f"the dielectric specular layer (IOR {ior:.4g}, Specular IOR Level {level:.4g}, roughness {rough:.4g}) over "
+         f"the base colour -> a coated diffuse (Mitsuba 3's {'rough' if rough > 0 else ''}plastic; outside IOR 1.0, "
+         f"as Blender){level_note}; approximated: {COATED_APPROXIMATION}")
+    tint = np.asarray(tint if tint is not None else (1, 1, 1), dtype=np.float64)[:3]
+    if np.abs(tint - 1).max() > 1e-3:
+        warn("inputs[Specular Tint]", f"Specular Tint {fmt(tint)} tints Blender's highlight at normal incidence; the "
+                                      "coat is colourless: its highlight is rendered untinted")
+    return {"type": "coated_diffuse", "reflectance": reflectance, "int_ior": round(eta, 6), "ext_ior": 1.0}
+
+
 def principled(inp, distribution):
     """Principled BSDF -> (bsdf, emitter): metallic >= 0.5 a conductor, else transmission >= 0.5 a
-    dielectric, else a diffuse of the base colour."""
+    dielectric, else a coated diffuse (its specular layer over the base colour), or a diffuse where
+    Specular IOR Level is 0."""
     warn = inp.warn
     base = np.asarray(inp.get("Base Color", (0.8, 0.8, 0.8)), dtype=np.float64)[:3]
     metallic = float(inp.get("Metallic", 0.0))
@@ -356,15 +404,16 @@ def principled(inp, distribution):
             warn("inputs[Base Color]", f"base colour {fmt(base)} tints transmission in Blender; the IR's dielectric is "
                                        "clear: the tint is lost")
     else:
-        out = {"type": "diffuse", "reflectance": colour_reflectance(base, "inputs[Base Color]", warn)}
+        reflectance = colour_reflectance(base, "inputs[Base Color]", warn)
         if 0 < transmission:
             warn("inputs[Transmission Weight]", f"transmission {transmission:.4g} < 0.5: taken as 0 (a diffuse)")
         level = float(inp.get("Specular IOR Level", 0.5))
         if level > 0:
-            warn("inputs[Specular IOR Level]",
-                 f"the dielectric specular layer (IOR {float(inp.get('IOR', 1.5)):.4g}, Specular IOR Level {level:.4g}, "
-                 f"roughness {rough:.4g}) has no IR counterpart on a diffuse: only the diffuse base is rendered "
-                 "(highlights are lost)")
+            out = coated(reflectance, float(inp.get("IOR", 1.5)), level, inp.get("Specular Tint", (1, 1, 1)), rough,
+                         warn)
+        else:
+            out = {"type": "diffuse", "reflectance": reflectance}
+            warn("inputs[Specular IOR Level]", "Specular IOR Level 0: no specular layer: a diffuse of the base colour")
     if out["type"] != "diffuse":
         r = _roughness(rough, distribution, "inputs[Roughness]", warn)
         if r:

@@ -41,6 +41,8 @@ MATERIAL_KINDS = [
     ("DIFFUSE", "Diffuse", "Lambertian reflector"),
     ("CONDUCTOR", "Conductor", "Metal with complex IOR (named table or eta/k spectra)"),
     ("DIELECTRIC", "Dielectric", "Transparent dielectric with a real IOR"),
+    ("COATED", "Coated Diffuse", "A dielectric coat (Interior IOR, microfacets) over a Lambertian base (Reflectance): "
+                                 "Mitsuba 3's plastic / roughplastic"),
 ]
 IOR_MODELS = [
     ("CONSTANT", "Constant", "One IOR at every wavelength (every renderer's native dielectric)"),

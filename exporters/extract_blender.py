@@ -116,6 +116,10 @@ def material_bsdf(mat):
                                 "ext_ior": _clean(a.film_ext_ior)}
     elif a.kind == "DIELECTRIC":
         out = {"type": "dielectric", "int_ior": _ior(a), "ext_ior": _clean(a.ext_ior)}
+    elif a.kind == "COATED":
+        # the coat takes one IOR (the IR's coated_diffuse has no dispersion model): int_ior itself
+        out = {"type": "coated_diffuse", "reflectance": spectrum(a.reflectance), "int_ior": _clean(a.int_ior),
+               "ext_ior": _clean(a.ext_ior)}
     if a.distribution != "SMOOTH":
         out["roughness"] = {"distribution": a.distribution.lower(), "alpha": _clean(a.alpha)}
     return out
@@ -347,15 +351,18 @@ def _completed(obj, mat, bsdf, warnings):
     spectrum, a named conductor never chosen) takes that data from Blender's own material (a
     warning), instead of the annotation's defaults (0.5 grey, Cu)."""
     a = mat.spectral_bench
-    if a.kind == "DIFFUSE" and not spectrum_set(a.reflectance):
+    if a.kind in ("DIFFUSE", "COATED") and not spectrum_set(a.reflectance):
         where = f"material[{mat.name}].spectral_bench.reflectance"
         converted, _ = _converted_material(obj, mat, [])
         colour, source = _base_colour(mat)
-        spec = converted["reflectance"] if converted["type"] == "diffuse" else conv.reflectance(colour)[0]
-        warnings.append((obj.name, where, f"Model Diffuse without a reflectance spectrum: Blender's {source} "
+        own = {"DIFFUSE": "diffuse", "COATED": "coated_diffuse"}[a.kind]
+        spec = converted["reflectance"] if converted["type"] in ("diffuse", "coated_diffuse") \
+            else conv.reflectance(colour)[0]
+        model = "Diffuse" if a.kind == "DIFFUSE" else "Coated Diffuse"
+        warnings.append((obj.name, where, f"Model {model} without a reflectance spectrum: Blender's {source} "
                          f"{conv.fmt(colour)} is used ({spec['type']} reflectance; {conv.UPLIFT_METHOD} where not "
                          "grey), not the default 0.5"
-                         + ("" if converted["type"] == "diffuse" else f"; Blender's material would convert to a "
+                         + ("" if converted["type"] == own else f"; Blender's material would convert to a "
                             f"{converted['type']}: the Model wins")))
         bsdf = dict(bsdf, reflectance=spec)
     if a.kind == "CONDUCTOR" and a.conductor_named and not a.is_property_set("conductor"):

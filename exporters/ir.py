@@ -41,6 +41,13 @@ Conventions (every writer follows them):
   the default keeps thickness 0 identical to the bare conductor. The film's reflectance is the
   Airy sum of both interfaces (batch/verdict/airy.py); rough films use it as the microfacet
   Fresnel factor (Belcour and Barla 2017).
+- Coated diffuse (``bsdf.type`` "coated_diffuse"): a dielectric coat of real index ``int_ior``
+  (outside ``ext_ior``, default air) over a Lambertian base of albedo ``reflectance``, one-sided:
+  Mitsuba 3's ``plastic`` with ``nonlinear`` false (Weidlich and Wilkie 2007): specular F(mu_i)
+  plus rho / (1 - F_dr,int) (1 - F(mu_i)) (1 - F(mu_o)) / (pi eta^2), F_dr,int the coat's
+  hemispherical reflectance from inside as the exact integral (reference_code/appearance.py,
+  ``coated_diffuse_brdf``); with ``roughness`` the coat is Mitsuba 3's ``roughplastic``.
+  docs/scene-format.md section 6.6 states it in full and how pbrt-v4's coateddiffuse differs.
 - Pixel filter is a box: each pixel is the plain integral over its area, so pixels are
   independent and a reference downsamples exactly to any integer factor (see batch/verdict/compare.py).
 """

@@ -106,6 +106,14 @@ class _Writer:
             node = ET.SubElement(parent, "bsdf", type="roughdielectric" if is_rough else "dielectric")
             ET.SubElement(node, "float", name="int_ior", value=repr(float(b["int_ior"])))
             ET.SubElement(node, "float", name="ext_ior", value=repr(float(b.get("ext_ior", ir.AIR_IOR))))
+        elif b["type"] == "coated_diffuse":
+            # the IR's coated diffuse is Mitsuba 3's plastic / roughplastic with nonlinear false
+            # (docs/scene-format.md 6.6); its spectral diffuse_reflectance is the base's albedo
+            node = ET.SubElement(parent, "bsdf", type="roughplastic" if is_rough else "plastic")
+            self.spectrum(node, "diffuse_reflectance", b["reflectance"], f"{stem}_reflectance")
+            ET.SubElement(node, "float", name="int_ior", value=repr(float(b["int_ior"])))
+            ET.SubElement(node, "float", name="ext_ior", value=repr(float(b.get("ext_ior", ir.AIR_IOR))))
+            ET.SubElement(node, "boolean", name="nonlinear", value="false")
         else:
             raise ValueError(f"unknown bsdf type {b['type']!r}")
         if is_rough:

@@ -355,7 +355,12 @@ def _mesh_file_problems(shape, base_dir):
 
 def bsdf_problems(bsdf):
     kind = bsdf["type"]
-    if kind == "diffuse":
+    if kind == "coated_diffuse":
+        for key in ("int_ior", "ext_ior"):
+            v = bsdf.get(key, ir.AIR_IOR)
+            if not _finite(v) or not 0 < v <= dispersion.MAX_IOR:
+                yield key, f"must be a finite IOR in (0, {dispersion.MAX_IOR:g}], got {v!r}"
+    if kind in ("diffuse", "coated_diffuse"):
         problems = list(spectra.check(bsdf["reflectance"], "reflectance"))
         yield from problems
         if not problems:

@@ -77,6 +77,7 @@ DEFAULT_REFERENCES = [
     "macbeth_chart_D65",                                                 # spectral accuracy
     "polarizing_plane_0", "polarizing_plane_90",                         # polarization
     "furnace_colorchecker_yellow", "furnace_spiky",                      # furnace (64 x 64: 240 kB)
+    "coated_sphere",                                                     # coated (256 x 256: 1.1 MB)
 ]
 # the observer layers the extension carries: Mitsuba's film (the renderer Blender users run here);
 # ART's (art46, 10 MB more) are in the all-references zip

@@ -231,6 +231,20 @@ def build_iridescence(square, sphere):
     add_object(scene, "smooth_film_sphere", sphere, base("smooth_film_1.33_550nm", (1.33, 550.0), distribution="SMOOTH"),
                "SPHERE")
     add_camera(scene, "smooth_film_camera", origin=(0, -4, 0))
+def build_coated(sphere):
+    """A lone smooth coated diffuse sphere (a dielectric coat of IOR 1.5 over the ColorChecker's red
+    as its Lambertian base: Mitsuba 3's plastic) in a uniform D65 environment: the coat probe's
+    scene (batch/verdict/probes/coated.py)."""
+    scene = new_scene("coated_sphere", "coated", 64,
+                      "A lone smooth coated diffuse sphere (coat IOR 1.5 over ColorChecker red) in a uniform D65 "
+                      "environment: the coat probe's scene", resolution=(256, 256))
+    scene.world = uniform_world("uniform_d65_coated", "NAMED", "cie_d65")
+    coat = material("coated_red_1.5", "COATED", reflectance_named="colorchecker_red", int_ior=1.5,
+                    ext_ior=1.000277, distribution="SMOOTH")
+    add_object(scene, "coated_sphere", sphere, coat, "SPHERE")
+    add_camera(scene, "coated_camera", origin=(0, -4, 0))
+
+
 def prism_mesh(name, apex_deg, side, height):
     """A triangular prism: apex angle ``apex_deg`` at +Y, sides of length ``side``, extruded
     along Z over ``height`` (centred); faces wound so their normals point outwards."""
@@ -530,6 +544,7 @@ def build():
     build_spectral_accuracy(square)
     build_polarization(square, sphere)
     build_iridescence(square, sphere)
+    build_coated(sphere)
     build_dispersion(square, sphere)
     build_fluorescence(square, sphere)
     build_furnace()

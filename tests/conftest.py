@@ -33,7 +33,9 @@ FLUORESCENCE = ["fluorescent_sphere_D50_red", "fluorescent_sphere_lone", "fluore
                 "fluorescent_sphere_mono_red", "yellow_sphere_F8"]
 FURNACE = ["furnace_colorchecker_yellow", "furnace_ggx_010", "furnace_ggx_030", "furnace_ggx_060", "furnace_ggx_100",
            "furnace_spiky"]
-ALL_SCENES = sorted(REFLECTANCE + SPECTRAL_ACCURACY + POLARIZATION + IRIDESCENCE + DISPERSION + FLUORESCENCE + FURNACE)
+COATED = ["coated_sphere"]
+ALL_SCENES = sorted(REFLECTANCE + SPECTRAL_ACCURACY + POLARIZATION + IRIDESCENCE + DISPERSION + FLUORESCENCE + FURNACE
+                    + COATED)
 
 
 # -- the suite's false-alarm budget (issue 45 item 7; benchmarks/TESTS.md) -------------------------

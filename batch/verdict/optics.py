@@ -10,9 +10,12 @@ source, and which is tested against published values (tests/probes/test_referenc
   mitsuba/render/microfacet.h MicrofacetDistribution::G) or the height-correlated
   1 / (1 + Lambda(i) + Lambda(o)) (Heitz 2014 eq. 99), for directions on the normal's side of
   every microfacet involved (the reflection configurations the probes integrate).
+- coated_diffuse_uniform(cos_o, rho, eta): a smooth coat over a Lambertian base under a uniform
+  environment, F(mu_o) + rho (1 - F(mu_o)) (Mitsuba 3's plastic, nonlinear false; Weidlich and
+  Wilkie 2007).
 """
-from ...reference_code.appearance import fresnel_conductor, fresnel_dielectric, smith_lambda
+from ...reference_code.appearance import coated_diffuse_uniform, fresnel_conductor, fresnel_dielectric, smith_lambda
 from ...reference_code.appearance import microfacet_d as distribution
 from ...reference_code.appearance import smith_g as shadowing
 
-__all__ = ["fresnel_dielectric", "fresnel_conductor", "distribution", "smith_lambda", "shadowing"]
+__all__ = ["coated_diffuse_uniform", "fresnel_dielectric", "fresnel_conductor", "distribution", "smith_lambda", "shadowing"]

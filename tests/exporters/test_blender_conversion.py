@@ -93,11 +93,14 @@ def test_an_ordinary_scene_exports_and_every_conversion_is_a_warning_naming_obje
         obj = f"sphere_{colour}"
         assert "uplifted to a smooth reflectance spectrum by Jakob and Hanika 2019" in \
             w[(obj, f"material[{colour}].{principled}[Base Color]")]
-        assert "has no IR counterpart" in w[(obj, f"material[{colour}].{principled}[Specular IOR Level]")]
+        # issue 42: the specular layer is the coat of a coated diffuse, said approximated, not lost
+        spec = w[(obj, f"material[{colour}].{principled}[Specular IOR Level]")]
+        assert "a coated diffuse" in spec and "approximated" in spec and "lost" not in spec
         assert "rendered faceted" in w[(obj, "data.polygons.use_smooth")] if (obj, "data.polygons.use_smooth") in w \
             else True
         bsdf = next(o for o in sc["objects"] if o["name"] == obj)["bsdf"]
-        assert bsdf["type"] == "diffuse" and bsdf["reflectance"]["type"] == "sampled"
+        assert bsdf["type"] == "coated_diffuse" and bsdf["reflectance"]["type"] == "sampled"
+        assert bsdf["int_ior"] == 1.5 and bsdf["roughness"] == {"distribution": "ggx", "alpha": 0.09}
         assert "Jakob 2019" in bsdf["reflectance"]["source"]
     gold = next(o for o in sc["objects"] if o["name"] == "sphere_gold")["bsdf"]
     assert gold == {"type": "conductor", "material": "Au", "roughness": {"distribution": "ggx", "alpha": 0.09}}
@@ -279,7 +282,7 @@ def test_each_conversion_and_loss_is_a_warning_and_the_scene_still_renders(expor
     objects = {o["name"]: o for o in sc["objects"]}
     assert objects["ball_glass"]["bsdf"] == {"type": "dielectric", "int_ior": 1.45, "ext_ior": 1.0}
     assert objects["ball_violet_metal"]["bsdf"]["eta"]["type"] == "sampled"
-    assert objects["ball_glowing"]["emitter"]["type"] == "area" and objects["ball_glowing"]["bsdf"]["type"] == "diffuse"
+    assert objects["ball_glowing"]["emitter"]["type"] == "area" and objects["ball_glowing"]["bsdf"]["type"] == "coated_diffuse"
     assert objects["disk"]["shape"]["type"] == "mesh" and "path" not in objects
     exposed = next(lt for lt in sc["lights"] if lt["name"] == "exposed")
     assert exposed["intensity"]["type"] == "blackbody" and exposed["intensity"]["temperature"] == 4000.0

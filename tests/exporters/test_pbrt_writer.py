@@ -454,6 +454,7 @@ def test_unsupported_canonical_scenes_name_their_fields(golden):
              if name not in EXPRESSIBLE}
     assert found == {
         "beckmann_glass": ["bsdf.roughness.distribution"],
+        "coated_sphere": ["bsdf.type"],
         "dispersion_prism": ["emitter.type"],
         **{n: ["bsdf.fluorescence"] for n in ("fluorescent_sphere_D50_red", "fluorescent_sphere_lone",
                                               "fluorescent_sphere_mono_invisible", "fluorescent_sphere_mono_red")},

@@ -21,6 +21,8 @@ a closed form, independently of any renderer (plain numpy; colour-science for CI
 - rough_film.py: rough (Beckmann) conductor spheres, filmed or bare, under a uniform environment
   beside other passive objects (the sky's share exact by a quadrature of the lobe, the other
   objects' light bounded: an interval per pixel, judged one-sided where it is narrow).
+- coated.py: a smooth coated diffuse sphere (Mitsuba 3's plastic) alone in a uniform environment
+  (F(mu) + rho (1 - F(mu)) per wavelength: the coat's Fresnel and its internal reflection series).
 - bands.py: a spectral render's bands on the regions whose truth is a spectrum (``spectral``).
 
 Each probe is a dict {name, expected, measured, error, unit, pass}; ``pass`` is None when the
@@ -28,8 +30,8 @@ probe cannot be measured at the render's resolution (fewer than MIN_PIXELS whole
 may add an image (an array under one of MAP_KEYS: ggx.py's ``residual_map``); ``evaluate`` takes
 it out of the record (records are metrics.json's plain data) and hands it over in ``maps``.
 """
-from . import (bands, floor_sphere, fluorescence, fresnel, furnace, ggx, lambert, prism, rough_film, stokes,
-               thin_film, white_furnace)
+from . import (bands, coated, floor_sphere, fluorescence, fresnel, furnace, ggx, lambert, prism, rough_film,
+               stokes, thin_film, white_furnace)
 from .common import MIN_PIXELS, Measurement  # noqa: F401 - part of the interface
 
 # Every probe: a function of one Measurement returning a list of probe records; a probe that does
@@ -37,7 +39,7 @@ from .common import MIN_PIXELS, Measurement  # noqa: F401 - part of the interfac
 PROBES = [lambert.patches, fresnel.brewster, ggx.plates, stokes.validity, thin_film.smooth_film, prism.probes,
           fluorescence.lone_sphere, floor_sphere.sphere_on_floor, rough_film.rough_films, furnace.furnace,
           white_furnace.white_furnace,
-          *bands.PROBES]
+          coated.coated_spheres, *bands.PROBES]
 
 
 MAP_KEYS = ("residual_map",)  # record keys that hold an image, not data

@@ -130,7 +130,8 @@ def _sub_rays(scene, index, width, height, sub, r0, r1, origin):
     return i, x - i, ok.reshape(r1 - r0, sub, width, sub).all(axis=(1, 3))
 
 
-def expected_images(scene, index, width, height, observers=(colorimetry.GROUND_TRUTH,), sub=None, cache=None):
+def expected_images(scene, index, width, height, observers=(colorimetry.GROUND_TRUTH,), sub=None, cache=None,
+                    tables=None):
     """({observer: expected linear sRGB per pixel (H, W, 3)}, mask) as ``expected_image``, the
     rays traced once for every observer. ``cache``: a dict the caller keeps across calls where
     only the film's thickness (or the sphere's material) changes (the diagnosis's thickness fit):
@@ -141,8 +142,9 @@ def expected_images(scene, index, width, height, observers=(colorimetry.GROUND_T
     obj = objs[index]
     sub = sub or supersampling(width, height)
     radiance = scene["environment"]["radiance"]
-    tables = {o: colour_table(obj["bsdf"], radiance, o) if cache is None
-              else _trial_colour_table(obj["bsdf"], radiance, o, cache) for o in observers}
+    if tables is None:  # ``tables``: {observer: (theta grid, RGB per angle)} of another material (probes/coated.py)
+        tables = {o: colour_table(obj["bsdf"], radiance, o) if cache is None
+                  else _trial_colour_table(obj["bsdf"], radiance, o, cache) for o in observers}
     geo = None
     if cache is not None:
         key = json.dumps(["thin film", cam, [o["shape"] for o in objs], index, width, height, sub], sort_keys=True,
