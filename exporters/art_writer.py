@@ -137,6 +137,10 @@ class _Writer:
     def surface(self, obj):
         """ART material expression of an object's BSDF (None when unsupported)."""
         b, name = obj["bsdf"], obj["name"]
+        if b.get("reflectance_texture") is not None:
+            self.unsupported.append((name, "bsdf.reflectance_texture", "an image texture: this writer maps no ART "
+                                     "texture to it (the .arm's surfaces here take one spectrum per object)"))
+            return None
         if b["type"] == "diffuse" and b.get("fluorescence") is not None:
             return self.fluorescent(name, b)
         if b["type"] == "diffuse":

@@ -250,18 +250,32 @@ def ggx_alpha(roughness):
 # warn(field, message) for every conversion and loss.
 
 
+# the shader inputs whose Image Texture converts (docs/scene-format.md 6.7): a base colour
+TEXTURED_INPUTS = ("Base Color", "Color")
+
+
 class Inputs:
     """A node's inputs; ``get`` warns when the input is linked (a texture, a mix): its unlinked
-    value is what is used."""
+    value is what is used, unless the caller took the input's image texture (``texture``)."""
 
-    def __init__(self, values, warn):
-        self.values, self.warn = values, warn
+    def __init__(self, values, warn, images=None):
+        self.values, self.warn, self.images = values, warn, dict(images or {})
+        self.taken = set()
+
+    def texture(self, name):
+        """The IR texture an Image Texture node linked into ``name`` converts to (extract_blender.py
+        ``_image_texture``: file, colour_space, filter and the private _mean, _base_dir, _image), or
+        None."""
+        tex = self.images.get(name)
+        if tex is not None:
+            self.taken.add(name)
+        return tex
 
     def get(self, name, default=None):
         if name not in self.values:
             return default
         value, linked = self.values[name]
-        if linked:
+        if linked and name not in self.taken:
             self.warn(f"inputs[{name}]", f"linked to a {linked} node (textures and node networks are not converted): "
                                           f"its unlinked value {fmt(value)} is used instead")
         return value
@@ -373,15 +387,34 @@ def coated(reflectance, ior, level, tint, rough, warn):
     return {"type": "coated_diffuse", "reflectance": reflectance, "int_ior": round(eta, 6), "ext_ior": 1.0}
 
 
+def textured_reflectance(inp, name, warn):
+    """(reflectance spectrum, reflectance_texture or None) of a colour input: with an image texture
+    linked into it, the texture (its file, colour space and filter) and its mean colour uplifted
+    as the BSDF's reflectance; else the socket's colour."""
+    tex = inp.texture(name)
+    if tex is None:
+        return colour_reflectance(inp.get(name, (0.8, 0.8, 0.8)), f"inputs[{name}]", warn), None
+    mean = np.clip(np.asarray(tex["_mean"], dtype=np.float64), 0.0, 1.0)
+    spec, _ = reflectance(mean)
+    warn(f"inputs[{name}]", f"image texture {tex['_image']!r} ({tex['file']}, {tex['colour_space']}, "
+                            f"{tex['filter']}) on the mesh's UVs: each texel's linear sRGB is uplifted by the renderer "
+                            f"(Mitsuba: Jakob and Hanika's coefficients; pbrt-v4: its RGBAlbedoSpectrum); the "
+                            f"reflectance recorded beside it is its mean colour {fmt(mean)}, uplifted by {UPLIFT_METHOD}")
+    return spec, {k: v for k, v in tex.items() if not k.startswith("_")}
+
+
 def principled(inp, distribution):
     """Principled BSDF -> (bsdf, emitter): metallic >= 0.5 a conductor, else transmission >= 0.5 a
     dielectric, else a coated diffuse (its specular layer over the base colour), or a diffuse where
     Specular IOR Level is 0."""
     warn = inp.warn
-    base = np.asarray(inp.get("Base Color", (0.8, 0.8, 0.8)), dtype=np.float64)[:3]
     metallic = float(inp.get("Metallic", 0.0))
-    rough = float(inp.get("Roughness", 0.5))
     transmission = float(inp.get("Transmission Weight", 0.0))
+    texture = None
+    if metallic < 0.5 and transmission < 0.5:  # a diffuse base: its colour may be an image texture
+        reflectance, texture = textured_reflectance(inp, "Base Color", warn)
+    base = np.asarray(inp.get("Base Color", (0.8, 0.8, 0.8)), dtype=np.float64)[:3]
+    rough = float(inp.get("Roughness", 0.5))
     for key, off, what in PRINCIPLED_LOBES:
         v = inp.get(key)
         if v is not None and abs(float(v) - off) > 1e-6:
@@ -404,7 +437,6 @@ def principled(inp, distribution):
             warn("inputs[Base Color]", f"base colour {fmt(base)} tints transmission in Blender; the IR's dielectric is "
                                        "clear: the tint is lost")
     else:
-        reflectance = colour_reflectance(base, "inputs[Base Color]", warn)
         if 0 < transmission:
             warn("inputs[Transmission Weight]", f"transmission {transmission:.4g} < 0.5: taken as 0 (a diffuse)")
         level = float(inp.get("Specular IOR Level", 0.5))
@@ -414,6 +446,8 @@ def principled(inp, distribution):
         else:
             out = {"type": "diffuse", "reflectance": reflectance}
             warn("inputs[Specular IOR Level]", "Specular IOR Level 0: no specular layer: a diffuse of the base colour")
+        if texture is not None:
+            out["reflectance_texture"] = texture
     if out["type"] != "diffuse":
         r = _roughness(rough, distribution, "inputs[Roughness]", warn)
         if r:
@@ -422,7 +456,10 @@ def principled(inp, distribution):
 
 
 def diffuse_node(inp, distribution):
-    out = {"type": "diffuse", "reflectance": colour_reflectance(inp.get("Color", (0.8, 0.8, 0.8)), "inputs[Color]", inp.warn)}
+    reflectance, texture = textured_reflectance(inp, "Color", inp.warn)
+    out = {"type": "diffuse", "reflectance": reflectance}
+    if texture is not None:
+        out["reflectance_texture"] = texture
     if float(inp.get("Roughness", 0.0)) > 0:
         inp.warn("inputs[Roughness]", f"Oren-Nayar roughness {float(inp.get('Roughness')):.4g}: the IR's diffuse is Lambertian")
     return out, None

@@ -17,7 +17,7 @@ from mathutils import Matrix
 
 from . import blend_safety
 from . import blender_conversion as conv
-from . import ir, names, validate
+from . import ir, names, textures, validate
 
 
 def _clean(x):
@@ -134,7 +134,10 @@ def _mesh_object(obj, depsgraph, problems, warnings, used=None):
         warnings.append((name, "material", "mesh object has no material: rendered as Blender renders it, a "
                          "diffuse reflectance 0.8 (Blender's default surface)"))
     elif mat.spectral_bench.kind == "NONE":
-        bsdf, emitter = _converted_material(obj, mat, warnings)
+        n_problems = len(problems)
+        bsdf, emitter = _converted_material(obj, mat, warnings, problems)
+        if len(problems) > n_problems:
+            return None
     else:
         bsdf = _completed(obj, mat, material_bsdf(mat), warnings)
         emitter = _annotated_emission(obj, mat, warnings)
@@ -149,6 +152,12 @@ def _mesh_object(obj, depsgraph, problems, warnings, used=None):
             return None
     kind = obj.spectral_bench.shape
     mw = _world(obj)
+    if (bsdf or {}).get("reflectance_texture") is not None and (kind in ("RECTANGLE", "SPHERE")
+                                                                 or not obj.data.uv_layers):
+        why = f"an analytic {kind.lower()}" if kind in ("RECTANGLE", "SPHERE") else "a mesh without a UV map"
+        warnings.append((name, "data.uv_layers", f"the image texture needs texture coordinates and this is {why}: "
+                         "the texture's mean colour is used"))
+        bsdf = {k: v for k, v in bsdf.items() if k != "reflectance_texture"}
     if kind == "RECTANGLE":
         m3 = mw.to_3x3()
         if m3.col[0].cross(m3.col[1]).length == 0:
@@ -182,6 +191,9 @@ def _mesh_object(obj, depsgraph, problems, warnings, used=None):
             mesh.calc_loop_triangles()
             verts = [[_clean(c) for c in v.co] for v in mesh.vertices]
             faces = [list(t.vertices) for t in mesh.loop_triangles]
+            uvs = None
+            if (bsdf or {}).get("reflectance_texture") is not None and faces:
+                verts, faces, uvs = _split_by_uv(mesh, verts, faces)
         finally:
             source.to_mesh_clear()
         if not faces:
@@ -190,11 +202,30 @@ def _mesh_object(obj, depsgraph, problems, warnings, used=None):
             warnings.append((name, "data.polygons.use_smooth", "smooth shading: the IR's mesh faces are flat (no "
                              "interpolated normals): rendered faceted"))
         shape = {"type": "mesh", "to_world": _matrix(mw), "vertices": verts, "faces": faces}
+        if uvs is not None:
+            shape["uvs"] = uvs
         if faces:
             shape = _mesh_in_world(name, shape, mw, warnings)
             if shape is None:
                 return None
     return {"name": name, "shape": shape, "bsdf": bsdf, "emitter": emitter}
+
+
+def _split_by_uv(mesh, verts, faces):
+    """(vertices, faces, uvs) with one (u, v) per vertex from the active UV map: a vertex whose
+    face corners carry different texture coordinates (a seam) is split into one vertex per pair."""
+    uv = np.empty(len(mesh.loops) * 2, dtype=np.float32)
+    mesh.uv_layers.active.data.foreach_get("uv", uv)
+    uv = uv.reshape(-1, 2)
+    loops = np.empty(len(mesh.loop_triangles) * 3, dtype=np.int64)
+    mesh.loop_triangles.foreach_get("loops", loops)
+    corner_v = np.asarray(faces, dtype=np.int64).reshape(-1)
+    corner_uv = uv[loops]
+    key = np.concatenate([corner_v[:, None].astype(np.float64), corner_uv.astype(np.float64)], axis=1)
+    unique, inverse = np.unique(key, axis=0, return_inverse=True)
+    v = np.asarray(verts, dtype=np.float64)[unique[:, 0].astype(np.int64)]
+    return (v.tolist(), inverse.reshape(-1, 3).tolist(),
+            [[_clean(a), _clean(b)] for a, b in unique[:, 1:].astype(np.float32).tolist()])
 
 
 def _scale_text(mw):
@@ -300,11 +331,81 @@ def _value(v):
     return float(v) if isinstance(v, (int, float, bool)) else v
 
 
-def _node_inputs(node, warn):
-    """conv.Inputs of a node: each input's unlinked value and the type of a node linked into it."""
+def _node_inputs(node, warn, problems=None):
+    """conv.Inputs of a node: each input's unlinked value and the type of a node linked into it,
+    and for an input linked from an Image Texture node, the IR texture it converts to
+    (``_image_texture``; what cannot be read a problem in ``problems``)."""
     values = {i.name: (_value(i.default_value), i.links[0].from_node.bl_idname if i.is_linked else None)
               for i in node.inputs if hasattr(i, "default_value")}
-    return conv.Inputs(values, warn)
+    images = {}
+    for i in node.inputs:
+        src = i.links[0].from_node if i.is_linked else None
+        if src is not None and src.bl_idname == "ShaderNodeTexImage" and i.name in conv.TEXTURED_INPUTS:
+            tex = _image_texture(src, f"inputs[{i.name}]", warn, problems)
+            if tex is not None:
+                images[i.name] = tex
+    return conv.Inputs(values, warn, images)
+
+
+# Blender colour spaces whose values are linear Rec.709 / sRGB primaries, or sRGB-encoded
+LINEAR_SPACES = ("Non-Color", "Linear Rec.709", "Linear", "Raw", "Linear Rec.709 (sRGB)")
+SRGB_SPACES = ("sRGB",)
+
+
+def _image_texture(node, field, warn, problems):
+    """The IR texture of an Image Texture node feeding ``field`` (exporters/textures.py): its file
+    relative to the .blend's folder (outside it, missing, a FIFO, too large: a problem naming the
+    node), its colour space and filter, and its mean linear colour (``mean``, for the BSDF's
+    reflectance); what Blender does beyond it is warned. None when it is not converted (a problem
+    or a warning says why)."""
+    where = f"{field} <- nodes[{node.name}]"
+    img = node.image
+    if img is None:
+        warn(field, f"linked to the Image Texture node {node.name!r} without an image (Blender renders it magenta): "
+                    "not converted, the socket's unlinked value is used")
+        return None
+    base = os.path.dirname(bpy.data.filepath) if bpy.data.filepath else None
+
+    def refuse(message):
+        if problems is not None:
+            problems.append((f"nodes[{node.name}].image", f"image {img.name!r}: {message}"))
+        else:
+            warn(where, f"image {img.name!r}: {message}: not converted")
+        return None
+    if img.packed_file is not None or img.source != "FILE" or not img.filepath:
+        return refuse(f"source {img.source}{', packed' if img.packed_file is not None else ''}: a texture is read from "
+                      "an image file beside the .blend (unpack it: File > External Data > Unpack Resources)")
+    if base is None:
+        return refuse("the .blend is not saved: its texture paths have no folder to be relative to")
+    path = os.path.normpath(bpy.path.abspath(img.filepath, library=img.library))
+    if os.path.commonpath([os.path.realpath(path), os.path.realpath(base)]) != os.path.realpath(base):
+        return refuse(f"{path!r} is outside the .blend's folder {base!r}: a texture is read from that folder or "
+                      "below (copy it there)")
+    space = img.colorspace_settings.name
+    if space not in LINEAR_SPACES + SRGB_SPACES:
+        return refuse(f"colour space {space!r}: a texture is sRGB or linear Rec.709 (Non-Color) here")
+    tex = {"file": os.path.relpath(path, base).replace(os.sep, "/"),
+           "colour_space": "srgb" if space in SRGB_SPACES else "linear",
+           "filter": "nearest" if node.interpolation == "Closest" else "bilinear"}
+    _path, why = textures.resolve(tex, base)
+    if why:
+        return refuse(why)
+    try:
+        mean = textures.mean_rgb(tex, base)
+    except Exception as exc:  # noqa: BLE001 - an unreadable image fails this scene, named
+        return refuse(f"cannot be read: {type(exc).__name__}: {exc}")
+    for setting, value, default, what in (
+            ("projection", node.projection, "FLAT", "its flat UV projection"),
+            ("extension", node.extension, "REPEAT", "repeat outside [0, 1]"),
+            ("interpolation", node.interpolation, None, "bilinear filtering")):
+        if default is not None and value != default:
+            warn(f"{where}.{setting}", f"{setting} {value}: the IR's texture has {what}")
+    if node.interpolation not in ("Linear", "Closest"):
+        warn(f"{where}.interpolation", f"interpolation {node.interpolation}: filtered bilinearly")
+    if node.inputs["Vector"].is_linked and node.inputs["Vector"].links[0].from_node.bl_idname != "ShaderNodeUVMap":
+        warn(f"{where}.inputs[Vector]", f"linked to a {node.inputs['Vector'].links[0].from_node.bl_idname} node: the "
+                                        "mesh's active UV map is used instead")
+    return dict(tex, _base_dir=base, _mean=[float(c) for c in mean], _image=img.name)
 
 
 def _surface(tree, socket="Surface"):
@@ -317,8 +418,9 @@ def _surface(tree, socket="Surface"):
     return out.inputs[socket].links[0].from_node
 
 
-def _converted_material(obj, mat, warnings):
-    """(bsdf, emitter) of a material without a spectral annotation, from its shader nodes."""
+def _converted_material(obj, mat, warnings, problems=None):
+    """(bsdf, emitter) of a material without a spectral annotation, from its shader nodes; what
+    cannot be read (an image texture's file) a problem in ``problems``."""
     where = f"material[{mat.name}]"
 
     def warn(field, message):
@@ -335,7 +437,11 @@ def _converted_material(obj, mat, warnings):
 
     def node_warn(field, message):
         warn(f"node_tree.nodes[{node.name}].{field}", message)
-    return convert(_node_inputs(node, node_warn), getattr(node, "distribution", None))
+    node_problems = [] if problems is not None else None
+    out = convert(_node_inputs(node, node_warn, node_problems), getattr(node, "distribution", None))
+    for field, message in node_problems or []:
+        problems.append((obj.name, f"{where}.node_tree.{field}", message))
+    return out
 
 
 SPECTRUM_FIELDS = ("kind", "value", "named", "scale", "temperature", "samples")
@@ -788,6 +894,8 @@ def extract_scene(scene):
         out["warnings"] = [{"object": o, "field": f, "message": m} for o, f, m in warnings]
     if problems:
         raise validate.SceneError(out["name"], problems)
+    if any((o.get("bsdf") or {}).get("reflectance_texture") for o in out["objects"]):
+        out["_base_dir"] = os.path.dirname(bpy.data.filepath)  # texture files are relative to the .blend
     validate.check(out, own_records=True)  # its warnings are the exporter's own records: not capped
     out["needs"] = ir.derived_needs(out)
     return out

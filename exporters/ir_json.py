@@ -9,7 +9,7 @@ import json
 import re
 from pathlib import Path
 
-from . import inline_data, ir, validate
+from . import inline_data, ir, textures, validate
 
 
 _NUMBER_LIST = re.compile(r"\[\s*(-?[\d.eE+-]+(?:,\s*-?[\d.eE+-]+)*)\s*\]")
@@ -29,8 +29,24 @@ def write(scene, path, self_contained=True):
     form (the internal IR as it is) with ``self_contained=False``."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(dumps(inline_data.embed(scene) if self_contained else scene))
+    path.write_text(dumps(inline_data.embed(with_textures_beside(scene, path.parent)) if self_contained
+                          else with_textures_beside(scene, path.parent)))
     return path
+
+
+def with_textures_beside(scene, folder):
+    """``scene`` with each texture's file copied into ``folder``/textures/ as it is (its colour
+    space stays recorded) and its ``file`` pointing there: a scene file's folder holds what it
+    names (exporters/textures.py)."""
+    if not any(textures.textured(o) for o in scene["objects"]):
+        return scene
+    out = dict(scene, objects=[dict(o) for o in scene["objects"]])
+    for obj in out["objects"]:
+        tex = textures.textured(obj)
+        if tex is not None:
+            rel = textures.copy_into(tex, obj["name"], scene.get("_base_dir"), folder)
+            obj["bsdf"] = dict(obj["bsdf"], reflectance_texture=dict(tex, file=rel))
+    return out
 
 
 MAX_DEPTH = 32  # nesting of a scene file (the deepest canonical scene nests 6 levels)

@@ -7,18 +7,25 @@ import numpy as np
 from plyfile import PlyData, PlyElement
 
 
-def write_ply(path, vertices, faces, normals=None):
-    """Binary PLY; ``normals`` (per vertex, optional) are written as nx, ny, nz."""
+def write_ply(path, vertices, faces, normals=None, uvs=None):
+    """Binary PLY; ``normals`` (per vertex, optional) are written as nx, ny, nz, texture
+    coordinates ``uvs`` (per vertex, optional) as u, v (the IR's: v up; a writer whose renderer
+    reads v down flips them first)."""
     v = np.asarray(vertices, dtype="<f4").reshape(-1, 3)
     f = np.asarray(faces, dtype="<i4").reshape(-1, 3)
     fields = [("x", "<f4"), ("y", "<f4"), ("z", "<f4")]
     if normals is not None:
         fields += [("nx", "<f4"), ("ny", "<f4"), ("nz", "<f4")]
+    if uvs is not None:
+        fields += [("u", "<f4"), ("v", "<f4")]
     vert = np.empty(len(v), dtype=fields)
     vert["x"], vert["y"], vert["z"] = v.T
     if normals is not None:
         n = np.asarray(normals, dtype="<f4").reshape(-1, 3)
         vert["nx"], vert["ny"], vert["nz"] = n.T
+    if uvs is not None:
+        uv = np.asarray(uvs, dtype="<f4").reshape(-1, 2)
+        vert["u"], vert["v"] = uv.T
     face = np.empty(len(f), dtype=[("vertex_indices", "<i4", (3,))])
     face["vertex_indices"] = f
     path = Path(path)

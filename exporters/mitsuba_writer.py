@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import camera_filter, dispersion, fluorescence, ir, mesh_io, mitsuba_plugins, names, spectra
+from . import camera_filter, dispersion, fluorescence, ir, mesh_io, mitsuba_plugins, names, spectra, textures
 
 # Blender/OpenGL cameras look down -Z with +Y up; Mitsuba's look down +Z with +X to the
 # image's left. Mitsuba to_world = IR to_world @ diag(-1, 1, -1).
@@ -54,6 +54,22 @@ class _Writer:
         self.files.append(path)
         ET.SubElement(parent, "spectrum", name=name, filename=rel)
 
+    def reflectance(self, node, key, obj):
+        """A diffuse albedo: its spectrum, or with a reflectance_texture a bitmap of linear sRGB
+        (exporters/textures.py) that the spectral variants uplift texel by texel with Jakob and
+        Hanika's coefficients (``raw`` stays false: true would skip the uplift)."""
+        b = obj["bsdf"]
+        tex = b.get("reflectance_texture")
+        if tex is None:
+            self.spectrum(node, key, b["reflectance"], f"{names.file_stem(obj['name'])}_reflectance")
+            return
+        rel = textures.write_linear(tex, obj["name"], self.scene.get("_base_dir"), self.out)
+        self.files.append(self.out / rel)
+        bitmap = ET.SubElement(node, "texture", type="bitmap", name=key)
+        ET.SubElement(bitmap, "string", name="filename", value=rel)
+        ET.SubElement(bitmap, "string", name="filter_type", value="nearest" if tex.get("filter") == "nearest" else "bilinear")
+        ET.SubElement(bitmap, "string", name="wrap_mode", value="repeat")
+
     def bsdf(self, parent, obj):
         b = obj["bsdf"]
         stem = names.file_stem(obj["name"])
@@ -69,7 +85,7 @@ class _Writer:
             return
         if b["type"] == "diffuse":
             node = ET.SubElement(parent, "bsdf", type="diffuse")
-            self.spectrum(node, "reflectance", b["reflectance"], f"{stem}_reflectance")
+            self.reflectance(node, "reflectance", obj)
             return
         if b["type"] == "conductor" and b.get("thin_film") is not None:
             # this project's Python plugin (exporters/mitsuba_plugins/thin_film_conductor.py);
@@ -110,7 +126,7 @@ class _Writer:
             # the IR's coated diffuse is Mitsuba 3's plastic / roughplastic with nonlinear false
             # (docs/scene-format.md 6.6); its spectral diffuse_reflectance is the base's albedo
             node = ET.SubElement(parent, "bsdf", type="roughplastic" if is_rough else "plastic")
-            self.spectrum(node, "diffuse_reflectance", b["reflectance"], f"{stem}_reflectance")
+            self.reflectance(node, "diffuse_reflectance", obj)
             ET.SubElement(node, "float", name="int_ior", value=repr(float(b["int_ior"])))
             ET.SubElement(node, "float", name="ext_ior", value=repr(float(b.get("ext_ior", ir.AIR_IOR))))
             ET.SubElement(node, "boolean", name="nonlinear", value="false")
@@ -133,7 +149,10 @@ class _Writer:
         elif s["type"] == "mesh":
             verts, faces = mesh_io.load_mesh(s, self.scene.get("_base_dir"))
             rel = f"meshes/{names.file_stem(obj['name'])}.ply"
-            self.files.append(mesh_io.write_ply(self.out / rel, verts, faces))
+            # Mitsuba's bitmap reads v down (row 0 at v = 0) and its PLY loader flips nothing: the
+            # IR's v up is written as 1 - v (as its OBJ loader's flip_tex_coords does)
+            uvs = None if s.get("uvs") is None else [[u, 1.0 - v] for u, v in s["uvs"]]
+            self.files.append(mesh_io.write_ply(self.out / rel, verts, faces, uvs=uvs))
             node = ET.SubElement(root, "shape", type="ply", id=obj["name"])
             ET.SubElement(node, "string", name="filename", value=rel)
             # the IR's meshes carry no normals: their faces are flat (Mitsuba would otherwise

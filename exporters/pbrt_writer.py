@@ -24,7 +24,9 @@ What each IR field becomes (docs/scene-format.md, "pbrt-v4" section, says the sa
   directional -> ``"distant"`` (``L``, from 0 to the IR's direction of travel); spot -> ``"spot"``
   only with a hard edge (beam_width = cutoff_angle: ``coneangle``, ``conedelta`` 0), as pbrt's
   falloff is a smoothstep in cos between the cones, not the IR's linear falloff in angle.
-- Materials: diffuse -> ``"diffuse"`` ``reflectance``; conductor -> ``"conductor"`` with ``eta``
+- Materials: diffuse -> ``"diffuse"`` ``reflectance`` (with a reflectance_texture an ``"imagemap"``
+  spectrum texture of the linear OpenEXR exporters/textures.py writes: pbrt's RGBAlbedoSpectrum
+  uplift; the mesh's uvs as the PLY's u, v); conductor -> ``"conductor"`` with ``eta``
   and ``k`` (named conductors as the IR's own tables, not pbrt's named spectra); dielectric ->
   ``"dielectric"`` with ``"float eta"`` int_ior / ext_ior (pbrt's eta is relative and its outside
   is the normal's side, as the IR's ext_ior), a dispersion model as ``"spectrum eta"`` n(l) / ext_ior
@@ -88,7 +90,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import dispersion, ir, mesh_io, names, planted, spectra
+from . import dispersion, ir, mesh_io, names, planted, spectra, textures
 
 FILM = {"nbuckets": 47, "lambdamin": 360.0, "lambdamax": 830.0}  # 47 box buckets of 10 nm
 SAMPLER = "independent"
@@ -319,6 +321,16 @@ class _Writer:
         if alpha > 0:
             notes.append("GGX: pbrt v4's shadowing and masking is height correlated, 1 / (1 + Lambda(o) + Lambda(i)); "
                          "the IR's is separable, G1(o) G1(i) (APPROXIMATED above)")
+        if b["type"] == "diffuse" and b.get("reflectance_texture") is not None:
+            # linear sRGB as float OpenEXR (exporters/textures.py); pbrt uplifts each texel to an
+            # RGBAlbedoSpectrum (Jakob and Hanika's sigmoid) and reads t up (it flips t itself)
+            tex = b["reflectance_texture"]
+            rel = textures.write_linear(tex, obj["name"], self.scene.get("_base_dir"), self.out)
+            tex_id = f"{names.file_stem(obj['name'])}_reflectance"
+            filt = "point" if tex.get("filter") == "nearest" else "bilinear"
+            notes.append(f"reflectance texture: {textures.UPLIFTS['pbrt']}")
+            return (f'Texture "{tex_id}" "spectrum" "imagemap" "string filename" "{rel}" "string filter" "{filt}" '
+                    f'"string wrap" "repeat"\n    Material "diffuse" "texture reflectance" "{tex_id}"'), notes
         if b["type"] == "diffuse":
             return f'Material "diffuse" {_spectrum_param("reflectance", *tabulated(b["reflectance"]))}', notes
         if b["type"] == "conductor":
@@ -353,7 +365,7 @@ class _Writer:
                 m = np.asarray(s["to_world"], dtype=np.float64)
                 v = v @ m[:3, :3].T + m[:3, 3]
             rel = f"meshes/{names.file_stem(obj['name'])}.ply"
-            mesh_io.write_ply(self.out / rel, v, faces)
+            mesh_io.write_ply(self.out / rel, v, faces, uvs=s.get("uvs"))
             return [f'Shape "plymesh" "string filename" "{rel}"']
         raise ValueError(f"unknown shape type {s['type']!r}")
 

@@ -62,6 +62,10 @@ def problems(scene, distributions, light_types=frozenset()):
                         "cutoff_angle has no counterpart",
                         "rendered with the renderer's own smooth falloff over the same angles"))
     for obj in scene["objects"]:
+        if (obj.get("bsdf") or {}).get("reflectance_texture") is not None:
+            out.append((obj["name"], "bsdf.reflectance_texture", "an image texture: not mapped to this renderer's "
+                        "textures yet (Mitsuba and pbrt-v4 render it)", None))
+            continue
         if (obj.get("bsdf") or {}).get("type") == "coated_diffuse":
             out.append((obj["name"], "bsdf.type", "a coated diffuse (Mitsuba 3's plastic: a closed form of the coat's "
                         "internal reflections) has no counterpart: Cycles' Principled BSDF and LuxCore's glossy2 are "

@@ -11,7 +11,7 @@ from pathlib import Path
 import jsonschema
 import numpy as np
 
-from . import dispersion, fluorescence, inline_data, ir, mesh_io, names, spectra
+from . import dispersion, fluorescence, inline_data, ir, mesh_io, names, spectra, textures
 
 SCHEMA_PATH = Path(__file__).resolve().parent / "schema" / "scene.schema.json"
 
@@ -228,6 +228,8 @@ def _value_problems(scene):
         bsdf = obj.get("bsdf")
         if bsdf:
             yield from ((name, "bsdf." + f, m) for f, m in bsdf_problems(bsdf))
+            if bsdf.get("reflectance_texture") is not None:
+                yield from ((name, f, m) for f, m in _texture_problems(obj, scene.get("_base_dir")))
         em = obj.get("emitter")
         if em:
             key = "irradiance" if em.get("type") == "collimated" else "radiance"
@@ -304,6 +306,28 @@ def _shape_problems(shape, base_dir):
             yield from _mesh_file_problems(shape, base_dir)
         else:
             yield from _mesh_data_problems(shape["vertices"], shape["faces"])
+        if "uvs" in shape:
+            yield from _uv_problems(shape)
+
+
+def _texture_problems(obj, base_dir):
+    """A textured BSDF's file (exporters/textures.py) and the texture coordinates it needs: a mesh
+    with inline ``uvs``, one finite (u, v) per vertex."""
+    yield from textures.problems(obj["bsdf"]["reflectance_texture"], base_dir)
+    shape = obj["shape"]
+    if shape["type"] != "mesh" or "uvs" not in shape:
+        yield "shape.uvs", (f"a textured BSDF needs texture coordinates: a mesh with inline uvs (this "
+                            f"{shape['type']} has none)")
+
+
+def _uv_problems(shape):
+    uvs = shape["uvs"]
+    if "vertices" not in shape:
+        yield "shape.uvs", "texture coordinates go with inline vertices (a mesh file's own u, v are not read)"
+    elif len(uvs) != len(shape["vertices"]):
+        yield "shape.uvs", f"{len(uvs)} texture coordinates for {len(shape.get('vertices', []))} vertices (one per vertex)"
+    elif not all(_finite(c) and abs(c) <= MAX_COORDINATE for uv in uvs for c in uv):
+        yield "shape.uvs", f"texture coordinates must be finite and within +-{MAX_COORDINATE:g}"
 
 
 def _mesh_data_problems(vertices, faces, file=None):
@@ -370,6 +394,9 @@ def bsdf_problems(bsdf):
                 i = int(values.argmax())
                 yield "reflectance", (f"a diffuse reflectance above 1 creates energy: {values[i]:.4g} at "
                                       f"{wl[i]:g} nm (360-830 nm)")
+            elif bsdf.get("fluorescence") is not None and bsdf.get("reflectance_texture") is not None:
+                yield "reflectance_texture", ("a fluorescent diffuse takes one reflectance spectrum: a texture "
+                                              "and a fluorescence matrix together are not modelled")
             elif bsdf.get("fluorescence") is not None:
                 rho = bsdf["reflectance"]
                 yield from fluorescence.problems(bsdf["fluorescence"], lambda wl: spectra.evaluate(rho, wl))

@@ -53,8 +53,10 @@ def evaluate(scene, names, image, reference=None, stderr=None, passes=None, obse
     m = Measurement(scene, list(names), image, stderr, reference, passes or (1 if stderr is None else 2),
                     tuple(observers), spectral)
     # every probe's closed form assumes the scene's light is its area emitters and environment: a
-    # scene with delta lights (point, spot, directional) has no probe yet
-    records = [] if scene.get("lights") else [record for probe in PROBES for record in probe(m)]
+    # scene with delta lights (point, spot, directional) has no probe yet; nor has a scene with an
+    # image texture (each probe reads one reflectance spectrum per object, a texture's is its mean)
+    textured = any((o.get("bsdf") or {}).get("reflectance_texture") for o in scene["objects"])
+    records = [] if scene.get("lights") or textured else [record for probe in PROBES for record in probe(m)]
     for record in records:
         for key in MAP_KEYS:
             if key in record:
