@@ -134,7 +134,7 @@ def equal_time_and_error(lines):
     return table
 
 
-def chart(path_stem, scene, lines, floor=None):
+def chart(path_stem, scene, lines, floor=None, ylabel="RMSE against the reference"):
     """error against time, log-log, one line per backend/mode; PNG and SVG."""
     import matplotlib
     matplotlib.use("Agg")
@@ -150,7 +150,7 @@ def chart(path_stem, scene, lines, floor=None):
     if floor:
         ax.axhline(floor, color="grey", ls="--", lw=1, label="reference noise floor")
     ax.set_xlabel("render time (s)")
-    ax.set_ylabel("RMSE against the reference")
+    ax.set_ylabel(ylabel)
     ax.set_title(scene)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7)

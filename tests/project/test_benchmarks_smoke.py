@@ -43,6 +43,7 @@ SMOKE = {  # script -> (arguments that make it run in seconds, what its output m
     "compare_records.py": (["--smoke"], r"1 jobs compared, 0 differences"),
     "crosscheck_fluorescence.py": (["--size", "16", "--spp", "4", "--passes", "2", "-s", "fluorescent_sphere_lone"], TABLE),
     "ggx_multiscatter.py": (["--scene", "furnace_ggx_030", "--spp", "4"], TABLE),
+    "furnace_depth.py": (["--rho", "0.9", "--spp", "2", "--size", "8", "--config", "3"], TABLE),
     "fuzz_scenes.py": (["--count", "40", "--schema-count", "4", "--chunk", "20", "--workers", "1"], TABLE),
     "ggx_shadowing_scene.py": (["--spp", "2", "--passes", "2"], r"height-correlated / separable, image mean"),
     "measure_determinism.py": (["--only", "mitsuba", "--size", "8", "--spp", "2", "--repeats", "2"], r'"bit_identical": (true|false)'),
