@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import dispersion, fluorescence, ir, mesh_io, names, planted, spectra
+from . import dispersion, fluorescence, ir, mesh_io, names, planted, spectra, textures
 
 # ART's own CIE illuminant tables are raw CIE data (D65 = 100 at 560 nm): the IR's scale s
 # (1.0 at 560 nm) becomes s / (raw table value at 560 nm): s / 100 for A and the D series, s / 11.76
@@ -220,6 +220,9 @@ class _Writer:
         for obj in sc["objects"]:
             if (obj.get("emitter") or {}).get("type") == "collimated":
                 self.unsupported.append((obj["name"], "emitter.type", "ART has no collimated (directional area) emitter"))
+        if textures.env_map(sc.get("environment")):
+            self.unsupported.append(("environment", "type", "an environment map: this writer maps no ART "
+                                     "environment to it (UNIFORM_ENVIRONMENT_MATERIAL is uniform)"))
         for light in sc.get("lights", []):
             self.unsupported.append((light["name"], "type", f"a {light['type']} light: not mapped to ART's light "
                                      "sources (only area emitters and the uniform environment are)"))
@@ -291,6 +294,8 @@ class _Writer:
             parts.append(self.shape(k, obj, material))
         env = sc.get("environment")
         env_line = None
+        if textures.env_map(env):
+            env = None  # unsupported (scene_problems)
         if env:
             colour, brightness = self.emission(env["radiance"])
             env_line = f"UNIFORM_ENVIRONMENT_MATERIAL({colour}, {_num(brightness)})"

@@ -702,6 +702,9 @@ def _converted_world(world, warnings, problems=None):
             t = _node_temperature(float(src.inputs[0].default_value), field, warn)
             warn(field, f"blackbody {t:g} K kept exact, luminance = strength {strength:g} (Cycles' normalisation)")
             return {"type": "uniform", "radiance": conv.blackbody(t, strength)}
+        if src is not None and src.bl_idname == "ShaderNodeTexEnvironment" and src.image is not None \
+                and src.image.source == "FILE" and src.image.packed_file is None and bpy.data.filepath:
+            return _environment_map(src, strength, field, name, warn, problems)
         if src is not None and src.bl_idname == "ShaderNodeTexEnvironment" and src.image is not None:
             refused = _image_problem(src.image)
             if refused:
@@ -716,8 +719,9 @@ def _converted_world(world, warnings, problems=None):
                     f"image {img.name!r} has no pixels (file {path!r}: missing, a folder or not an image): the "
                     "environment map's mean radiance is unknown (Blender renders a missing image magenta)")))
                 return None
-            warn(field, f"environment map {src.image.name!r}: the IR's environment is uniform: substituted the map's "
-                 f"mean radiance over the sphere {conv.fmt(colour)} (solid-angle weighted, equirectangular)")
+            warn(field, f"environment map {src.image.name!r} is {'packed' if src.image.packed_file else 'generated'} "
+                 "(a map is read from an image file beside the .blend: unpack it): substituted the map's mean radiance "
+                 f"over the sphere {conv.fmt(colour)} (solid-angle weighted, equirectangular)")
         elif src is not None:
             warn(field, f"linked to a {src.bl_idname} node: not converted, its unlinked colour {conv.fmt(colour)} used")
     if strength < 0:
@@ -730,6 +734,49 @@ def _converted_world(world, warnings, problems=None):
     warn(field, f"background colour {conv.fmt(colour)} x strength {strength:g} -> a uniform environment of that "
          f"radiance (Cycles' convention): {conv.emission_note(spec)}")
     return {"type": "uniform", "radiance": spec}
+
+
+def _environment_map(node, strength, field, name, warn, problems):
+    """The IR's environment map of an Environment Texture node (docs/scene-format.md 7.1): its file
+    relative to the .blend's folder, checked as a texture's is (a problem naming the world and node
+    otherwise), its colour space, the Background strength as its scale and its mean radiance."""
+    img = node.image
+    base = os.path.dirname(bpy.data.filepath)
+    where = f"node_tree.nodes[{node.name}].image"
+
+    def refuse(message):
+        (problems if problems is not None else []).append((name, where, f"image {img.name!r}: {message}"))
+        return None
+    path = os.path.normpath(bpy.path.abspath(img.filepath, library=img.library))
+    if os.path.commonpath([os.path.realpath(path), os.path.realpath(base)]) != os.path.realpath(base):
+        return refuse(f"{path!r} is outside the .blend's folder {base!r}: a map is read from that folder or below")
+    space = img.colorspace_settings.name
+    if space not in LINEAR_SPACES + SRGB_SPACES:
+        return refuse(f"colour space {space!r}: a map is sRGB or linear Rec.709 here")
+    env = {"type": "map", "file": os.path.relpath(path, base).replace(os.sep, "/"),
+           "colour_space": "srgb" if space in SRGB_SPACES else "linear", "scale": float(strength), "rotation": 0.0}
+    _path, why = textures.resolve(env, base)
+    if why:
+        return refuse(why)
+    if strength < 0:
+        warn(f"{field.rsplit('.', 1)[0]}.Strength", f"negative strength {strength:g}: Blender subtracts light, the "
+             "IR's emission is >= 0: no environment")
+        return None
+    try:
+        mean = textures.map_mean_rgb(textures.read_linear(env, base))
+    except Exception as exc:  # noqa: BLE001 - an unreadable image fails this scene, named
+        return refuse(f"cannot be read: {type(exc).__name__}: {exc}")
+    if node.projection != "EQUIRECTANGULAR":
+        warn(f"node_tree.nodes[{node.name}].projection", f"projection {node.projection}: read as equirectangular")
+    if node.inputs["Vector"].is_linked:
+        warn(f"node_tree.nodes[{node.name}].inputs[Vector]", f"linked to a "
+             f"{node.inputs['Vector'].links[0].from_node.bl_idname} node (a rotation, a mapping): not converted, "
+             "the map is placed as Blender places it unlinked")
+    env["radiance"] = conv.emission(np.clip(mean, 0.0, None), strength)
+    warn(field, f"environment map {img.name!r} ({env['file']}, {env['colour_space']}) x strength {strength:g}: "
+         "each texel's linear sRGB uplifted by the renderer as an illuminant (Mitsuba: D65 times Jakob and Hanika's "
+         f"model); its mean radiance {conv.fmt(mean * strength)} is recorded beside it")
+    return env
 
 
 def _image_problem(image):
@@ -894,7 +941,8 @@ def extract_scene(scene):
         out["warnings"] = [{"object": o, "field": f, "message": m} for o, f, m in warnings]
     if problems:
         raise validate.SceneError(out["name"], problems)
-    if any((o.get("bsdf") or {}).get("reflectance_texture") for o in out["objects"]):
+    if any((o.get("bsdf") or {}).get("reflectance_texture") for o in out["objects"]) \
+            or (out.get("environment") or {}).get("type") == "map":
         out["_base_dir"] = os.path.dirname(bpy.data.filepath)  # texture files are relative to the .blend
     validate.check(out, own_records=True)  # its warnings are the exporter's own records: not capped
     out["needs"] = ir.derived_needs(out)

@@ -38,9 +38,13 @@ def with_textures_beside(scene, folder):
     """``scene`` with each texture's file copied into ``folder``/textures/ as it is (its colour
     space stays recorded) and its ``file`` pointing there: a scene file's folder holds what it
     names (exporters/textures.py)."""
-    if not any(textures.textured(o) for o in scene["objects"]):
+    env = scene.get("environment")
+    if not any(textures.textured(o) for o in scene["objects"]) and not textures.env_map(env):
         return scene
     out = dict(scene, objects=[dict(o) for o in scene["objects"]])
+    if textures.env_map(env):
+        rel = textures.copy_into(env, "environment", scene.get("_base_dir"), folder, stem="environment")
+        out["environment"] = dict(env, file=rel)
     for obj in out["objects"]:
         tex = textures.textured(obj)
         if tex is not None:

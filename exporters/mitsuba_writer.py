@@ -233,7 +233,22 @@ class _Writer:
         ET.SubElement(film, "string", name="component_format", value="float32")
         ET.SubElement(film, "rfilter", type="box")
         env = sc.get("environment")
-        if env:
+        if textures.env_map(env):
+            # linear sRGB radiance, uplifted by the spectral variants as an illuminant (D65 times
+            # Jakob and Hanika's model); Mitsuba's map frame is y up with u = atan2(x, -z) / 2 pi, the
+            # IR's (Blender's) z up with u = 1/2 - phi / 2 pi from +X: local x, y, z -> world y, z, x,
+            # then the map's rotation about +Z (docs/scene-format.md 7.1)
+            rel = textures.write_linear(env, "environment", sc.get("_base_dir"), self.out, stem="environment")
+            self.files.append(self.out / rel)
+            em = ET.SubElement(root, "emitter", type="envmap", id="environment")
+            ET.SubElement(em, "string", name="filename", value=rel)
+            ET.SubElement(em, "float", name="scale", value=repr(float(env.get("scale", 1.0))))
+            a = np.radians(float(env.get("rotation", 0.0)))
+            rz = np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]])
+            m = np.eye(4)
+            m[:3, :3] = rz @ np.array([[0, 0, 1], [1, 0, 0], [0, 1, 0]], dtype=np.float64)
+            _transform(em, m.tolist())
+        elif env:
             em = ET.SubElement(root, "emitter", type="constant", id="environment")
             self.spectrum(em, "radiance", env["radiance"], "environment_radiance")
         for obj in sc["objects"]:

@@ -281,6 +281,10 @@ class _Writer:
                           "no polariser)"))
         if sc["render"].get("output", "rgb") == "stokes":
             found.append(("render", "output", "Stokes output: pbrt v4 has no polarisation"))
+        if textures.env_map(sc.get("environment")):
+            found.append(("environment", "type", "an environment map: pbrt v4's image infinite light takes an "
+                          "equal-area octahedral square image; this writer does not resample the IR's "
+                          "equirectangular map to it yet"))
         for obj in sc["objects"]:
             em = obj.get("emitter") or {}
             if em.get("type") == "collimated":

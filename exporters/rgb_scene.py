@@ -61,6 +61,9 @@ def problems(scene, distributions, light_types=frozenset()):
             out.append((light["name"], "beam_width", "a spot's linear falloff in angle between beam_width and "
                         "cutoff_angle has no counterpart",
                         "rendered with the renderer's own smooth falloff over the same angles"))
+    if (scene.get("environment") or {}).get("type") == "map":
+        out.append(("environment", "type", "an environment map: not mapped to this renderer's world textures "
+                    "yet (Mitsuba renders it)", None))
     for obj in scene["objects"]:
         if (obj.get("bsdf") or {}).get("reflectance_texture") is not None:
             out.append((obj["name"], "bsdf.reflectance_texture", "an image texture: not mapped to this renderer's "

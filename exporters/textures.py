@@ -28,7 +28,7 @@ import numpy as np
 
 from . import blend_safety, names
 
-FORMATS = (".png", ".jpg", ".jpeg", ".exr", ".tif", ".tiff")
+FORMATS = (".png", ".jpg", ".jpeg", ".exr", ".hdr", ".tif", ".tiff")
 MAX_FILE_BYTES = 256 << 20
 COLOUR_SPACES = ("srgb", "linear")
 FILTERS = ("bilinear", "nearest")
@@ -112,7 +112,7 @@ def read_linear(tex, base_dir):
     px = np.asarray(px, dtype=np.float64)
     px = px.reshape(px.shape[0], px.shape[1], -1)
     rgb = px[..., :3] if px.shape[-1] >= 3 else np.repeat(px[..., :1], 3, axis=-1)
-    return decode(rgb, tex.get("colour_space", "srgb"))
+    return decode(rgb, tex.get("colour_space", "linear" if tex.get("type") == "map" else "srgb"))
 
 
 def mean_rgb(tex, base_dir):
@@ -120,13 +120,13 @@ def mean_rgb(tex, base_dir):
     return read_linear(tex, base_dir).reshape(-1, 3).mean(axis=0)
 
 
-def copy_into(tex, obj_name, base_dir, out_dir):
+def copy_into(tex, obj_name, base_dir, out_dir, stem=None):
     """Copy the texture's file into ``out_dir``/textures/ under the object's checked name; returns
     the path relative to ``out_dir`` (forward slashes)."""
     path, why = resolve(tex, base_dir)
     if why:
         raise ValueError(f"object {obj_name!r}, {FIELD}.file: {why}")
-    rel = f"textures/{names.file_stem(obj_name)}_reflectance{path.suffix.lower()}"
+    rel = f"textures/{stem or names.file_stem(obj_name) + '_reflectance'}{path.suffix.lower()}"
     dest = Path(out_dir) / rel
     dest.parent.mkdir(parents=True, exist_ok=True)
     if not (dest.exists() and dest.resolve() == path):  # a scene file rewritten where it was read
@@ -134,7 +134,7 @@ def copy_into(tex, obj_name, base_dir, out_dir):
     return rel
 
 
-def write_linear(tex, obj_name, base_dir, out_dir):
+def write_linear(tex, obj_name, base_dir, out_dir, stem=None):
     """The texture decoded to linear sRGB (``read_linear``) and written as a float OpenEXR file in
     ``out_dir``/textures/ under the object's checked name; returns its path relative to
     ``out_dir``. What the renderers' writers give them: one linear file, whatever the source's
@@ -143,7 +143,7 @@ def write_linear(tex, obj_name, base_dir, out_dir):
     spectral uplift)."""
     import OpenImageIO as oiio
     rgb = np.ascontiguousarray(read_linear(tex, base_dir), dtype=np.float32)
-    rel = f"textures/{names.file_stem(obj_name)}_reflectance.exr"
+    rel = f"textures/{stem or names.file_stem(obj_name) + '_reflectance'}.exr"
     dest = Path(out_dir) / rel
     dest.parent.mkdir(parents=True, exist_ok=True)
     out = oiio.ImageOutput.create(str(dest))
@@ -155,6 +155,33 @@ def write_linear(tex, obj_name, base_dir, out_dir):
     finally:
         out.close()
     return rel
+
+
+# -- environment maps (docs/scene-format.md 7.1): the same file rules, an equirectangular image --
+def equirect_directions(width, height):
+    """World directions (H x W x 3, z up) of an equirectangular image's texel centres in the IR's
+    (Blender's) convention, rotation 0: column u = (x + 0.5) / W is the azimuth phi = pi (1 - 2u)
+    about +Z from +X (u = 0.5: +X; u = 0.25: +Y), row v = (y + 0.5) / H from the top is the
+    polar angle theta = pi v from +Z."""
+    u = (np.arange(width) + 0.5) / width
+    v = (np.arange(height) + 0.5) / height
+    phi = np.pi * (1.0 - 2.0 * u)[None, :]
+    theta = np.pi * v[:, None]
+    return np.stack(np.broadcast_arrays(np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)),
+                    axis=-1)
+
+
+def map_mean_rgb(rgb):
+    """The mean of an equirectangular image (H x W x 3) over the sphere: rows weighted by their
+    solid angle (sin theta)."""
+    h = rgb.shape[0]
+    w = np.sin(np.pi * (np.arange(h) + 0.5) / h)
+    return (rgb * w[:, None, None]).sum(axis=(0, 1)) / (w.sum() * rgb.shape[1])
+
+
+def env_map(env):
+    """Whether an IR environment is a map."""
+    return bool(env) and env.get("type") == "map"
 
 
 def textured(obj):

@@ -222,6 +222,14 @@ def _value_problems(scene):
     if env:
         for field, msg in spectra.check(env["radiance"], "radiance"):
             yield "environment", field, msg
+        if env.get("type") == "map":
+            _path, why = textures.resolve(env, scene.get("_base_dir"))
+            if why:
+                yield "environment", "file", why
+            for key, lo in (("scale", 0.0), ("rotation", None)):
+                v = env.get(key, 0.0)
+                if not _finite(v) or (lo is not None and v < lo) or abs(v) > MAX_COORDINATE:
+                    yield "environment", key, f"must be finite{' and >= 0' if lo is not None else ''}, got {v!r}"
     for obj in scene["objects"]:
         name = obj["name"]
         yield from ((name, f, m) for f, m in _shape_problems(obj["shape"], scene.get("_base_dir")))

@@ -54,8 +54,10 @@ def evaluate(scene, names, image, reference=None, stderr=None, passes=None, obse
                     tuple(observers), spectral)
     # every probe's closed form assumes the scene's light is its area emitters and environment: a
     # scene with delta lights (point, spot, directional) has no probe yet; nor has a scene with an
-    # image texture (each probe reads one reflectance spectrum per object, a texture's is its mean)
-    textured = any((o.get("bsdf") or {}).get("reflectance_texture") for o in scene["objects"])
+    # image texture or an environment map (each probe reads one spectrum per object and one for the
+    # environment: a texture's or a map's is its mean)
+    textured = any((o.get("bsdf") or {}).get("reflectance_texture") for o in scene["objects"]) \
+        or (scene.get("environment") or {}).get("type") == "map"
     records = [] if scene.get("lights") or textured else [record for probe in PROBES for record in probe(m)]
     for record in records:
         for key in MAP_KEYS:
