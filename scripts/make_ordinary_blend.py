@@ -3,12 +3,16 @@ annotation: scene "ordinary" (four Principled BSDF spheres of different base col
 metallic gold, on a Principled floor; a 100 W point light, a 300 W area light, a world colour)
 scene "zoo" (one of each conversion and loss the export warns about), and small plane scenes whose every light has a closed form (a Diffuse BSDF plane seen straight
 down through a 1-degree camera: under a world colour, a point, spot, sun, area and disk light,
-and a blackbody point light). tests/exporters/test_blender_conversion.py exports and renders them.
+and a blackbody point light), and scene "textured" (Principled spheres at Blender's defaults, a
+floor whose base colour is an image texture, a world lit by an HDRI, an emissive panel; its two
+images are written beside the .blend). tests/exporters/test_blender_conversion.py and
+tests/studies/test_spectral_vs_rgb.py export and render them.
 
     python scripts/make_ordinary_blend.py OUT.blend      (or: blender -b -P this -- OUT.blend)
 """
 import math
 import sys
+from pathlib import Path
 
 import bpy
 
@@ -178,11 +182,94 @@ def zoo(scene):
     scene.world = w
 
 
-def build():
+CHECKER = ((0.8, 0.8, 0.8), (0.1, 0.1, 0.3))  # the floor texture's two colours (sRGB-encoded)
+SUN = (-60.0, 35.0, 3000.0)  # the sky map's sun: azimuth from +X (towards +Y) and elevation in degrees, radiance
+
+
+# the textured scene's spheres: Blender's default roughness is 0.5; at 0.3 (as the "ordinary" scene's)
+# the coat's highlight lifts each sphere's brightest block above the diffuse-only export's (issue 42)
+SPHERE_ROUGHNESS = 0.3
+
+
+def _saved_image(path, rows_top_down, float_buffer):
+    """An image file written with OpenImageIO (Blender's Image.save would pass a float image
+    through the scene's view transform), loaded into Blender as a user's image is."""
+    import numpy as np
+    import OpenImageIO as oiio
+    px = np.asarray(rows_top_down, dtype=np.float32)
+    if not float_buffer:
+        px = np.round(np.clip(px, 0, 1) * 255).astype(np.uint8)
+    out = oiio.ImageOutput.create(str(path))
+    if out is None or not out.open(str(path), oiio.ImageSpec(px.shape[1], px.shape[0], px.shape[2],
+                                                            "float" if float_buffer else "uint8")):
+        raise RuntimeError(f"cannot write {path}: {oiio.geterror()}")
+    out.write_image(px)
+    out.close()
+    return bpy.data.images.load(str(path), check_existing=False)
+
+
+def textured(scene, folder):
+    """Scene "textured": Principled spheres at Blender's defaults but their colour and roughness
+    (SPHERE_ROUGHNESS; a specular layer: a coat), a floor whose base colour is a checker image (floor_checker.png, 64 x 64 in squares of 8), a
+    world lit by an equirectangular HDRI (sky.exr: a blue gradient and a small sun 35 degrees up, in front of the spheres to the right),
+    an emissive panel; the images are written beside the .blend (``folder``)."""
+    import math as m
+    camera(scene, (0.0, -7.0, 2.5), (math.radians(75), 0.0, 0.0))
+    checker = _saved_image(Path(folder) / "floor_checker.png",
+                           [[CHECKER[(x // 8 + y // 8) % 2] for x in range(64)] for y in range(64)], False)
+    checker.colorspace_settings.name = "sRGB"
+    w, h = 128, 64
+    sky = []
+    for row in range(h):  # top to bottom: row 0 is the zenith
+        elevation = 90.0 - (row + 0.5) / h * 180.0
+        line = []
+        for col in range(w):
+            azimuth = 180.0 - (col + 0.5) / w * 360.0  # u = 1/2 - phi / 2 pi (docs/scene-format.md 7.1)
+            sun = abs(elevation - SUN[1]) < 2.0 and abs((azimuth - SUN[0] + 180.0) % 360.0 - 180.0) < 2.0
+            base = (0.15, 0.22, 0.4) if elevation > 0 else (0.08, 0.06, 0.05)
+            line.append((SUN[2],) * 3 if sun else
+                        tuple(c * (1.0 if elevation <= 0 else 0.6 + 0.4 * m.sin(m.radians(elevation))) for c in base))
+        sky.append(line)
+    hdri = _saved_image(Path(folder) / "sky.exr", sky, True)
+    hdri.colorspace_settings.name = "Linear Rec.709"
+    floor_mat = principled("floor_checker", (0.5, 0.5, 0.5))
+    nt = floor_mat.node_tree
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    tex.image = checker
+    nt.links.new(tex.outputs["Color"], nt.nodes["Principled BSDF"].inputs["Base Color"])
+    floor = quad("floor_tiled", 6.0, floor_mat)
+    uv = floor.uv_layers.new(name="UVMap")
+    for loop, corner in zip(uv.data, ((0, 0), (3, 0), (3, 3), (0, 3))):  # the checker repeated 3 x 3
+        loop.uv = corner
+    link(scene, "tex_floor", floor)
+    for i, (name, colour) in enumerate((("red", (0.8, 0.1, 0.1)), ("green", (0.1, 0.6, 0.2)), ("blue", (0.1, 0.2, 0.8)))):
+        mat = bpy.data.materials.new(f"{name}_default")
+        mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = (*colour, 1.0)
+        mat.node_tree.nodes["Principled BSDF"].inputs["Roughness"].default_value = SPHERE_ROUGHNESS
+        link(scene, f"tex_sphere_{name}", uv_sphere(f"{name}_ball", 0.6, mat), (-1.6 + 1.6 * i, 0.0, 0.6))
+    glow = bpy.data.materials.new("panel_glow")
+    gnt = glow.node_tree
+    emission = gnt.nodes.new("ShaderNodeEmission")
+    emission.inputs["Color"].default_value = (1.0, 0.8, 0.6, 1.0)
+    emission.inputs["Strength"].default_value = 5.0
+    gnt.links.new(emission.outputs[0], gnt.nodes["Material Output"].inputs["Surface"])
+    link(scene, "tex_panel", quad("panel", 0.5, glow), (2.5, 1.5, 1.5), (math.radians(90), 0.0, math.radians(-30)))
+    w_sky = bpy.data.worlds.new("hdri_sky")
+    env = w_sky.node_tree.nodes.new("ShaderNodeTexEnvironment")
+    env.image = hdri
+    w_sky.node_tree.links.new(env.outputs["Color"], w_sky.node_tree.nodes["Background"].inputs["Color"])
+    scene.world = w_sky
+
+
+def build(folder=None):
+    """Every scene; "textured" too when ``folder`` (where the .blend goes: its images are written
+    there) is given."""
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
     scene.name = "ordinary"
     ordinary(scene)
+    if folder is not None:
+        textured(bpy.data.scenes.new("textured"), folder)
     zoo(bpy.data.scenes.new("zoo"))
     sc = plane_scene("plane_world")
     sc.world = world("plane_world", WORLD_COLOUR, WORLD_STRENGTH)
@@ -196,6 +283,7 @@ def build():
 
 
 if __name__ == "__main__":
-    out = sys.argv[sys.argv.index("--") + 1] if "--" in sys.argv else sys.argv[1]
-    build()
-    bpy.ops.wm.save_as_mainfile(filepath=out)
+    out = Path(sys.argv[sys.argv.index("--") + 1] if "--" in sys.argv else sys.argv[1]).resolve()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    build(out.parent)
+    bpy.ops.wm.save_as_mainfile(filepath=str(out))

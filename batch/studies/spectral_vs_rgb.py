@@ -68,10 +68,12 @@ def lights(scene):
     """[(holder dict, key)] of every light spectrum in ``scene``, every kind of light the IR has
     (exporters/ir.py): the environment's radiance, each object's emitter (area ``radiance``,
     collimated ``irradiance``) and each delta light of ``lights`` (point and spot ``intensity``,
-    directional ``irradiance``)."""
+    directional ``irradiance``). An environment map is not among them: its light is its image's
+    RGB texels, which the renderer uplifts itself (its ``radiance`` is only their mean), so no
+    illuminant replaces it and it stays as it is under --illuminants."""
     out = []
     env = scene.get("environment")
-    if isinstance(env, dict) and isinstance(env.get("radiance"), dict):
+    if isinstance(env, dict) and isinstance(env.get("radiance"), dict) and env.get("type") != "map":
         out.append((env, "radiance"))
     holders = [obj.get("emitter") for obj in scene.get("objects") or [] if isinstance(obj, dict)]
     holders += list(scene.get("lights") or [])
