@@ -769,14 +769,38 @@ def _environment_map(node, strength, field, name, warn, problems):
     if node.projection != "EQUIRECTANGULAR":
         warn(f"node_tree.nodes[{node.name}].projection", f"projection {node.projection}: read as equirectangular")
     if node.inputs["Vector"].is_linked:
-        warn(f"node_tree.nodes[{node.name}].inputs[Vector]", f"linked to a "
-             f"{node.inputs['Vector'].links[0].from_node.bl_idname} node (a rotation, a mapping): not converted, "
-             "the map is placed as Blender places it unlinked")
+        rotation, why = _map_rotation(node.inputs["Vector"].links[0].from_node)
+        if why is None:
+            env["rotation"] = rotation
+        else:
+            warn(f"node_tree.nodes[{node.name}].inputs[Vector]", f"{why}: not converted, the map is placed as "
+                 "Blender places it unlinked")
     env["radiance"] = conv.emission(np.clip(mean, 0.0, None), strength)
     warn(field, f"environment map {img.name!r} ({env['file']}, {env['colour_space']}) x strength {strength:g}: "
          "each texel's linear sRGB uplifted by the renderer as an illuminant (Mitsuba: D65 times Jakob and Hanika's "
          f"model); its mean radiance {conv.fmt(mean * strength)} is recorded beside it")
     return env
+
+
+def _map_rotation(src):
+    """(IR rotation in degrees, None) of a Mapping node that only turns an environment about Z, fed
+    by the Texture Coordinate's Generated or Object output (the world direction), or (None, why
+    not). A Point mapping looks the map up at R d, which turns the map by -angle; a Texture mapping
+    at R^-1 d, which turns it by +angle."""
+    if src.bl_idname != "ShaderNodeMapping":
+        return None, f"linked to a {src.bl_idname} node"
+    vec = src.inputs["Vector"]
+    feed = vec.links[0].from_node if vec.is_linked else None
+    if feed is None or feed.bl_idname != "ShaderNodeTexCoord" or vec.links[0].from_socket.name not in ("Generated", "Object"):
+        return None, "a Mapping node not fed by the Texture Coordinate's Generated or Object output"
+    if src.vector_type not in ("POINT", "TEXTURE") or any(src.inputs[k].is_linked for k in ("Location", "Rotation", "Scale")):
+        return None, f"a {src.vector_type.lower()} Mapping node, or one with linked inputs"
+    loc, rot, scale = (tuple(src.inputs[k].default_value) for k in ("Location", "Rotation", "Scale"))
+    if any(abs(v) > 1e-9 for v in (*loc, rot[0], rot[1])) or any(abs(s - 1) > 1e-9 for s in scale):
+        return None, (f"a Mapping node with location {conv.fmt(loc)}, rotation {conv.fmt(tuple(math.degrees(r) for r in rot))} "
+                      f"degrees and scale {conv.fmt(scale)}: only a rotation about Z converts")
+    angle = math.degrees(rot[2])
+    return round(-angle if src.vector_type == "POINT" else angle, 4), None  # float32 radians: 4 decimals of a degree
 
 
 def _image_problem(image):

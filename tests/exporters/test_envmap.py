@@ -5,7 +5,7 @@ with a real Blender and real renders:
 - orientation: the map has a red patch on the horizon towards +X and a green one towards +Y;
   cameras at the origin looking along +X, +Y and -X see red, green and the grey background, in
   Cycles (Blender's own render of its world: what the user sees) and in Mitsuba's render of the
-  export alike;
+  export alike; so do the world turned 90 degrees about Z by a Mapping node (Point and Texture);
 - a bright region casts a shadow: a sphere on a floor under a map whose light is a small bright
   patch 45 degrees above +X; the floor beside the sphere towards -X is darker than the floor
   towards +X, beyond noise, in Mitsuba's render of the export.
@@ -89,10 +89,24 @@ def exported(tmp_path_factory):
             sc.render.resolution_x = sc.render.resolution_y = size
             sc.render.resolution_percentage = 100
 
+        def turned(w, kind, degrees):
+            nt = w.node_tree
+            env = next(n for n in nt.nodes if n.bl_idname == "ShaderNodeTexEnvironment")
+            coords, mapping = nt.nodes.new("ShaderNodeTexCoord"), nt.nodes.new("ShaderNodeMapping")
+            mapping.vector_type = kind
+            mapping.inputs["Rotation"].default_value = (0.0, 0.0, math.radians(degrees))
+            nt.links.new(coords.outputs["Generated"], mapping.inputs["Vector"])
+            nt.links.new(mapping.outputs["Vector"], env.inputs["Vector"])
+            return w
+
         out = {{}}
-        for name, rotation in (("look_px", (90, 0, -90)), ("look_py", (90, 0, 0)), ("look_mx", (90, 0, 90))):
+        for name, rotation, turn in (("look_px", (90, 0, -90), None), ("look_py", (90, 0, 0), None),
+                                     ("look_mx", (90, 0, 90), None), ("look_px_point90", (90, 0, -90), ("POINT", 90)),
+                                     ("look_px_texture90", (90, 0, -90), ("TEXTURE", 90))):
             sc = bpy.data.scenes.new(name)
             sc.world = world(name + "_world", "patches.exr")
+            if turn:
+                turned(sc.world, *turn)
             camera(sc, name + "_cam", (0, 0, 0), rotation, 30.0, 8)
             out[name] = extract_blender.extract_scene(sc)
             sc.render.engine = "CYCLES"
@@ -149,7 +163,12 @@ def test_cycles_and_mitsuba_see_the_same_sky_in_each_direction(exported, tmp_pat
     each direction: the map is placed as Blender places it."""
     folder, out = exported
     seen = {}
-    for name, expected in (("look_px", "red"), ("look_py", "green"), ("look_mx", "grey")):
+    # a Mapping node's rotation about Z (90 degrees): a Point mapping turns the map by -90 (+X then
+    # sees what was towards +Y), a Texture mapping by +90 (what was towards -Y: the grey background)
+    assert out["look_px_point90"]["environment"]["rotation"] == -90.0
+    assert out["look_px_texture90"]["environment"]["rotation"] == 90.0
+    for name, expected in (("look_px", "red"), ("look_py", "green"), ("look_mx", "grey"),
+                           ("look_px_point90", "green"), ("look_px_texture90", "grey")):
         sc = dict(out[name], _base_dir=str(folder))
         _sc, names, img, _se = render_with_noise(sc, tmp_path / name, 16)
         mitsuba = img[..., [names.index(c) for c in "RGB"]].reshape(-1, 3).mean(axis=0)
