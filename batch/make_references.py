@@ -479,7 +479,7 @@ def _who():
 
 def _make(args, argv, out, held, backend):
     from spectral_bench.batch import scene_sources
-    from spectral_bench.batch.jobs import engines, job as jobs, plan as planning
+    from spectral_bench.batch.jobs import job as jobs, plan as planning
     from spectral_bench.batch.verdict import references
     plans, failed = [], []
     for name, scene in scene_sources.load(args.input):
@@ -661,20 +661,30 @@ def _make(args, argv, out, held, backend):
     for plan in plans:
         if not plan[5]:
             write_reference(plan)  # every pass was already there
+    status = run_passes(args.cluster, [j for p in plans for j in p[5]], finished, "references/.work")
+    if status is not None:
+        return status
+    return 1 if failed or any(remaining.values()) else 0
+
+
+def run_passes(cluster, jobs, finished, kept_in):
+    """Render ``jobs`` on the engine ``--cluster`` names (here by default), ``finished`` called
+    for each; None when they ran, else the exit status: 2 when the cluster cannot be reached, 130
+    when interrupted (the finished passes stay in ``kept_in`` for the same command to resume)."""
+    from spectral_bench.batch.jobs import engines
     try:
-        engine = engines.make(args.cluster)
+        engine = engines.make(cluster)
     except engines.ClusterError as exc:
-        print(f"error: --cluster {args.cluster}: {exc}", file=sys.stderr, flush=True)
+        print(f"batch/make_references.py: error: --cluster {cluster}: {exc}", file=sys.stderr, flush=True)
         return 2
     try:
-        engine.map([j for p in plans for j in p[5]], finished)
+        engine.map(jobs, finished)
     except engines.Interrupted:
-        print("interrupted: the finished passes are kept in references/.work; run the same command to resume",
-              flush=True)
+        print(f"interrupted: the finished passes are kept in {kept_in}; run the same command to resume", flush=True)
         return 130
     finally:
         engine.close()
-    return 1 if failed or any(remaining.values()) else 0
+    return None
 
 
 # -- cross-checks (issue 44): the references judged against another renderer --------------------
@@ -718,7 +728,7 @@ def crosscheck(args, argv, backend):
     the reference's provenance. Exit status 0 when every scene agrees at the stated power, 1 naming
     each that does not (or could not be cross-checked), 2 for usage (nothing rendered)."""
     from spectral_bench.batch import scene_sources
-    from spectral_bench.batch.jobs import engines, plan as planning
+    from spectral_bench.batch.jobs import plan as planning
     from spectral_bench.batch.verdict import crosscheck as cc, observer_layers, references
     from spectral_bench.batch.backends import rgb_common
     from spectral_bench.exporters import names as scene_names, rgb_scene
@@ -863,19 +873,9 @@ def crosscheck(args, argv, backend):
     for plan in plans:
         if not plan["todo"]:
             judge(plan)  # every pass was already there
-    try:
-        engine = engines.make(args.cluster)
-    except engines.ClusterError as exc:
-        print(f"batch/make_references.py: error: --cluster {args.cluster}: {exc}", file=sys.stderr, flush=True)
-        return 2
-    try:
-        engine.map([j for p in plans for j in p["todo"]], finished)
-    except engines.Interrupted:
-        print(f"interrupted: the finished passes are kept in {folder / '.work' / '.crosscheck'}; run the same command to resume",
-              flush=True)
-        return 130
-    finally:
-        engine.close()
+    status = run_passes(args.cluster, [j for p in plans for j in p["todo"]], finished, folder / ".work" / ".crosscheck")
+    if status is not None:
+        return status
     for scene_name, left in remaining.items():
         if left and scene_name not in failed:
             fail(scene_name, f"{left} of {args.passes} passes of {name} did not render")

@@ -49,48 +49,24 @@ from spectral_bench.exporters import mitsuba_writer  # noqa: E402
 def plugin_class(height_correlated):
     """sb_thin_film_conductor with the Smith term chosen (see the module docstring)."""
     import drjit as dr
-    import mitsuba as mi
     from spectral_bench.exporters.mitsuba_plugins import thin_film_conductor as tf
 
     class Shadowed(tf.ThinFilmConductor):
-        def _g(self, distr, wi, wo, m):
-            g1_i, g1_o = distr.smith_g1(wi, m), distr.smith_g1(wo, m)
+        def _g(self, distr, wi, wo, m, g1_i=None):
+            g1_i = distr.smith_g1(wi, m) if g1_i is None else g1_i
+            g1_o = distr.smith_g1(wo, m)
             if not height_correlated:
                 return g1_i * g1_o
             # Lambda = 1 / G1 - 1 (G1 = 1 / (1 + Lambda)); G2 = 1 / (1 + Lambda_i + Lambda_o)
             ok = (g1_i > 0) & (g1_o > 0)
             return dr.select(ok, 1.0 / (dr.rcp(dr.select(ok, g1_i, 1.0)) + dr.rcp(dr.select(ok, g1_o, 1.0)) - 1.0), 0.0)
 
-        def sample(self, ctx, si, sample1, sample2, active=True):
-            bs = dr.zeros(mi.BSDFSample3f)
-            cos_i = mi.Frame3f.cos_theta(si.wi)
-            active = active & (cos_i > 0.0)
-            if not ctx.is_enabled(mi.BSDFFlags.GlossyReflection):
-                return bs, dr.zeros(mi.Spectrum)
-            distr = self._distribution()
-            m, pdf = distr.sample(si.wi, sample2)
-            bs.wo = mi.reflect(si.wi, m)
-            active = active & (pdf != 0.0) & (mi.Frame3f.cos_theta(bs.wo) > 0.0)
-            bs.pdf = pdf / (4.0 * dr.dot(bs.wo, m))
-            bs.sampled_type = mi.UInt32(+mi.BSDFFlags.GlossyReflection)
-            g1_i = distr.smith_g1(si.wi, m)
-            weight = self._g(distr, si.wi, bs.wo, m) / dr.select(g1_i > 0, g1_i, 1.0)  # VNDF: pdf carries G1(i)
-            bs.eta = 1.0
-            bs.sampled_component = mi.UInt32(0)
-            value = self._fresnel_value(ctx, si, dr.dot(si.wi, m), bs.wo, m, active) * weight
-            return bs, dr.select(active, value, 0.0)
+        def _masked(self, d, g1_i, distr, wi, wo, m):
+            return d * self._g(distr, wi, wo, m, g1_i)
 
-        def _eval_pdf(self, ctx, si, wo, active):
-            cos_i, cos_o = mi.Frame3f.cos_theta(si.wi), mi.Frame3f.cos_theta(wo)
-            m = dr.normalize(wo + si.wi)
-            active = active & (cos_i > 0) & (cos_o > 0) & (dr.dot(si.wi, m) > 0) & (dr.dot(wo, m) > 0)
-            distr = self._distribution()
-            d = distr.eval(m)
-            active = active & (d != 0.0)
-            value = d * self._g(distr, si.wi, wo, m) / (4.0 * cos_i)
-            f = self._fresnel_value(ctx, si, dr.dot(si.wi, m), wo, m, active)
-            pdf = d * distr.smith_g1(si.wi, m) / (4.0 * cos_i)
-            return dr.select(active, f * value, 0.0), dr.select(active, pdf, 0.0)
+        def _sample_weight(self, distr, wi, wo, m):
+            g1_i = distr.smith_g1(wi, m)
+            return self._g(distr, wi, wo, m, g1_i) / dr.select(g1_i > 0, g1_i, 1.0)  # VNDF: pdf carries G1(i)
     return Shadowed
 
 

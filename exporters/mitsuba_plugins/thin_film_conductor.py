@@ -193,6 +193,16 @@ class ThinFilmConductor(mi.BSDF):
     def _distribution(self):
         return mi.MicrofacetDistribution(self.distribution_type, self.alpha, True)
 
+    # the Smith shadowing-masking, in the two places it enters (a subclass may change the form:
+    # benchmarks/ggx_shadowing_scene.py puts pbrt-v4's height-correlated G2 here)
+    def _masked(self, d, g1_i, distr, wi, wo, m):
+        """D G(i, o): the IR's separable G1(i) G1(o)."""
+        return d * g1_i * distr.smith_g1(wo, m)
+
+    def _sample_weight(self, distr, wi, wo, m):
+        """G(i, o) / G1(i): what is left of G once the visible normals (pdf D G1(i)) are sampled."""
+        return distr.smith_g1(wo, m)
+
     # -- BSDF interface -------------------------------------------------------------------------
     def sample(self, ctx, si, sample1, sample2, active=True):
         bs = dr.zeros(mi.BSDFSample3f)
@@ -207,7 +217,7 @@ class ThinFilmConductor(mi.BSDF):
             active = active & (pdf != 0.0) & (mi.Frame3f.cos_theta(bs.wo) > 0.0)
             bs.pdf = pdf / (4.0 * dr.dot(bs.wo, m))
             bs.sampled_type = mi.UInt32(+mi.BSDFFlags.GlossyReflection)
-            weight = distr.smith_g1(bs.wo, m)
+            weight = self._sample_weight(distr, si.wi, bs.wo, m)
             cos_m = dr.dot(si.wi, m)
         else:
             if not ctx.is_enabled(mi.BSDFFlags.DeltaReflection):
@@ -251,7 +261,7 @@ class ThinFilmConductor(mi.BSDF):
         d = distr.eval(m)
         active = active & (d != 0.0)
         g1_i = distr.smith_g1(si.wi, m)
-        value = d * g1_i * distr.smith_g1(wo, m) / (4.0 * cos_i)  # includes the cosine at wo
+        value = self._masked(d, g1_i, distr, si.wi, wo, m) / (4.0 * cos_i)  # includes the cosine at wo
         f = self._fresnel_value(ctx, si, dr.dot(si.wi, m), wo, m, active)
         pdf = d * g1_i / (4.0 * cos_i)
         return dr.select(active, f * value, 0.0), dr.select(active, pdf, 0.0)

@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 
 from conftest import render_with_noise, run_bpy
+from test_textures import mitsuba_file, write_image
 from spectral_bench.exporters import art_writer, ir, ir_json, pbrt_writer, rgb_scene, textures, validate
 
 W, H = 64, 32
@@ -28,14 +29,7 @@ GREY = 0.05
 
 
 def write_exr(path, rgb):
-    import OpenImageIO as oiio
-    path.parent.mkdir(parents=True, exist_ok=True)
-    rgb = np.ascontiguousarray(rgb, dtype=np.float32)
-    out = oiio.ImageOutput.create(str(path))
-    assert out.open(str(path), oiio.ImageSpec(rgb.shape[1], rgb.shape[0], 3, "float")), oiio.geterror()
-    out.write_image(rgb)
-    out.close()
-    return path
+    return write_image(path, np.asarray(rgb, dtype=np.float32))
 
 
 def patches_map(path):
@@ -220,13 +214,9 @@ def test_validation_checks_the_maps_file_and_fields(tmp_path):
 
 
 def test_writers_hold_the_map_inside_their_folder_or_say_unsupported(tmp_path):
-    import xml.etree.ElementTree as ET
-    from spectral_bench.exporters import mitsuba_writer
     sc = map_scene(tmp_path)
-    xml = mitsuba_writer.write(sc, tmp_path / "mitsuba")
-    em = ET.parse(xml).getroot().find(".//emitter[@type='envmap']")
-    rel = em.find("string[@name='filename']").get("value")
-    assert rel == "textures/environment.exr" and (tmp_path / "mitsuba" / rel).is_file()
+    em, rel = mitsuba_file(sc, tmp_path, ".//emitter[@type='envmap']")
+    assert rel == "textures/environment.exr"
     assert em.find("float[@name='scale']").get("value") == "2.0"
     for found in (pbrt_writer.unsupported(sc), art_writer.unsupported(sc), rgb_scene.problems(sc, {"ggx"})):
         assert ("environment", "type") in {(o, f) for o, f, *_ in found}

@@ -27,18 +27,24 @@ TEXELS = {"bottom-left": (0.7, 0.05, 0.05), "bottom-right": (0.05, 0.7, 0.05),
 SIZE, SPP = 32, 32
 
 
-def write_png(path, rows_top_down):
-    """An 8-bit sRGB PNG of linear colours (rows listed top to bottom)."""
+def write_image(path, px):
+    """An RGB image file of ``px`` (H x W x 3, rows top to bottom; uint8 or float32), by OpenImageIO."""
     import OpenImageIO as oiio
-    lin = np.asarray(rows_top_down, dtype=np.float64)
-    enc = np.where(lin <= 0.0031308, 12.92 * lin, 1.055 * lin ** (1 / 2.4) - 0.055)
-    px = np.round(np.clip(enc, 0, 1) * 255).astype(np.uint8)
+    px = np.ascontiguousarray(px)
     path.parent.mkdir(parents=True, exist_ok=True)
     out = oiio.ImageOutput.create(str(path))
-    assert out.open(str(path), oiio.ImageSpec(px.shape[1], px.shape[0], 3, "uint8")), oiio.geterror()
+    kind = "uint8" if px.dtype == np.uint8 else "float"
+    assert out.open(str(path), oiio.ImageSpec(px.shape[1], px.shape[0], 3, kind)), oiio.geterror()
     out.write_image(px)
     out.close()
     return path
+
+
+def write_png(path, rows_top_down):
+    """An 8-bit sRGB PNG of linear colours (rows listed top to bottom)."""
+    lin = np.asarray(rows_top_down, dtype=np.float64)
+    enc = np.where(lin <= 0.0031308, 12.92 * lin, 1.055 * lin ** (1 / 2.4) - 0.055)
+    return write_image(path, np.round(np.clip(enc, 0, 1) * 255).astype(np.uint8))
 
 
 def quad_png(path):
@@ -247,14 +253,23 @@ def test_validation_takes_a_textured_mesh_and_refuses_one_without_uvs(tmp_path):
     assert any(f == "shape.uvs" and "1 texture coordinates for 4 vertices" in m for _o, f, m in err.value.problems)
 
 
-def test_writers_hold_the_texture_inside_their_folder_or_say_unsupported(tmp_path):
+def mitsuba_file(sc, folder, xpath):
+    """The Mitsuba export of ``sc`` in ``folder``/mitsuba: (its element at ``xpath``, the file that
+    element names, relative to the export), the file checked to lie inside the export."""
     import xml.etree.ElementTree as ET
     from spectral_bench.exporters import mitsuba_writer
+    xml = mitsuba_writer.write(sc, folder / "mitsuba")
+    node = ET.parse(xml).getroot().find(xpath)
+    rel = node.find("string[@name='filename']").get("value")
+    assert (folder / "mitsuba" / rel).resolve().is_relative_to((folder / "mitsuba").resolve()), rel
+    assert (folder / "mitsuba" / rel).is_file(), rel
+    return node, rel
+
+
+def test_writers_hold_the_texture_inside_their_folder_or_say_unsupported(tmp_path):
     sc = textured_scene(tmp_path)
-    xml = mitsuba_writer.write(sc, tmp_path / "mitsuba")
-    bitmap = ET.parse(xml).getroot().find(".//texture[@type='bitmap']")
-    rel = bitmap.find("string[@name='filename']").get("value")
-    assert rel == "textures/floor_reflectance.exr" and (tmp_path / "mitsuba" / rel).is_file()
+    _bitmap, rel = mitsuba_file(sc, tmp_path, ".//texture[@type='bitmap']")
+    assert rel == "textures/floor_reflectance.exr"
     linear = textures.read_linear({"file": rel, "colour_space": "linear"}, tmp_path / "mitsuba")
     assert linear == pytest.approx(textures.read_linear(sc["objects"][0]["bsdf"]["reflectance_texture"], tmp_path),
                                    abs=1e-6)
