@@ -281,10 +281,6 @@ class _Writer:
                           "no polariser)"))
         if sc["render"].get("output", "rgb") == "stokes":
             found.append(("render", "output", "Stokes output: pbrt v4 has no polarisation"))
-        if textures.env_map(sc.get("environment")):
-            found.append(("environment", "type", "an environment map: pbrt v4's image infinite light takes an "
-                          "equal-area octahedral square image; this writer does not resample the IR's "
-                          "equirectangular map to it yet"))
         for obj in sc["objects"]:
             em = obj.get("emitter") or {}
             if em.get("type") == "collimated":
@@ -460,7 +456,15 @@ class _Writer:
         lines += self.camera()
         lines += ["", "WorldBegin", ""]
         env = sc.get("environment")
-        if env:
+        if textures.env_map(env):
+            # pbrt's image light reads an equal-area octahedral square (resampled, rotation applied)
+            # in the world's frame, uplifts each texel as an RGBIlluminantSpectrum and divides by
+            # its colour space's illuminant's photometric value: with the film's CIE_Y_integral, a
+            # white texel is D65 of luminance 1, the IR's (docs/scene-format.md 7.1); scale as is
+            rel = textures.write_equal_area(env, sc.get("_base_dir"), self.out)
+            lines.append(f'LightSource "infinite" "string filename" "{rel}" '
+                         f'"float scale" [ {_num(float(env.get("scale", 1.0)) * self.planted)} ]')
+        elif env:
             lines.append(f'LightSource "infinite" {self.light_params("L", env["radiance"])}')
         lines += self.lights(skipped_lights)
         for obj in sc["objects"]:

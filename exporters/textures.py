@@ -179,6 +179,62 @@ def map_mean_rgb(rgb):
     return (rgb * w[:, None, None]).sum(axis=(0, 1)) / (w.sum() * rgb.shape[1])
 
 
+def equal_area_square_directions(n):
+    """Directions (n x n x 3) of the texel centres of an equal-area octahedral square image, row 0
+    first: the mapping pbrt-v4's image infinite light reads (Clarberg, "Fast equal-area mapping of
+    the (hemi)sphere using SIMD", JGT 13(3), 2008; pbrt-v4 util/math.cpp EqualAreaSquareToSphere),
+    texel (row i, column j) at (u, v) = ((j + 0.5) / n, (i + 0.5) / n)."""
+    c = (np.arange(n) + 0.5) / n
+    u, v = np.meshgrid(2 * c - 1, 2 * c - 1)  # u across (columns), v down (rows)
+    up, vp = np.abs(u), np.abs(v)
+    signed = 1 - (up + vp)
+    r = 1 - np.abs(signed)
+    phi = np.where(r == 0, 1.0, (vp - up) / np.where(r == 0, 1.0, r) + 1) * np.pi / 4
+    z = np.copysign(1 - r * r, signed)
+    s = r * np.sqrt(np.clip(2 - r * r, 0, None))
+    return np.stack([np.copysign(np.cos(phi), u) * s, np.copysign(np.sin(phi), v) * s, z], axis=-1)
+
+
+def equirect_lookup(rgb, directions, rotation=0.0):
+    """Bilinear lookup of an equirectangular map (H x W x 3, the IR's convention, turned by
+    ``rotation`` degrees about +Z) at world ``directions`` (... x 3): u wraps, v clamps."""
+    h, w = rgb.shape[:2]
+    a = np.radians(rotation)
+    x, y, z = (directions[..., k] for k in range(3))
+    xr, yr = np.cos(a) * x + np.sin(a) * y, -np.sin(a) * x + np.cos(a) * y  # Rz(-rotation) d
+    phi = np.arctan2(yr, xr)
+    theta = np.arccos(np.clip(z, -1, 1))
+    fx = ((0.5 - phi / (2 * np.pi)) % 1.0) * w - 0.5
+    fy = np.clip(theta / np.pi * h - 0.5, 0, h - 1)
+    x0, y0 = np.floor(fx).astype(int), np.floor(fy).astype(int)
+    tx, ty = (fx - x0)[..., None], (fy - y0)[..., None]
+    x0, x1 = x0 % w, (x0 + 1) % w
+    y1 = np.minimum(y0 + 1, h - 1)
+    return ((1 - ty) * ((1 - tx) * rgb[y0, x0] + tx * rgb[y0, x1]) + ty * ((1 - tx) * rgb[y1, x0] + tx * rgb[y1, x1]))
+
+
+def write_equal_area(env, base_dir, out_dir, stem="environment"):
+    """The map resampled to pbrt-v4's equal-area octahedral square (side sqrt(W H), at least 16,
+    bilinear), the rotation applied, written as linear float OpenEXR; returns its path relative to
+    ``out_dir``."""
+    import OpenImageIO as oiio
+    rgb = read_linear(env, base_dir)
+    n = max(16, int(round(np.sqrt(rgb.shape[0] * rgb.shape[1]))))
+    square = np.ascontiguousarray(equirect_lookup(rgb, equal_area_square_directions(n), float(env.get("rotation", 0.0))),
+                                  dtype=np.float32)
+    rel = f"textures/{stem}.exr"
+    dest = Path(out_dir) / rel
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    out = oiio.ImageOutput.create(str(dest))
+    if out is None or not out.open(str(dest), oiio.ImageSpec(n, n, 3, "float")):
+        raise ValueError(f"cannot write {dest}: {oiio.geterror()}")
+    try:
+        out.write_image(square)
+    finally:
+        out.close()
+    return rel
+
+
 def env_map(env):
     """Whether an IR environment is a map."""
     return bool(env) and env.get("type") == "map"

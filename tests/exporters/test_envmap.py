@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 
 from conftest import render_with_noise, run_bpy
+from test_pbrt import needs_pbrt
 from test_textures import mitsuba_file, write_image
 from spectral_bench.exporters import art_writer, ir, ir_json, pbrt_writer, rgb_scene, textures, validate
 
@@ -52,6 +53,19 @@ def test_the_map_convention_puts_u_half_at_plus_x_and_the_top_row_at_the_zenith(
     d = textures.equirect_directions(W, H)
     assert d[H // 2, W // 2] == pytest.approx([np.cos(np.pi / W), -np.sin(np.pi / W), 0.0], abs=0.06)
     assert d[H // 2, W // 4, 1] > 0.99 and d[0, 0, 2] > 0.99 and d[-1, 0, 2] < -0.99
+
+
+def test_the_equal_area_square_is_unit_directions_and_the_lookup_reads_the_map_where_it_points():
+    """pbrt's map (exporters/textures.py): every texel centre a unit direction; a map that holds
+    its own directions, looked up at the square's directions, gives them back (bilinear, so to
+    the map's resolution), and turned by 90 degrees gives back the turned directions."""
+    sq = textures.equal_area_square_directions(64)
+    assert np.abs(np.linalg.norm(sq, axis=-1) - 1).max() < 1e-12
+    assert sq[0, 0, 2] < -0.99 and sq[31, 31, 2] > 0.99  # the corners hold the nadir, the centre the zenith
+    m = textures.equirect_directions(256, 128)
+    assert np.abs(textures.equirect_lookup(m, sq) - sq).max() < 2e-3
+    turned = textures.equirect_lookup(m, sq, rotation=90.0)
+    assert np.abs(turned - np.stack([sq[..., 1], -sq[..., 0], sq[..., 2]], axis=-1)).max() < 2e-3
 
 
 @pytest.fixture(scope="module")
@@ -156,21 +170,34 @@ def test_cycles_and_mitsuba_see_the_same_sky_in_each_direction(exported, tmp_pat
     """Blender's own render (Cycles) of its world and Mitsuba's of the export see the same patch in
     each direction: the map is placed as Blender places it."""
     folder, out = exported
-    seen = {}
     # a Mapping node's rotation about Z (90 degrees): a Point mapping turns the map by -90 (+X then
     # sees what was towards +Y), a Texture mapping by +90 (what was towards -Y: the grey background)
     assert out["look_px_point90"]["environment"]["rotation"] == -90.0
     assert out["look_px_texture90"]["environment"]["rotation"] == 90.0
+    _looks_agree(exported, tmp_path, "mitsuba")
+
+
+def _looks_agree(exported, tmp_path, backend):
+    folder, out = exported
+    seen = {}
     for name, expected in (("look_px", "red"), ("look_py", "green"), ("look_mx", "grey"),
                            ("look_px_point90", "green"), ("look_px_texture90", "grey")):
         sc = dict(out[name], _base_dir=str(folder))
-        _sc, names, img, _se = render_with_noise(sc, tmp_path / name, 16)
-        mitsuba = img[..., [names.index(c) for c in "RGB"]].reshape(-1, 3).mean(axis=0)
-        seen[name] = (_dominant(out[name + "_cycles"]), _dominant(mitsuba), expected)
+        _sc, names, img, _se = render_with_noise(sc, tmp_path / name, 16, backend=backend)
+        rgb = img[..., [names.index(c) for c in "RGB"]].reshape(-1, 3).mean(axis=0)
+        seen[name] = (_dominant(out[name + "_cycles"]), _dominant(rgb), expected)
         # the patch's radiance itself, not only its hue (a map at the wrong scale would pass the hue)
         if expected != "grey":
-            assert float(mitsuba.max()) == pytest.approx(1.0, rel=0.02), (name, mitsuba)
-    assert all(c == m == e for c, m, e in seen.values()), seen
+            assert float(rgb.max()) == pytest.approx(1.0, rel=0.02), (backend, name, rgb)
+    assert all(c == m == e for c, m, e in seen.values()), (backend, seen)
+
+
+@pytest.mark.slow
+@needs_pbrt
+def test_cycles_and_pbrt_see_the_same_sky_in_each_direction(exported, tmp_path):
+    """pbrt-v4 renders the map resampled to its equal-area square (exporters/textures.py): the same
+    patch in each direction as Cycles, at the map's radiance (its image light's scale as the IR's)."""
+    _looks_agree(exported, tmp_path, "pbrt")
 
 
 @pytest.mark.slow
@@ -218,7 +245,13 @@ def test_writers_hold_the_map_inside_their_folder_or_say_unsupported(tmp_path):
     em, rel = mitsuba_file(sc, tmp_path, ".//emitter[@type='envmap']")
     assert rel == "textures/environment.exr"
     assert em.find("float[@name='scale']").get("value") == "2.0"
-    for found in (pbrt_writer.unsupported(sc), art_writer.unsupported(sc), rgb_scene.problems(sc, {"ggx"})):
+    assert pbrt_writer.unsupported(sc) == []
+    pbrt_writer.write(sc, tmp_path / "pbrt")
+    text = (tmp_path / "pbrt" / pbrt_writer.SCENE_FILE).read_text()
+    assert 'LightSource "infinite" "string filename" "textures/environment.exr" "float scale" [ 2 ]' in text
+    square = textures.read_linear({"file": "textures/environment.exr", "colour_space": "linear"}, tmp_path / "pbrt")
+    assert square.shape[0] == square.shape[1] == round(np.sqrt(W * H))
+    for found in (art_writer.unsupported(sc), rgb_scene.problems(sc, {"ggx"})):
         assert ("environment", "type") in {(o, f) for o, f, *_ in found}
 
 
