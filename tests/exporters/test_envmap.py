@@ -16,6 +16,7 @@ file export copying the map beside it."""
 import copy
 import json
 import math
+import os
 
 import numpy as np
 import pytest
@@ -73,10 +74,12 @@ def exported(tmp_path_factory):
     folder = tmp_path_factory.mktemp("hdri")
     patches_map(folder / "patches.exr")
     sun_map(folder / "sun.exr")
+    patches_map(folder.parent / "elsewhere_sky.exr")
+    os.mkfifo(folder / "fifo.exr")
     return folder, run_bpy(f"""
         import math, bmesh
         from spectral_bench.batch import exr
-        from spectral_bench.exporters import extract_blender
+        from spectral_bench.exporters import extract_blender, validate
         bpy.ops.wm.save_as_mainfile(filepath={str(folder / 'scene.blend')!r})
 
         def world(name, image):
@@ -124,6 +127,20 @@ def exported(tmp_path_factory):
             bpy.ops.render.render(write_still=True, scene=sc.name)
             ch = exr.read(sc.render.filepath)
             out[name + "_cycles"] = [float(ch[c].mean()) for c in "RGB"]
+        for name, path in (("outside", {str(folder.parent / 'elsewhere_sky.exr')!r}), ("fifo", "//fifo.exr")):
+            sc = bpy.data.scenes.new("bad_" + name)
+            w = world("bad_" + name + "_world", "patches.exr")
+            env = next(n for n in w.node_tree.nodes if n.bl_idname == "ShaderNodeTexEnvironment")
+            env.image = env.image.copy()
+            env.image.name = name + "_sky"
+            env.image.filepath = path  # not loaded: Blender reads pixels when they are used
+            sc.world = w
+            camera(sc, "bad_" + name + "_cam", (0, 0, 0), (90, 0, 0), 30.0, 8)
+            try:
+                extract_blender.extract_scene(sc)
+                out["bad_" + name] = None
+            except validate.SceneError as exc:
+                out["bad_" + name] = [list(p) for p in exc.problems]
         sc = bpy.data.scenes.new("shadow")
         sc.world = world("shadow_world", "sun.exr")
         camera(sc, "shadow_cam", (0, 0, 8), (0, 0, 0), 40.0, 32)
@@ -159,6 +176,16 @@ def test_an_hdri_world_exports_as_a_map_with_its_strength(exported):
     msgs = [w["message"] for w in out["look_px"].get("warnings", [])]
     assert any("environment map" in m and "uplifted by the renderer" in m for m in msgs), msgs
     assert not any("substituted" in m for m in msgs), msgs
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case, words", [("outside", "outside the .blend's folder"), ("fifo", "FIFO")])
+def test_a_hostile_map_fails_its_scene_alone_named(exported, case, words):
+    _folder, out = exported
+    (problem,) = out["bad_" + case]
+    assert problem[0] == f"world[bad_{case}_world]" and problem[1] == "node_tree.nodes[Environment Texture].image"
+    assert words in problem[2] and f"{case}_sky" in problem[2], problem
+    assert out["look_px"]["environment"]["type"] == "map"  # the good scenes beside it exported
 
 
 def _dominant(rgb):
