@@ -27,15 +27,17 @@ from pathlib import Path
 import numpy as np
 
 from . import ir, mesh_io, rgb_reduction
+from . import textures as tex_mod
 
 UNMAPPED_NEEDS = ("fluorescence", "dispersion", "thin_film")
 SPHERE_LEVEL = 6  # icosphere subdivisions for the renderers without analytic spheres (both)
 POLARIZER_TRANSMITTANCE = 0.5  # an ideal linear polariser passes half of unpolarised light (Malus)
 
 
-def problems(scene, distributions, light_types=frozenset()):
+def problems(scene, distributions, light_types=frozenset(), env_maps=False, textures=False):
     """[(object, field, message, approximation or None)]: what an RGB renderer with the given
-    microfacet ``distributions`` and delta ``light_types`` cannot express in ``scene``."""
+    microfacet ``distributions`` and delta ``light_types`` cannot express in ``scene`` (an
+    environment map unless ``env_maps``, an image texture unless ``textures``)."""
     out = []
     cam = scene["camera"]
     if cam.get("polarizer"):
@@ -61,13 +63,13 @@ def problems(scene, distributions, light_types=frozenset()):
             out.append((light["name"], "beam_width", "a spot's linear falloff in angle between beam_width and "
                         "cutoff_angle has no counterpart",
                         "rendered with the renderer's own smooth falloff over the same angles"))
-    if (scene.get("environment") or {}).get("type") == "map":
+    if (scene.get("environment") or {}).get("type") == "map" and not env_maps:
         out.append(("environment", "type", "an environment map: not mapped to this renderer's world textures "
-                    "yet (Mitsuba renders it)", None))
+                    "yet (Mitsuba, pbrt-v4 and Cycles render it)", None))
     for obj in scene["objects"]:
-        if (obj.get("bsdf") or {}).get("reflectance_texture") is not None:
+        if (obj.get("bsdf") or {}).get("reflectance_texture") is not None and not textures:
             out.append((obj["name"], "bsdf.reflectance_texture", "an image texture: not mapped to this renderer's "
-                        "textures yet (Mitsuba and pbrt-v4 render it)", None))
+                        "textures yet (Mitsuba, pbrt-v4 and Cycles render it)", None))
             continue
         if (obj.get("bsdf") or {}).get("type") == "coated_diffuse":
             out.append((obj["name"], "bsdf.type", "a coated diffuse (Mitsuba 3's plastic: a closed form of the coat's "
@@ -174,7 +176,10 @@ def _shape(obj, base_dir):
     if "to_world" in s:
         m = np.asarray(s["to_world"], dtype=np.float64)
         v = (np.c_[v, np.ones(len(v))] @ m.T)[:, :3]
-    return {"type": "mesh", "vertices": v.tolist(), "faces": np.asarray(faces, dtype=np.int64).tolist()}
+    out = {"type": "mesh", "vertices": v.tolist(), "faces": np.asarray(faces, dtype=np.int64).tolist()}
+    if s.get("uvs") is not None:
+        out["uvs"] = [list(map(float, uv)) for uv in s["uvs"]]
+    return out
 
 
 def _material(obj, distributions, reduced):
@@ -210,10 +215,14 @@ def _light(light, reduced):
     return {"name": light["name"], "type": light["type"], key: rgb.tolist(), **geometry}
 
 
-def build(scene, distributions, approximate=False, light_types=frozenset()):
+def build(scene, distributions, approximate=False, light_types=frozenset(), out_dir=None, env_maps=False,
+          textures=False):
     """The RGB scene (see the module docstring). Raises ValueError naming object and field when
-    something cannot be expressed (and, with ``approximate``, has no stated approximation)."""
-    found = problems(scene, distributions, light_types)
+    something cannot be expressed (and, with ``approximate``, has no stated approximation). An
+    environment map (``env_maps``) and image textures (``textures``) are written into ``out_dir``
+    as linear OpenEXR (exporters/textures.py), named relative to it: an RGB renderer reads their
+    texels as linear sRGB, with no uplift."""
+    found = problems(scene, distributions, light_types, env_maps, textures)
     blocking = [p for p in found if not approximate or p[3] is None]
     if blocking:
         raise ValueError("; ".join(f"{o}.{f}: {m}" for o, f, m, _ in blocking))
@@ -221,8 +230,13 @@ def build(scene, distributions, approximate=False, light_types=frozenset()):
     depth = r.get("max_depth", 64)
     reduced = []
     env = scene.get("environment")
-    env_rgb = None
-    if env:
+    env_rgb = env_map = None
+    if tex_mod.env_map(env):
+        env_map = {"file": tex_mod.write_linear(env, "environment", scene.get("_base_dir"), out_dir, stem="environment"),
+                   "scale": float(env.get("scale", 1.0)), "rotation": float(env.get("rotation", 0.0))}
+        reduced.append({"object": "environment", "field": "file", "rgb": None,
+                        "note": "an environment map: its texels are linear sRGB already (no reduction)"})
+    elif env:
         rgb, note = rgb_reduction.emission_rgb(env["radiance"])
         reduced.append({"object": "environment", "field": "radiance", "rgb": rgb.round(8).tolist(), "note": note})
         env_rgb = rgb.tolist()
@@ -233,14 +247,21 @@ def build(scene, distributions, approximate=False, light_types=frozenset()):
             rgb, note = rgb_reduction.emission_rgb(obj["emitter"]["radiance"])
             reduced.append({"object": obj["name"], "field": "emitter.radiance", "rgb": rgb.round(8).tolist(), "note": note})
             emission = rgb.tolist()
+        material = _material(obj, distributions, reduced)
+        tex = tex_mod.textured(obj)
+        if tex is not None and material is not None and material["type"] == "diffuse":
+            material["texture"] = tex_mod.write_linear(tex, obj["name"], scene.get("_base_dir"), out_dir)
+            material["filter"] = tex.get("filter", "bilinear")
+            reduced.append({"object": obj["name"], "field": "bsdf.reflectance_texture", "rgb": None,
+                            "note": "an image texture: its texels are linear sRGB already (no reduction)"})
         objects.append({"name": obj["name"], "shape": _shape(obj, scene.get("_base_dir")),
-                        "material": _material(obj, distributions, reduced), "emission": emission})
+                        "material": material, "emission": emission})
     fields = {(o, f) for o, f, _, _ in found}
     return {"name": scene["name"], "case": scene.get("case"),
             "render": {"width": int(r["width"]), "height": int(r["height"]), "spp": int(r["spp"]),
                        "max_depth": 1024 if depth is None or depth < 0 else int(depth)},
             "camera": {"to_world": cam["to_world"], "fov": float(cam["fov"]), "fov_axis": cam.get("fov_axis", "x")},
-            "environment": None if env_rgb is None else {"rgb": env_rgb},
+            "environment": {"map": env_map} if env_map else None if env_rgb is None else {"rgb": env_rgb},
             "objects": objects,
             "lights": [_light(light, reduced) for light in scene.get("lights", [])],
             "film_scale": POLARIZER_TRANSMITTANCE if (cam.get("name", "camera"), "polarizer") in fields else 1.0,

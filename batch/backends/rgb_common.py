@@ -28,6 +28,8 @@ class RgbBackend:
     name = label = ""
     distributions = frozenset()
     light_types = frozenset()  # the IR's delta light types (point, spot, directional) it renders
+    environment_maps = False  # renders an IR environment map (docs/scene-format.md 7.1)
+    textures = False  # renders an IR image texture (docs/scene-format.md 6.7)
 
     def __init__(self, executable=None, approximate=False):
         self.executable = executable
@@ -39,7 +41,7 @@ class RgbBackend:
         return (self.name,)
 
     def mode_for(self, scene):
-        found = rgb_scene.problems(scene, self.distributions, self.light_types)
+        found = rgb_scene.problems(scene, self.distributions, self.light_types, self.environment_maps, self.textures)
         blocking = [p for p in found if not self.approximate or p[3] is None]
         if blocking:
             hint = any(p[3] for p in blocking)
@@ -49,9 +51,10 @@ class RgbBackend:
 
     def export(self, scene, out_dir):
         """Reduce ``scene`` to RGB and write it in this renderer's format into ``out_dir``."""
-        rgb = rgb_scene.build(scene, self.distributions, approximate=self.approximate, light_types=self.light_types)
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
+        rgb = rgb_scene.build(scene, self.distributions, approximate=self.approximate, light_types=self.light_types,
+                              out_dir=out, env_maps=self.environment_maps, textures=self.textures)
         return self.write(rgb, out)
 
 

@@ -220,6 +220,13 @@ def _looks_agree(exported, tmp_path, backend):
 
 
 @pytest.mark.slow
+def test_blenders_cycles_and_the_exports_cycles_see_the_same_sky(exported, tmp_path):
+    """-r cycles renders the export's map as an Environment Texture turned by the map's rotation:
+    the same patch in each direction as Blender's own world."""
+    _looks_agree(exported, tmp_path, "cycles")
+
+
+@pytest.mark.slow
 @needs_pbrt
 def test_cycles_and_pbrt_see_the_same_sky_in_each_direction(exported, tmp_path):
     """pbrt-v4 renders the map resampled to its equal-area square (exporters/textures.py): the same
@@ -278,6 +285,7 @@ def test_writers_hold_the_map_inside_their_folder_or_say_unsupported(tmp_path):
     assert 'LightSource "infinite" "string filename" "textures/environment.exr" "float scale" [ 2 ]' in text
     square = textures.read_linear({"file": "textures/environment.exr", "colour_space": "linear"}, tmp_path / "pbrt")
     assert square.shape[0] == square.shape[1] == round(np.sqrt(W * H))
+    assert rgb_scene.problems(sc, {"ggx"}, env_maps=True) == []
     for found in (art_writer.unsupported(sc), rgb_scene.problems(sc, {"ggx"})):
         assert ("environment", "type") in {(o, f) for o, f, *_ in found}
 

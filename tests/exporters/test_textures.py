@@ -211,6 +211,16 @@ def test_the_pattern_check_sees_a_texture_upside_down(exported, tmp_path):
 
 
 @pytest.mark.slow
+def test_the_checkerboard_appears_in_a_cycles_render_the_right_way_up(exported, tmp_path):
+    """-r cycles: the export's texture as an Image Texture node on the mesh's UVs (RGB texels, no
+    uplift)."""
+    folder, out = exported
+    sc = dict(out["diffuse"], _base_dir=str(folder))
+    rendered, names, img, _se = render_with_noise(sc, tmp_path, SPP, backend="cycles")
+    _assert_pattern(names, img, expected_texels(folder))
+
+
+@pytest.mark.slow
 @needs_pbrt
 def test_the_checkerboard_appears_in_a_pbrt_render_the_right_way_up(exported, tmp_path):
     folder, out = exported
@@ -281,6 +291,7 @@ def test_writers_hold_the_texture_inside_their_folder_or_say_unsupported(tmp_pat
     assert ("floor", "bsdf.reflectance_texture") in {(o, f) for o, f, *_ in art_writer.unsupported(sc)}
     rgb = rgb_scene.problems(sc, {"ggx"})
     assert ("floor", "bsdf.reflectance_texture") in {(o, f) for o, f, *_ in rgb}
+    assert rgb_scene.problems(sc, {"ggx"}, textures=True) == []
 
 
 def test_the_scene_file_export_copies_the_texture_beside_it(tmp_path):

@@ -40,6 +40,8 @@ class CyclesBackend(RgbBackend):
     label = "Cycles"
     distributions = frozenset({"ggx", "beckmann"})
     light_types = frozenset({"point", "spot", "directional"})
+    environment_maps = True  # an Environment Texture node (worker.py)
+    textures = True  # an Image Texture node on the mesh's UV map (worker.py)
 
     def availability(self):
         if self.executable:

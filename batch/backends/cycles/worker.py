@@ -32,7 +32,11 @@ intern/cycles/kernel/svm/closure.h for the roughness conventions):
   the sphere) with exact radial custom normals, smooth-shaded. Cycles' point primitives are exact
   spheres but a ray inside one never finds its exit (measured on ggx_glass: the refracted view of
   the light through the bottom of the sphere was black, max |z| 988 against the reference).
-- World: Background colour rgb / strength, strength = the largest component (radiance = rgb).
+- World: Background colour rgb / strength, strength = the largest component (radiance = rgb); an
+  environment map as an Environment Texture (the export's linear OpenEXR, Linear Rec.709) of
+  strength its scale, turned by a Point Mapping node of Z rotation -rotation.
+- Image textures: an Image Texture node (the export's linear OpenEXR) into the Diffuse BSDF's
+  Color, on a UV map holding the mesh's per-vertex uvs: texels are RGB already (no reduction).
 - Delta lights (make_light): point and spot lights of power 4 pi I (Cycles' point intensity is
   P / (4 pi), measured), radius 0; a spot's size is twice the cutoff angle and its blend
   1 - beam_width / cutoff (Cycles' smoothstep falloff: an approximation unless beam = cutoff); a
@@ -120,6 +124,15 @@ def _front_only(nt, out, shader_output):
     nt.links.new(mix.outputs[0], out.inputs["Surface"])
 
 
+def _linear_image(bpy, rel):
+    """An export's linear OpenEXR (relative to the .blend, which is saved beside it) as a Blender
+    image in Linear Rec.709."""
+    img = bpy.data.images.load(str(Path(bpy.context.scene["export_dir"]) / rel), check_existing=True)
+    img.filepath = "//" + rel
+    img.colorspace_settings.name = "Linear Rec.709"
+    return img
+
+
 def make_material(bpy, name, material, emission):
     m, nt, out = _new_material(bpy, name)
     m.cycles.emission_sampling = "FRONT" if emission is not None else "NONE"
@@ -130,6 +143,12 @@ def make_material(bpy, name, material, emission):
             node = nt.nodes.new("ShaderNodeBsdfDiffuse")
             node.inputs["Color"].default_value = (*material["albedo"], 1.0)
             node.inputs["Roughness"].default_value = 0.0
+            if material.get("texture"):  # linear sRGB texels on the mesh's UV map (its active one)
+                tex = nt.nodes.new("ShaderNodeTexImage")
+                tex.image = _linear_image(bpy, material["texture"])
+                tex.interpolation = "Closest" if material.get("filter") == "nearest" else "Linear"
+                tex.extension = "REPEAT"
+                nt.links.new(tex.outputs["Color"], node.inputs["Color"])
         else:
             rough = math.sqrt(max(material["alpha"], 0.0))
             if kind == "conductor":
@@ -204,12 +223,28 @@ def build(rgb, blend_path):
     if bpy.data.colorspace.working_space != "Linear Rec.709":  # read-only; a new file's default
         raise RuntimeError(f"scene-linear space is {bpy.data.colorspace.working_space}, not Linear Rec.709 (sRGB)")
     setup_render(sc, rgb)
+    sc["export_dir"] = str(Path(blend_path).parent)
     world = bpy.data.worlds.new("environment")
     world.use_nodes = True
     bg = world.node_tree.nodes["Background"]
-    strength, colour = _strength(rgb["environment"]["rgb"]) if rgb["environment"] else (0.0, [0.0, 0.0, 0.0])
-    bg.inputs["Color"].default_value = (*colour, 1.0)
-    bg.inputs["Strength"].default_value = strength
+    env_map = (rgb["environment"] or {}).get("map")
+    if env_map:
+        # the IR's map is Blender's equirectangular convention; its rotation rho turns it about +Z,
+        # which a Point mapping does by -rho (Blender looks the map up at R d)
+        nt = world.node_tree
+        env = nt.nodes.new("ShaderNodeTexEnvironment")
+        env.image = _linear_image(bpy, env_map["file"])
+        coords, mapping = nt.nodes.new("ShaderNodeTexCoord"), nt.nodes.new("ShaderNodeMapping")
+        mapping.vector_type = "POINT"
+        mapping.inputs["Rotation"].default_value = (0.0, 0.0, math.radians(-env_map["rotation"]))
+        nt.links.new(coords.outputs["Generated"], mapping.inputs["Vector"])
+        nt.links.new(mapping.outputs["Vector"], env.inputs["Vector"])
+        nt.links.new(env.outputs["Color"], bg.inputs["Color"])
+        bg.inputs["Strength"].default_value = env_map["scale"]
+    else:
+        strength, colour = _strength(rgb["environment"]["rgb"]) if rgb["environment"] else (0.0, [0.0, 0.0, 0.0])
+        bg.inputs["Color"].default_value = (*colour, 1.0)
+        bg.inputs["Strength"].default_value = strength
     sc.world = world
     cam = rgb["camera"]
     cd = bpy.data.cameras.new("camera")
@@ -232,6 +267,10 @@ def build(rgb, blend_path):
             verts, faces = shape["vertices"], shape["faces"]
         me = bpy.data.meshes.new(obj["name"])
         me.from_pydata([tuple(v) for v in verts], [], [tuple(f) for f in faces])
+        if shape.get("uvs") is not None:  # one (u, v) per vertex: each face corner takes its vertex's
+            layer = me.uv_layers.new(name="UVMap")
+            for loop in me.loops:
+                layer.data[loop.index].uv = shape["uvs"][loop.vertex_index]
         if normals is not None:
             me.shade_smooth()
             me.normals_split_custom_set_from_vertices([tuple(n) for n in normals])  # exact radial normals
@@ -241,6 +280,8 @@ def build(rgb, blend_path):
     for light in rgb.get("lights", []):
         make_light(bpy, sc, light)
     sc["spectral_bench"] = json.dumps({k: rgb[k] for k in ("film_scale", "stokes", "approximated")})
+    if "export_dir" in sc:
+        del sc["export_dir"]  # the images are named relative to the .blend
     bpy.ops.wm.save_as_mainfile(filepath=str(blend_path), compress=True)
 
 
