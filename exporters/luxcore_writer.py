@@ -8,7 +8,8 @@ normal; spheres are icospheres (level 6, every point within 4e-5 r of the sphere
 vertex normals), as LuxCore has no analytic sphere.
 
 Materials (LuxCore 2.x names, src/slg/scene/parsematerials.cpp):
-- diffuse: ``matte`` (kd = albedo); conductor: ``metal2`` with RGB ``n``/``k`` and
+- diffuse: ``matte`` (kd = albedo, or an ``imagemap`` of the export's linear texture on the mesh's
+  uvs, gamma 1); conductor: ``metal2`` with RGB ``n``/``k`` and
   ``uroughness = vroughness = alpha``. LuxCore's microfacet distribution (SchlickDistribution_D in
   materialdefs_funcs_generic.cl) is r / (pi (r cos^2 + sin^2)^2) with r = u * v = alpha^2: GGX's
   D with the IR's alpha; its shadowing term is Schlick's approximation of Smith's G
@@ -94,7 +95,14 @@ def material_lines(name, material, emission):
             out += [f"{p}.uroughness = {_v(material['alpha'])}", f"{p}.vroughness = {_v(material['alpha'])}"]
     else:
         front = f"scene.materials.{name}_front"
-        if material["type"] == "diffuse":
+        if material["type"] == "diffuse" and material.get("texture"):
+            tex = f"scene.textures.{name}_kd"
+            out += [f'{tex}.type = "imagemap"', f'{tex}.file = "{material["texture"]}"', f"{tex}.gamma = 1",
+                    f'{tex}.channel = "rgb"', f'{tex}.wrap = "repeat"',
+                    f'{tex}.filter = "{"nearest" if material.get("filter") == "nearest" else "linear"}"',
+                    f'{tex}.mapping.type = "uvmapping2d"',
+                    f'{front}.type = "matte"', f'{front}.kd = "{name}_kd"']
+        elif material["type"] == "diffuse":
             out += [f'{front}.type = "matte"', f"{front}.kd = {_v(material['albedo'])}"]
         else:
             out += [f'{front}.type = "metal2"', f"{front}.n = {_v(material['eta'])}", f"{front}.k = {_v(material['k'])}",
@@ -113,6 +121,14 @@ def shape_geometry(shape):
     if shape["type"] == "sphere":
         return rgb_scene.icosphere(shape["center"], shape["radius"], rgb_scene.SPHERE_LEVEL)
     return np.asarray(shape["vertices"]), np.asarray(shape["faces"]), None
+
+
+def _uvs(shape):
+    """The mesh's per-vertex texture coordinates as LuxCore reads them (or None): its PLY loader
+    takes them as s, t (not u, v: measured, those are ignored) and its imagemap reads t down, so
+    the IR's v up is written as 1 - v (measured: a 2 x 2 texture upside down otherwise)."""
+    uvs = shape.get("uvs")
+    return None if uvs is None else [[u, 1.0 - v] for u, v in uvs]
 
 
 def config_lines(rgb, seed=0):
@@ -166,7 +182,7 @@ def write(rgb, out_dir):
         lines += material_lines(name, obj["material"], obj["emission"])
         verts, faces, normals = shape_geometry(obj["shape"])
         rel = f"meshes/{name}.ply"
-        mesh_io.write_ply(out / rel, verts, faces, normals=normals)
+        mesh_io.write_ply(out / rel, verts, faces, normals=normals, uvs=_uvs(obj["shape"]), uv_names=("s", "t"))
         lines += [f'scene.shapes.{name}.type = "mesh"', f'scene.shapes.{name}.ply = "{rel}"',
                   f'scene.objects.{name}.shape = "{name}"', f'scene.objects.{name}.material = "{name}"']
     for k, light in enumerate(rgb.get("lights", [])):

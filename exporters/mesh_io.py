@@ -7,7 +7,7 @@ import numpy as np
 from plyfile import PlyData, PlyElement
 
 
-def write_ply(path, vertices, faces, normals=None, uvs=None):
+def write_ply(path, vertices, faces, normals=None, uvs=None, uv_names=("u", "v")):
     """Binary PLY; ``normals`` (per vertex, optional) are written as nx, ny, nz, texture
     coordinates ``uvs`` (per vertex, optional) as u, v (the IR's: v up; a writer whose renderer
     reads v down flips them first)."""
@@ -17,7 +17,7 @@ def write_ply(path, vertices, faces, normals=None, uvs=None):
     if normals is not None:
         fields += [("nx", "<f4"), ("ny", "<f4"), ("nz", "<f4")]
     if uvs is not None:
-        fields += [("u", "<f4"), ("v", "<f4")]
+        fields += [(uv_names[0], "<f4"), (uv_names[1], "<f4")]
     vert = np.empty(len(v), dtype=fields)
     vert["x"], vert["y"], vert["z"] = v.T
     if normals is not None:
@@ -25,7 +25,7 @@ def write_ply(path, vertices, faces, normals=None, uvs=None):
         vert["nx"], vert["ny"], vert["nz"] = n.T
     if uvs is not None:
         uv = np.asarray(uvs, dtype="<f4").reshape(-1, 2)
-        vert["u"], vert["v"] = uv.T
+        vert[uv_names[0]], vert[uv_names[1]] = uv.T
     face = np.empty(len(f), dtype=[("vertex_indices", "<i4", (3,))])
     face["vertex_indices"] = f
     path = Path(path)

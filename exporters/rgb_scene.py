@@ -69,7 +69,7 @@ def problems(scene, distributions, light_types=frozenset(), env_maps=False, text
     for obj in scene["objects"]:
         if (obj.get("bsdf") or {}).get("reflectance_texture") is not None and not textures:
             out.append((obj["name"], "bsdf.reflectance_texture", "an image texture: not mapped to this renderer's "
-                        "textures yet (Mitsuba, pbrt-v4 and Cycles render it)", None))
+                        "textures yet (Mitsuba, pbrt-v4, Cycles and LuxCore render it)", None))
             continue
         if (obj.get("bsdf") or {}).get("type") == "coated_diffuse":
             out.append((obj["name"], "bsdf.type", "a coated diffuse (Mitsuba 3's plastic: a closed form of the coat's "

@@ -221,6 +221,14 @@ def test_the_checkerboard_appears_in_a_cycles_render_the_right_way_up(exported, 
 
 
 @pytest.mark.slow
+def test_the_checkerboard_appears_in_a_luxcore_render_the_right_way_up(exported, tmp_path):
+    folder, out = exported
+    sc = dict(out["diffuse"], _base_dir=str(folder))
+    rendered, names, img, _se = render_with_noise(sc, tmp_path, SPP, backend="luxcore")
+    _assert_pattern(names, img, expected_texels(folder))
+
+
+@pytest.mark.slow
 @needs_pbrt
 def test_the_checkerboard_appears_in_a_pbrt_render_the_right_way_up(exported, tmp_path):
     folder, out = exported

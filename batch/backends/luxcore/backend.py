@@ -34,6 +34,7 @@ class LuxCoreBackend(RgbBackend):
     label = "LuxCore"
     distributions = frozenset({"ggx"})
     light_types = frozenset({"point", "spot", "directional"})
+    textures = True  # an imagemap on the mesh's uvs (exporters/luxcore_writer.py)
 
     def availability(self):
         if self.executable:
