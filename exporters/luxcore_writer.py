@@ -22,7 +22,8 @@ Materials (LuxCore 2.x names, src/slg/scene/parsematerials.cpp):
 - Emission: ``emission = rgb`` with the default gain 1 and power 0 (Material::UpdateEmittedFactor:
   the radiance is exactly rgb) and theta 90 (TriangleLight: emits on the front side only, like
   the IR's +Z-only rectangles); an emitter without BSDF is a black matte.
-- The uniform environment: ``constantinfinite`` with ``color = rgb``, gain 1 (radiance rgb).
+- The uniform environment: ``constantinfinite`` with ``color = rgb``, gain 1 (radiance rgb); an
+  environment map: ``infinite`` (``env_map_lines``).
 - Delta lights: ``point`` (gain 4 pi: LuxCore's point intensity is gain x color / (4 pi)), ``spot``
   (coneangle = cutoff, conedeltaangle = cutoff - beam_width; intensity gain x color; its falloff
   is LuxCore's, an approximation unless beam = cutoff) and ``sharpdistant`` (irradiance gain x
@@ -131,6 +132,39 @@ def _uvs(shape):
     return None if uvs is None else [[u, 1.0 - v] for u, v in uvs]
 
 
+ENV_FLIP = True   # write the map mirrored left to right (LuxCore's azimuth runs the other way)
+ENV_TURN = 180.0  # then turn it about +Z by this many degrees besides the map's own rotation
+
+
+def env_map_lines(env_map, out):
+    """An environment map (rgb_scene: the export's linear equirectangular OpenEXR) as LuxCore's
+    ``infinite`` light: gain the map's scale, gamma 1; LuxCore reads u = phi / 2 pi about +Z (the
+    IR: u = 1/2 - phi / 2 pi), so the map is written mirrored and turned (measured against Cycles'
+    render of Blender's world: tests/exporters/test_envmap.py)."""
+    from . import textures
+    src = {"file": env_map["file"], "colour_space": "linear"}
+    rgb = textures.read_linear(src, out)
+    if ENV_FLIP:
+        rgb = rgb[:, ::-1]
+    rel = "textures/environment_luxcore.exr"
+    import OpenImageIO as oiio
+    dest = Path(out) / rel
+    img = np.ascontiguousarray(rgb, dtype=np.float32)
+    o = oiio.ImageOutput.create(str(dest))
+    if o is None or not o.open(str(dest), oiio.ImageSpec(img.shape[1], img.shape[0], 3, "float")):
+        raise ValueError(f"cannot write {dest}: {oiio.geterror()}")
+    o.write_image(img)
+    o.close()
+    a = math.radians(ENV_TURN + env_map["rotation"])
+    m = np.eye(4)
+    m[:2, :2] = [[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]]
+    s = env_map["scale"]
+    return ['scene.lights.environment.type = "infinite"', f'scene.lights.environment.file = "{rel}"',
+            "scene.lights.environment.gamma = 1", f"scene.lights.environment.gain = {_v([s, s, s])}",
+            f"scene.lights.environment.transformation = {_v(m.T)}",
+            "scene.lights.environment.visibilitymapcache.enable = 0"]
+
+
 def config_lines(rgb, seed=0):
     r = rgb["render"]
     depth = max(2, r["max_depth"])
@@ -171,7 +205,10 @@ def write(rgb, out_dir):
     out.mkdir(parents=True, exist_ok=True)
     lines = [f"# {names.comment_text(rgb['name'])} ({names.comment_text(rgb.get('case'))}), reduced to linear sRGB by spectral_bench (see reduction.json)"]
     lines += camera_lines(rgb["camera"], rgb["render"]["width"], rgb["render"]["height"])
-    if rgb["environment"]:
+    env_map = (rgb["environment"] or {}).get("map")
+    if env_map:
+        lines += env_map_lines(env_map, out)
+    elif rgb["environment"]:
         lines += ['scene.lights.environment.type = "constantinfinite"',
                   f"scene.lights.environment.color = {_v(rgb['environment']['rgb'])}",
                   "scene.lights.environment.gain = 1 1 1",

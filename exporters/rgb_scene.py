@@ -65,7 +65,7 @@ def problems(scene, distributions, light_types=frozenset(), env_maps=False, text
                         "rendered with the renderer's own smooth falloff over the same angles"))
     if (scene.get("environment") or {}).get("type") == "map" and not env_maps:
         out.append(("environment", "type", "an environment map: not mapped to this renderer's world textures "
-                    "yet (Mitsuba, pbrt-v4 and Cycles render it)", None))
+                    "yet (Mitsuba, pbrt-v4, Cycles and LuxCore render it)", None))
     for obj in scene["objects"]:
         if (obj.get("bsdf") or {}).get("reflectance_texture") is not None and not textures:
             out.append((obj["name"], "bsdf.reflectance_texture", "an image texture: not mapped to this renderer's "

@@ -227,6 +227,11 @@ def test_blenders_cycles_and_the_exports_cycles_see_the_same_sky(exported, tmp_p
 
 
 @pytest.mark.slow
+def test_cycles_and_luxcore_see_the_same_sky_in_each_direction(exported, tmp_path):
+    _looks_agree(exported, tmp_path, "luxcore")
+
+
+@pytest.mark.slow
 @needs_pbrt
 def test_cycles_and_pbrt_see_the_same_sky_in_each_direction(exported, tmp_path):
     """pbrt-v4 renders the map resampled to its equal-area square (exporters/textures.py): the same

@@ -35,6 +35,7 @@ class LuxCoreBackend(RgbBackend):
     distributions = frozenset({"ggx"})
     light_types = frozenset({"point", "spot", "directional"})
     textures = True  # an imagemap on the mesh's uvs (exporters/luxcore_writer.py)
+    environment_maps = True  # an infinite light (exporters/luxcore_writer.py)
 
     def availability(self):
         if self.executable:
