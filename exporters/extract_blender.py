@@ -352,6 +352,23 @@ LINEAR_SPACES = ("Non-Color", "Linear Rec.709", "Linear", "Raw", "Linear Rec.709
 SRGB_SPACES = ("sRGB",)
 
 
+def _image_file(img, base, what):
+    """({"file": relative to ``base``, "colour_space"}, None) of a Blender image read from a file
+    in the .blend's folder ``base`` or below, checked by exporters/textures.py before a pixel is
+    read; or (None, why not)."""
+    path = os.path.normpath(bpy.path.abspath(img.filepath, library=img.library))
+    if os.path.commonpath([os.path.realpath(path), os.path.realpath(base)]) != os.path.realpath(base):
+        return None, (f"{path!r} is outside the .blend's folder {base!r}: a {what} is read from that folder or below "
+                      "(copy it there)")
+    space = img.colorspace_settings.name
+    if space not in LINEAR_SPACES + SRGB_SPACES:
+        return None, f"colour space {space!r}: a {what} is sRGB or linear Rec.709 (Non-Color) here"
+    found = {"file": os.path.relpath(path, base).replace(os.sep, "/"),
+             "colour_space": "srgb" if space in SRGB_SPACES else "linear"}
+    _path, why = textures.resolve(found, base)
+    return (None, why) if why else (found, None)
+
+
 def _image_texture(node, field, warn, problems):
     """The IR texture of an Image Texture node feeding ``field`` (exporters/textures.py): its file
     relative to the .blend's folder (outside it, missing, a FIFO, too large: a problem naming the
@@ -377,19 +394,10 @@ def _image_texture(node, field, warn, problems):
                       "an image file beside the .blend (unpack it: File > External Data > Unpack Resources)")
     if base is None:
         return refuse("the .blend is not saved: its texture paths have no folder to be relative to")
-    path = os.path.normpath(bpy.path.abspath(img.filepath, library=img.library))
-    if os.path.commonpath([os.path.realpath(path), os.path.realpath(base)]) != os.path.realpath(base):
-        return refuse(f"{path!r} is outside the .blend's folder {base!r}: a texture is read from that folder or "
-                      "below (copy it there)")
-    space = img.colorspace_settings.name
-    if space not in LINEAR_SPACES + SRGB_SPACES:
-        return refuse(f"colour space {space!r}: a texture is sRGB or linear Rec.709 (Non-Color) here")
-    tex = {"file": os.path.relpath(path, base).replace(os.sep, "/"),
-           "colour_space": "srgb" if space in SRGB_SPACES else "linear",
-           "filter": "nearest" if node.interpolation == "Closest" else "bilinear"}
-    _path, why = textures.resolve(tex, base)
+    found, why = _image_file(img, base, "texture")
     if why:
         return refuse(why)
+    tex = dict(found, filter="nearest" if node.interpolation == "Closest" else "bilinear")
     try:
         mean = textures.mean_rgb(tex, base)
     except Exception as exc:  # noqa: BLE001 - an unreadable image fails this scene, named
@@ -747,17 +755,10 @@ def _environment_map(node, strength, field, name, warn, problems):
     def refuse(message):
         (problems if problems is not None else []).append((name, where, f"image {img.name!r}: {message}"))
         return None
-    path = os.path.normpath(bpy.path.abspath(img.filepath, library=img.library))
-    if os.path.commonpath([os.path.realpath(path), os.path.realpath(base)]) != os.path.realpath(base):
-        return refuse(f"{path!r} is outside the .blend's folder {base!r}: a map is read from that folder or below")
-    space = img.colorspace_settings.name
-    if space not in LINEAR_SPACES + SRGB_SPACES:
-        return refuse(f"colour space {space!r}: a map is sRGB or linear Rec.709 here")
-    env = {"type": "map", "file": os.path.relpath(path, base).replace(os.sep, "/"),
-           "colour_space": "srgb" if space in SRGB_SPACES else "linear", "scale": float(strength), "rotation": 0.0}
-    _path, why = textures.resolve(env, base)
+    found, why = _image_file(img, base, "map")
     if why:
         return refuse(why)
+    env = {"type": "map", **found, "scale": float(strength), "rotation": 0.0}
     if strength < 0:
         warn(f"{field.rsplit('.', 1)[0]}.Strength", f"negative strength {strength:g}: Blender subtracts light, the "
              "IR's emission is >= 0: no environment")

@@ -28,6 +28,10 @@ from spectral_bench.exporters import art_writer, ir, ir_json, pbrt_writer, rgb_s
 
 W, H = 64, 32
 GREY = 0.05
+# a patch of linear sRGB (1, 0.1, 0.1) uplifted (Jakob and Hanika's model times D65) and read back
+# through a spectral film: Mitsuba's is 0.1 % bright (known_deviations.toml), the model's round trip
+# of an in-gamut colour well under that; Cycles and LuxCore take the RGB as it is
+UPLIFT_ALLOWANCE = 0.002
 
 
 def write_exr(path, rgb):
@@ -210,12 +214,17 @@ def _looks_agree(exported, tmp_path, backend):
     for name, expected in (("look_px", "red"), ("look_py", "green"), ("look_mx", "grey"),
                            ("look_px_point90", "green"), ("look_px_texture90", "grey")):
         sc = dict(out[name], _base_dir=str(folder))
-        _sc, names, img, _se = render_with_noise(sc, tmp_path / name, 16, backend=backend)
-        rgb = img[..., [names.index(c) for c in "RGB"]].reshape(-1, 3).mean(axis=0)
+        _sc, names, img, se = render_with_noise(sc, tmp_path / name, 16, backend=backend)
+        idx = [names.index(c) for c in "RGB"]
+        rgb = img[..., idx].reshape(-1, 3).mean(axis=0)
         seen[name] = (_dominant(out[name + "_cycles"]), _dominant(rgb), expected)
-        # the patch's radiance itself, not only its hue (a map at the wrong scale would pass the hue)
+        # the patch's radiance itself, not only its hue (a map at the wrong scale would pass the hue):
+        # its brightest channel is 1 within the image mean's noise (from the passes' spread) and
+        # UPLIFT_ALLOWANCE, what a spectral renderer's uplift and film may move a colour by
         if expected != "grey":
-            assert float(rgb.max()) == pytest.approx(1.0, rel=0.02), (backend, name, rgb)
+            k = int(np.argmax(rgb))
+            se_mean = float(np.sqrt((se[..., idx[k]] ** 2).sum()) / se[..., idx[k]].size)
+            assert abs(rgb[k] - 1.0) <= 4 * se_mean + UPLIFT_ALLOWANCE, (backend, name, rgb, se_mean)
     assert all(c == m == e for c, m, e in seen.values()), (backend, seen)
 
 
