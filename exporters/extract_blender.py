@@ -357,6 +357,10 @@ def _image_file(img, base, what):
     in the .blend's folder ``base`` or below, checked by exporters/textures.py before a pixel is
     read; or (None, why not)."""
     path = os.path.normpath(bpy.path.abspath(img.filepath, library=img.library))
+    if os.path.lexists(path):  # what it is first (a FIFO, a device: never opened), then where
+        refused = blend_safety.file_problem(path)
+        if refused:
+            return None, refused
     if os.path.commonpath([os.path.realpath(path), os.path.realpath(base)]) != os.path.realpath(base):
         return None, (f"{path!r} is outside the .blend's folder {base!r}: a {what} is read from that folder or below "
                       "(copy it there)")

@@ -45,7 +45,7 @@ def relative_problem(raw):
     rel = Path(raw)
     if not raw or rel.is_absolute() or raw.startswith(("/", "\\")) or ".." in rel.parts or "\\" in raw \
             or any(ord(c) < 32 for c in raw):
-        return (f"{raw!r}: a texture file must be a relative path inside the scene's folder (no absolute path, "
+        return (f"{raw!r}: an image file must be a relative path inside the scene's folder (no absolute path, "
                 "no '..', no backslash or control character)")
     return None
 
@@ -62,7 +62,7 @@ def resolve(tex, base_dir):
     if base not in path.parents:
         return None, f"{raw!r} resolves to {path}, outside the scene's folder {base} (a link?)"
     if not path.exists():
-        return None, f"texture file not found: {path}"
+        return None, f"{raw!r}: no such file ({path})"
     refused = blend_safety.file_problem(path)
     if refused:
         return None, refused

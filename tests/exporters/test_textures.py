@@ -157,7 +157,7 @@ def test_a_blender_image_texture_exports_with_its_uvs(exported):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("case, words", [("outside", "outside the .blend's folder"), ("missing", "not found"),
+@pytest.mark.parametrize("case, words", [("outside", "outside the .blend's folder"), ("missing", "no such file"),
                                          ("huge", "20000 x 20000"), ("fifo", "FIFO")])
 def test_a_hostile_texture_fails_its_scene_alone_named(exported, case, words):
     _folder, out = exported
