@@ -52,7 +52,15 @@ def relative_problem(raw):
 
 def resolve(tex, base_dir):
     """(absolute path, None) of a texture's file, or (None, why not): every check of the module
-    docstring, the header's size included, without reading a pixel."""
+    docstring, the header's size included, without reading a pixel. A path the system refuses
+    (a name too long, ...) is a why, not an error."""
+    try:
+        return _resolve(tex, base_dir)
+    except (OSError, ValueError) as exc:
+        return None, f"{tex['file']!r}: {getattr(exc, 'strerror', None) or exc}"
+
+
+def _resolve(tex, base_dir):
     raw = tex["file"]
     why = relative_problem(raw)
     if why:
