@@ -147,14 +147,7 @@ def env_map_lines(env_map, out):
     if ENV_FLIP:
         rgb = rgb[:, ::-1]
     rel = "textures/environment_luxcore.exr"
-    import OpenImageIO as oiio
-    dest = Path(out) / rel
-    img = np.ascontiguousarray(rgb, dtype=np.float32)
-    o = oiio.ImageOutput.create(str(dest))
-    if o is None or not o.open(str(dest), oiio.ImageSpec(img.shape[1], img.shape[0], 3, "float")):
-        raise ValueError(f"cannot write {dest}: {oiio.geterror()}")
-    o.write_image(img)
-    o.close()
+    textures.write_exr(rgb, Path(out) / rel)
     a = math.radians(ENV_TURN + env_map["rotation"])
     m = np.eye(4)
     m[:2, :2] = [[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]]

@@ -149,10 +149,16 @@ def write_linear(tex, obj_name, base_dir, out_dir, stem=None):
     format and colour space, so no renderer applies a transfer function of its own (Mitsuba's
     bitmap decodes an 8-bit file as sRGB unless told ``raw``, which would also turn off its
     spectral uplift)."""
-    import OpenImageIO as oiio
-    rgb = np.ascontiguousarray(read_linear(tex, base_dir), dtype=np.float32)
     rel = f"textures/{stem or names.file_stem(obj_name) + '_reflectance'}.exr"
-    dest = Path(out_dir) / rel
+    write_exr(read_linear(tex, base_dir), Path(out_dir) / rel)
+    return rel
+
+
+def write_exr(rgb, dest):
+    """An H x W x 3 image as a float OpenEXR file at ``dest`` (its folder made)."""
+    import OpenImageIO as oiio
+    rgb = np.ascontiguousarray(rgb, dtype=np.float32)
+    dest = Path(dest)
     dest.parent.mkdir(parents=True, exist_ok=True)
     out = oiio.ImageOutput.create(str(dest))
     if out is None or not out.open(str(dest), oiio.ImageSpec(rgb.shape[1], rgb.shape[0], 3, "float")):
@@ -162,7 +168,7 @@ def write_linear(tex, obj_name, base_dir, out_dir, stem=None):
             raise ValueError(f"cannot write {dest}: {out.geterror()}")
     finally:
         out.close()
-    return rel
+    return dest
 
 
 # -- environment maps (docs/scene-format.md 7.1): the same file rules, an equirectangular image --
@@ -225,21 +231,10 @@ def write_equal_area(env, base_dir, out_dir, stem="environment"):
     """The map resampled to pbrt-v4's equal-area octahedral square (side sqrt(W H), at least 16,
     bilinear), the rotation applied, written as linear float OpenEXR; returns its path relative to
     ``out_dir``."""
-    import OpenImageIO as oiio
     rgb = read_linear(env, base_dir)
     n = max(16, int(round(np.sqrt(rgb.shape[0] * rgb.shape[1]))))
-    square = np.ascontiguousarray(equirect_lookup(rgb, equal_area_square_directions(n), float(env.get("rotation", 0.0))),
-                                  dtype=np.float32)
     rel = f"textures/{stem}.exr"
-    dest = Path(out_dir) / rel
-    dest.parent.mkdir(parents=True, exist_ok=True)
-    out = oiio.ImageOutput.create(str(dest))
-    if out is None or not out.open(str(dest), oiio.ImageSpec(n, n, 3, "float")):
-        raise ValueError(f"cannot write {dest}: {oiio.geterror()}")
-    try:
-        out.write_image(square)
-    finally:
-        out.close()
+    write_exr(equirect_lookup(rgb, equal_area_square_directions(n), float(env.get("rotation", 0.0))), Path(out_dir) / rel)
     return rel
 
 
