@@ -398,6 +398,7 @@ def test_writers_model_no_more_than_a_scene_needs(golden, tmp_path):
 
 # ---- ART ----------------------------------------------------------------------------------------------
 
+@pytest.mark.slow  # an ART render: 9.8 s in the fast subset once ART is built (benchmarks/TESTS.md, 2026-12-06)
 @needs_artist
 def test_art_renders_the_450nm_spheres_dark_and_red(golden, tmp_path):
     """ART (fluorescent natively) shows the thesis' two 450 nm cases the same way."""
