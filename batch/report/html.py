@@ -528,15 +528,20 @@ def _probe_views(job):
 
 def _baseline(out, run):
     """The job's comparison with a baseline run (metrics.json ``baseline``, batch/verdict/
-    baseline.py): status, the image test's smallest p against its threshold, the mean ratio per
-    channel, what it could detect and the time ratio (baseline.how_much), the reason, and links to
-    its z-map (EXR and PNG) when they are files inside the run folder. None without a record."""
+    baseline.py): status, the two-sample noise test's parts (records.noise_test_text: the failing
+    one first, each with its own figures; a record without them: the smallest p against its
+    threshold), the mean ratio per channel, what it could detect and the time ratio
+    (baseline.how_much), the reason, and links to its z-map (EXR and PNG) when they are files
+    inside the run folder. None without a record."""
     from ..verdict import baseline
     base = run.get("baseline")
     if not isinstance(base, dict):
         return None
     text = f"against baseline {_text(base.get('run'))}: {_text(base.get('status'))}"
-    if _num(base.get("p_min")) and _num(base.get("threshold")):
+    test = records.noise_test_text(base.get("test"))
+    if test:  # the two-sample test's parts, the failing one first with its own figures (the job's cell's words)
+        text += f" (two-sample noise test {test})"
+    elif _num(base.get("p_min")) and _num(base.get("threshold")):  # a record without the test's parts
         ok = base["p_min"] >= base["threshold"]
         text += f" (smallest p {base['p_min']:.3g} {'>=' if ok else '<'} threshold {base['threshold']:.3g})"
     try:

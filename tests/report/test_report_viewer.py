@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from conftest import metrics, run_batch, write_hand_made_metrics
-from spectral_bench.batch import run_folder
+from spectral_bench.batch import records, run_folder
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 pytestmark = pytest.mark.skipif(not CHROMIUM, reason="no chromium: report not checked in a browser "
@@ -448,8 +448,9 @@ def test_prism_marks_at_the_expected_columns(overlays):
 
 @pytest.mark.slow
 def test_baseline_comparison_shown_with_its_z_map(overlays):
-    """A run made with --baseline: the job's line gives the status, the smallest p against its
-    threshold, the mean ratio per channel, and links to the z-map files that exist."""
+    """A run made with --baseline: the job's line gives the status, the two-sample noise test's
+    parts with their figures (the block test's smallest p against its threshold), the mean ratio
+    per channel, and links to the z-map files that exist."""
     first, second = overlays
     entry = _entry(second, PRISM)
     base = entry["baseline"]
@@ -459,7 +460,8 @@ def test_baseline_comparison_shown_with_its_z_map(overlays):
     assert line, "no baseline line in the page"
     text = line.group(1)
     assert f"against baseline {first}: {base['status']}" in text.replace("&#39;", "'")
-    assert f"smallest p {base['p_min']:.3g}" in text and f"threshold {base['threshold']:.3g}" in text
+    assert f"(two-sample noise test {records.noise_test_text(base['test'])})" in text  # its parts, the job cell's words
+    assert f"p_min {base['p_min']:.3g} (threshold {base['threshold']:.3g})" in text
     assert f"R {base['ratio'][0][0]:.4f} +- {base['ratio'][0][1]:.4f}" in text
     links = re.findall(r"<a href='([^']+)'>z-map \((EXR|PNG)\)</a>", text)
     assert [k for _, k in links] == ["EXR", "PNG"]
@@ -491,6 +493,34 @@ def test_a_screenshot_of_the_overlays(overlays, tmp_path):
         assert png.is_file() and png.stat().st_size > 10000, png
         shots.append(png)
     print("screenshots in", tmp_path)
+
+
+def test_a_baseline_change_only_the_scale_test_sees_is_named_on_the_page(tmp_path):
+    """Issue 45 item 8 on the report's baseline line: a build 0.2 % darker whose block test passes
+    and whose scale test fails says "scale test failed" with the scale test's own figures, the
+    block test's figures beside it as passed, never a bare "smallest p >= threshold" that reads as
+    a pass; a record without the test's parts keeps the smallest p line."""
+    from spectral_bench.batch import exr
+    from spectral_bench.batch.report import html
+    out = tmp_path / "out"
+    exr.write(out / "s" / "results" / "mitsuba" / "render.exr", np.ones((4, 8, 3), dtype=np.float32))
+    test = {"name": "block test, Sidak-corrected", "p_min": 0.031, "threshold": 6.5e-6, "z_max": 2.9,
+            "block_pass": True, "pass": False,
+            "scale_test": {"p_min": 2.0e-9, "threshold": 1.7e-4, "pass": False,
+                           "s": [0.9995, 0.9990, 0.9980], "se": [0.0004, 0.0004, 0.0003], "z": [-1.2, -2.5, -6.0]}}
+    base = {"run": "old", "status": "changed", "reason": "image differs beyond noise", "p_min": 0.031,
+            "threshold": 6.5e-6, "ratio": [[0.9995, 0.0004], [0.999, 0.0004], [0.998, 0.0003]], "test": test}
+    runs = [{"scene": "s", "backend": "mitsuba", "status": "ok", "image": "s/results/mitsuba/render.exr",
+             "resolution": [8, 4], "baseline": base},
+            {"scene": "t", "backend": "mitsuba", "status": "ok", "image": "s/results/mitsuba/render.exr",
+             "resolution": [8, 4], "baseline": {k: v for k, v in base.items() if k != "test"}}]
+    write_hand_made_metrics(out, {"started": "now", "runs": runs})
+    lines = [__import__("html").unescape(m) for m in re.findall(r"<li class='baseline [a-z]*'>(.*?)</li>", html.render(out), re.S)]
+    assert len(lines) == 2, lines
+    assert ("against baseline old: changed (two-sample noise test FAIL: scale test failed: B 0.2 % dark (+- 0.03), "
+            "p 2e-09 (threshold 0.00017); block test passed: p_min 0.031 (threshold 6.5e-06), z_max 2.90)") in lines[0], lines[0]
+    assert "smallest p" not in lines[0]
+    assert "against baseline old: changed (smallest p 0.031 >= threshold 6.5e-06)" in lines[1], lines[1]
 
 
 def test_overlay_fields_of_metrics_json_are_text(tmp_path):
