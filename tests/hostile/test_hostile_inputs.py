@@ -166,6 +166,7 @@ def test_a_scene_named_like_the_runs_own_files_cannot_take_them_over(golden, tmp
     assert proc.returncode == 1
 
 
+@pytest.mark.slow  # over about 1 s of CPU (1.2-2.6 s measured with ART and pbrt built, 2026-12-06: benchmarks/TESTS.md)
 def test_a_blend_file_that_is_no_blend_fails_alone(tmp_path):
     bad = tmp_path / "broken.blend"
     bad.write_bytes(b"BLENDER-v500 this is not a blend file")

@@ -113,6 +113,7 @@ def test_a_time_out_ends_the_real_renderer_behind_a_shell_wrapper(tmp_path, wrap
     assert leftovers(mark) == []
 
 
+@pytest.mark.slow  # over about 1 s of CPU (1.2-2.6 s measured with ART and pbrt built, 2026-12-06: benchmarks/TESTS.md)
 def test_a_renderer_flooding_its_output_is_kept_head_and_tail_in_bounded_memory(tmp_path, wrapper):
     """100 MB on stdout: render.log keeps its first and last 64 kB and says how much was dropped;
     the process running the pass grows by far less than the output (measured in a child: its peak

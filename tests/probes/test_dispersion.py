@@ -53,6 +53,7 @@ def _at_scale(scene, scale):
     return sc
 
 
+@pytest.mark.slow  # over about 1 s of CPU (1.2-2.6 s measured with ART and pbrt built, 2026-12-06: benchmarks/TESTS.md)
 def test_prism_probes_fail_for_fused_silica_rendered_where_n_bk7_is_declared(golden, tmp_path):
     declared = _at_scale(golden["dispersion_prism"], SCALE)
     wrong = copy.deepcopy(declared)

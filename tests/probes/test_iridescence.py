@@ -131,7 +131,7 @@ def test_chi2_sampling_matches_pdf(distribution, alpha, theta_deg):
     assert chi2.run(), chi2.messages
 
 
-@pytest.mark.parametrize("variant", ["llvm_ad_spectral", "llvm_ad_spectral_polarized"])
+@pytest.mark.parametrize("variant", ["llvm_ad_spectral", pytest.param("llvm_ad_spectral_polarized", marks=pytest.mark.slow)])  # polarised: 1.9-2.6 s of CPU
 def test_sample_weight_equals_eval_over_pdf(variant):
     mi = _variant(variant)
     rng = np.random.default_rng(2)

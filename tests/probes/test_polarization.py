@@ -146,6 +146,7 @@ def test_degree_of_polarisation_at_brewster_and_s1_sign(golden, tmp_path):
     assert abs(s1[:10].sum()) < 0.01 * s1.sum()
 
 
+@pytest.mark.slow  # over about 1 s of CPU (1.2-2.6 s measured with ART and pbrt built, 2026-12-06: benchmarks/TESTS.md)
 def test_stokes_output_behind_the_polariser_is_what_it_transmits(golden, tmp_path):
     """Stokes output with the camera's polariser gives the Stokes vector behind it: at 90 degrees
     all that passes is vertically polarised (S1 = -S0, S2 = 0, R = S0.R), and at 45 degrees the

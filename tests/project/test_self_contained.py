@@ -99,6 +99,7 @@ def test_both_forms_load_to_one_scene_export_and_fingerprint(name, tmp_path):
     assert references.fingerprint(full) == references.fingerprint(named)
 
 
+@pytest.mark.slow  # over about 1 s of CPU (1.2-2.6 s measured with ART and pbrt built, 2026-12-06: benchmarks/TESTS.md)
 def test_every_reference_stays_current_with_the_self_contained_goldens():
     stale = []
     for name in ALL_SCENES:
