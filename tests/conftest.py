@@ -245,6 +245,17 @@ def run_bpy(body, timeout=600, env=None):
 def pytest_configure(config):
     config.addinivalue_line("markers", "slow: costs over about 1 s of CPU with its children and shared fixtures (renders, "
                                        "bpy, batch runs, studies); `pytest -m 'not slow'` is the fast subset")
+    if not hasattr(config, "workerinput"):  # the session's first process: before the workers start
+        hand_down_mitsuba_probes()
+
+
+def hand_down_mitsuba_probes():
+    """Mitsuba's LLVM and CUDA probes (batch/backends/mitsuba/llvm.py, cuda.py), run for real once
+    here; their answers reach every worker and child through the environment, so each batch/run.py
+    child does not probe again (about 0.7 s of CPU each). Tests of the probes change its inputs
+    (DRJIT_LIBLLVM_PATH, the candidates, the CUDA test hook) and so probe anew."""
+    from spectral_bench.batch.backends.mitsuba import cuda
+    cuda.find()  # asks llvm.find first; both hand their answers down
 
 
 # pytest.ini runs the suite on pytest-xdist workers with `--dist loadscope`, which this file's

@@ -1,4 +1,5 @@
-"""Without a usable libLLVM the runner says so (once) and falls back to the scalar variants."""
+"""Without a usable libLLVM the runner says so (once) and falls back to the scalar variants; the
+probe's answer is handed down to children only for the same inputs."""
 import json
 import os
 import subprocess
@@ -30,3 +31,29 @@ def test_no_llvm_falls_back_to_scalar_and_says_why(tmp_path):
     assert out["path"] is None
     assert "falling back to the scalar variants" in out["message"] and "libLLVM-missing" in out["message"]
     assert out["mode"] == "scalar_spectral"
+
+
+def test_a_handed_down_answer_is_taken_only_for_the_same_inputs(monkeypatch):
+    """The LLVM answer is handed down through the environment (llvm.INHERITED): the same
+    interpreter and candidate libraries take the parent's answer (here a planted one, which no
+    probe could give); other candidates, or a malformed value, probe for real."""
+    import pkg_bootstrap
+    pkg_bootstrap.package()
+    from spectral_bench.batch.backends.mitsuba import llvm
+    key = [sys.executable, llvm.candidates()]
+    planted = json.dumps({"llvm": [key, [None, "handed down by the test"]]})
+    try:
+        monkeypatch.setenv(llvm.INHERITED, planted)
+        llvm.find.cache_clear()
+        assert llvm.find() == (None, "handed down by the test")
+        for bad in ("{not json", "[1, 2]", json.dumps({"llvm": [key, [3, 4]]}), json.dumps({"llvm": [key]})):
+            monkeypatch.setenv(llvm.INHERITED, bad)
+            assert llvm.inherited("llvm", key) is None, bad
+        monkeypatch.setenv(llvm.INHERITED, planted)
+        monkeypatch.setenv("DRJIT_LIBLLVM_PATH", "/nonexistent/libLLVM-test.so")  # another first candidate
+        llvm.find.cache_clear()
+        path, message = llvm.find()  # probed for real: the missing library is named in it or skipped for a good one
+        assert message != "handed down by the test"
+        assert json.loads(os.environ[llvm.INHERITED])["llvm"][0] == [sys.executable, llvm.candidates()]  # handed on
+    finally:
+        llvm.find.cache_clear()

@@ -2,7 +2,8 @@
 
 The probe mirrors batch/backends/mitsuba/llvm.py: a child process sets ``cuda_ad_rgb`` and renders a tiny
 scene at 1 spp, so a missing driver, a GPU Dr.Jit cannot use or a crash in the CUDA back end costs
-a failed probe, never the runner. The answer (usable, message) is cached for the process.
+a failed probe, never the runner. The answer (usable, message) is cached for the process and
+handed down to its children (llvm.py's module docstring).
 
 Test hook (tests/backends/test_gpu.py, docs/developing.md): ``SPECTRAL_BENCH_TEST_CUDA=1`` in the
 environment makes :func:`find` answer "usable" without probing (so the variant selection can be
@@ -24,7 +25,7 @@ _PROBE = ("import drjit as dr, mitsuba as mi; mi.set_variant('cuda_ad_rgb'); d =
           "img = mi.render(mi.load_dict(d), spp=1); dr.eval(img); dr.sync_thread(); print('ok')")
 
 
-@llvm.probed_once
+@llvm.probed_once("cuda", lambda: [sys.executable, os.environ.get(TEST_HOOK), llvm.find()[0]])
 def find():
     """(usable, message): whether a cuda_ad_* variant renders in a child process here."""
     hook = os.environ.get(TEST_HOOK)
