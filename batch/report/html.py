@@ -539,7 +539,10 @@ def _baseline(out, run):
         return None
     text = f"against baseline {_text(base.get('run'))}: {_text(base.get('status'))}"
     test = records.noise_test_text(base.get("test"))
-    if test:  # the two-sample test's parts, the failing one first with its own figures (the job's cell's words)
+    failure = records.noise_test_failure(base.get("test"))
+    if failure and failure in _text(base.get("reason")):
+        pass  # the reason (below) names the failing part with its figures already
+    elif test:  # the two-sample test's parts, the failing one first with its own figures (the job's cell's words)
         text += f" (two-sample noise test {test})"
     elif _num(base.get("p_min")) and _num(base.get("threshold")):  # a record without the test's parts
         ok = base["p_min"] >= base["threshold"]

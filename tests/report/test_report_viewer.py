@@ -460,8 +460,12 @@ def test_baseline_comparison_shown_with_its_z_map(overlays):
     assert line, "no baseline line in the page"
     text = line.group(1)
     assert f"against baseline {first}: {base['status']}" in text.replace("&#39;", "'")
-    assert f"(two-sample noise test {records.noise_test_text(base['test'])})" in text  # its parts, the job cell's words
-    assert f"p_min {base['p_min']:.3g} (threshold {base['threshold']:.3g})" in text
+    failure = records.noise_test_failure(base["test"])
+    if failure:  # changed: the reason names the failing part with its own figures
+        assert failure in text.replace("&#39;", "'")
+    else:  # same: the test's parts, the job cell's words, the block test's smallest p against its threshold
+        assert f"(two-sample noise test {records.noise_test_text(base['test'])})" in text
+        assert f"p_min {base['p_min']:.3g} (threshold {base['threshold']:.3g})" in text
     assert f"R {base['ratio'][0][0]:.4f} +- {base['ratio'][0][1]:.4f}" in text
     links = re.findall(r"<a href='([^']+)'>z-map \((EXR|PNG)\)</a>", text)
     assert [k for _, k in links] == ["EXR", "PNG"]
@@ -499,7 +503,8 @@ def test_a_baseline_change_only_the_scale_test_sees_is_named_on_the_page(tmp_pat
     """Issue 45 item 8 on the report's baseline line: a build 0.2 % darker whose block test passes
     and whose scale test fails says "scale test failed" with the scale test's own figures, the
     block test's figures beside it as passed, never a bare "smallest p >= threshold" that reads as
-    a pass; a record without the test's parts keeps the smallest p line."""
+    a pass; said once where the reason names the failing part already (as the runner's does); a
+    record without the test's parts keeps the smallest p line."""
     from spectral_bench.batch import exr
     from spectral_bench.batch.report import html
     out = tmp_path / "out"
@@ -513,14 +518,19 @@ def test_a_baseline_change_only_the_scale_test_sees_is_named_on_the_page(tmp_pat
     runs = [{"scene": "s", "backend": "mitsuba", "status": "ok", "image": "s/results/mitsuba/render.exr",
              "resolution": [8, 4], "baseline": base},
             {"scene": "t", "backend": "mitsuba", "status": "ok", "image": "s/results/mitsuba/render.exr",
-             "resolution": [8, 4], "baseline": {k: v for k, v in base.items() if k != "test"}}]
+             "resolution": [8, 4], "baseline": {k: v for k, v in base.items() if k != "test"}},
+            {"scene": "u", "backend": "mitsuba", "status": "ok", "image": "s/results/mitsuba/render.exr",
+             "resolution": [8, 4], "baseline": dict(base, reason="image differs beyond noise: " + records.noise_test_failure(test))}]
     write_hand_made_metrics(out, {"started": "now", "runs": runs})
     lines = [__import__("html").unescape(m) for m in re.findall(r"<li class='baseline [a-z]*'>(.*?)</li>", html.render(out), re.S)]
-    assert len(lines) == 2, lines
+    assert len(lines) == 3, lines
     assert ("against baseline old: changed (two-sample noise test FAIL: scale test failed: B 0.2 % dark (+- 0.03), "
             "p 2e-09 (threshold 0.00017); block test passed: p_min 0.031 (threshold 6.5e-06), z_max 2.90)") in lines[0], lines[0]
     assert "smallest p" not in lines[0]
     assert "against baseline old: changed (smallest p 0.031 >= threshold 6.5e-06)" in lines[1], lines[1]
+    # the runner's reason names the failing part already (baseline.judge_pair): said once, not twice
+    assert lines[2].count("scale test") == 1 and "smallest p" not in lines[2], lines[2]
+    assert lines[2].startswith("against baseline old: changed; ratio R 0.9995"), lines[2]
 
 
 def test_overlay_fields_of_metrics_json_are_text(tmp_path):
