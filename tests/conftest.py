@@ -11,9 +11,10 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 # The tests are grouped by the part of the house they test (tests/<room>/test_*.py, issue 45 item 4);
-# this folder holds what they share: this file's fixtures and the helper modules beside it
-# (plant_renderer, scene_fuzz, run_fuzz, exr_craft, blend_builder, ...). A test module may import
-# another room's (a fixture or a constant it shares): every room is on the path.
+# this folder holds what they share: this file's fixtures and helpers and the helper modules beside
+# it (installed: ART, pbrt and Chromium and their skip markers; fake_renderer; noisy_runs;
+# plant_renderer, scene_fuzz, run_fuzz, exr_craft, blend_builder, ...). Every room is on the path;
+# a test module imports test modules of its own room only (tests/project/test_rooms.py).
 ROOMS = sorted(p.name for p in Path(__file__).resolve().parent.iterdir()
                if p.is_dir() and any(p.glob("test_*.py")))
 for _room in ROOMS:
@@ -214,6 +215,38 @@ def assert_sees(run, effect, what):
     det = (run.get("detectable") or {}).get("scale")
     assert isinstance(det, (int, float)) and det < effect, (
         f"{run.get('scene')}: this run detects {det} (90 % power), not below the {effect:g} of {what}")
+
+
+def turned_about_view_axis(scene, degrees):
+    """A copy of a polarizing_plane scene's IR with the plane and light turned about the camera's
+    view axis (world +y there): the s direction of the reflection then sits at ``degrees``
+    counter-clockwise from image right (the Stokes frame tests of probes/ and backends/)."""
+    import numpy as np
+    sc = copy.deepcopy(scene)
+    a = np.radians(-degrees)  # a right-handed turn about +y by -d moves image right towards image up by d
+    rot = np.array([[np.cos(a), 0, np.sin(a), 0], [0, 1, 0, 0], [-np.sin(a), 0, np.cos(a), 0], [0, 0, 0, 1]])
+    for obj in sc["objects"]:
+        obj["shape"]["to_world"] = (rot @ np.asarray(obj["shape"]["to_world"])).tolist()
+    return sc
+
+
+def bpy_script(body, timeout=300):
+    """Run ``body`` in a child Python with bpy and scenes.blend read by the runner's reader
+    (batch/blend_input.py: ``results`` holds its scenes' IR or the error of each), the extractor's
+    modules imported, the extension not registered; returns the JSON its last printed line holds."""
+    import textwrap
+    code = textwrap.dedent(f"""
+        import json, sys
+        sys.path.insert(0, {str(ROOT)!r})
+        import pkg_bootstrap; pkg_bootstrap.package()
+        import bpy
+        from spectral_bench.batch import blend_input
+        from spectral_bench.exporters import extract_blender, ir_json, validate
+        results = dict(blend_input.load_blend({str(ROOT / 'scenes.blend')!r}))
+    """) + textwrap.dedent(body)
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=timeout)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
 def run_bpy(body, timeout=600, env=None):

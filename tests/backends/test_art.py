@@ -26,17 +26,14 @@ import numpy as np
 import pytest
 
 import build_scripts
-from conftest import ALL_SCENES, RANDOM_TEST_ALPHA, ROOT, metrics, random_run_env, run_batch, write_scene
+from conftest import ALL_SCENES, RANDOM_TEST_ALPHA, ROOT, metrics, random_run_env, run_batch, turned_about_view_axis, write_scene
+from installed import ART_EXEC, ARTIST, needs_artist
 from spectral_bench.batch import backends, exr, spectral_exr
 from spectral_bench.batch.backends.art import backend as art_backend
 from spectral_bench.batch.verdict import probes, stats
 from spectral_bench.exporters import art_writer
 
-ARTIST = os.environ.get("ART_ARTIST") or (str(art_backend.find_artist()) if art_backend.find_artist() else None)
-EXEC = ["-e", f"art={ARTIST}"] if os.environ.get("ART_ARTIST") else []  # else the runner finds it itself
-needs_artist = pytest.mark.skipif(not ARTIST, reason=(
-    "no ART: no .art/env.json (scripts/build_art.sh SRC builds ART from its source; .ci/run does when "
-    "../shared/art/ holds it), no artist on PATH, no ART_ARTIST: ART renders not run"))
+EXEC = ART_EXEC
 # an emitter's or the environment's brightness in a written .arm (named illuminant or sampled spectrum)
 EMITTED = re.compile(r"(?:LAMBERT_EMITTER|UNIFORM_ENVIRONMENT_MATERIAL)\((?:CONST_COLOUR_PSSPECTRUM\(.*?PSS_END\)|\w+(?:\([^()]*\))?)"
                      r"\s*,\s*([0-9.e+-]+)\)", re.S)
@@ -357,8 +354,7 @@ def test_art_brewster_and_polariser_convention(golden, tmp_path, angle, turned, 
     from the camera): parallel to the reflection's s direction the Brewster reflection is bright,
     crossed it is near zero (a factor of ~20 apart), each judged on its own noise (64x64, 2 passes
     of 16 spp)."""
-    from test_polarization import _turned
-    sc = _turned(golden["polarizing_plane_0"], turned)
+    sc = turned_about_view_axis(golden["polarizing_plane_0"], turned)
     sc["camera"]["polarizer"]["angle"] = angle
     sc["render"]["width"] = sc["render"]["height"] = 64
     b = backends.get("art", executable=ARTIST)
@@ -401,7 +397,7 @@ def test_report_shows_art_runs_like_any_other(art_runs):
     """The HTML report of the ART run, in headless Chromium: every rendered ART job has a viewer
     that decodes its images (render from ART's spectral film, reference, and for a polarised scene
     its Stokes tabs S0..S3), and the unsupported job is listed with its reason."""
-    from test_report import CHROMIUM, dump_dom
+    from installed import CHROMIUM, dump_dom
     if not CHROMIUM:
         pytest.skip("no chromium: report not checked in a browser (scripts/setup.sh installs it as root)")
     out, runs = art_runs[1], art_runs[2]

@@ -21,13 +21,10 @@ import pytest
 
 import build_scripts
 from conftest import ROOT, metrics, run_batch, write_scene
+from installed import PBRT, needs_pbrt
 from spectral_bench.batch import exr, spectral_exr
 from spectral_bench.batch.backends.pbrt import backend as pbrt_backend
 
-PBRT = pbrt_backend.find_pbrt()
-needs_pbrt = pytest.mark.skipif(not PBRT, reason=(
-    f"no pbrt-v4: no {pbrt_backend.ENV_FILE} (scripts/build_pbrt.sh SRC builds pbrt from its source; .ci/run does "
-    "when ../shared/pbrt/ holds it) and no pbrt on PATH: pbrt renders not run"))
 
 
 @pytest.mark.skipif(not (pbrt_backend.built_pbrt() and pbrt_backend.ENV_FILE.is_file()),

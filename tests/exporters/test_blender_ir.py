@@ -2,31 +2,13 @@
 
 Each test that edits the Blender data runs in a child process (bpy has one global state)."""
 import json
-import subprocess
-import sys
-import textwrap
 
 import pytest
 
-from conftest import ALL_SCENES, GOLDEN, REFLECTANCE, ROOT
+from conftest import ALL_SCENES, GOLDEN, REFLECTANCE, bpy_script
 from spectral_bench.exporters import inline_data, ir_json
 
 pytestmark = pytest.mark.slow  # every test here costs over ~1 s of CPU, its children and module fixtures counted (benchmarks/TESTS.md)
-
-
-def bpy_script(body, timeout=300):
-    code = textwrap.dedent(f"""
-        import json, sys
-        sys.path.insert(0, {str(ROOT)!r})
-        import pkg_bootstrap; pkg_bootstrap.package()
-        import bpy
-        from spectral_bench.batch import blend_input
-        from spectral_bench.exporters import extract_blender, ir_json, validate
-        results = dict(blend_input.load_blend({str(ROOT / 'scenes.blend')!r}))
-    """) + textwrap.dedent(body)
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=timeout)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
 @pytest.fixture(scope="module")

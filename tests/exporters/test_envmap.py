@@ -15,14 +15,13 @@ its folder; pbrt, ART and the RGB backends unsupported, naming the environment),
 file export copying the map beside it."""
 import copy
 import json
-import math
 import os
 
 import numpy as np
 import pytest
 
 from conftest import RANDOM_TEST_ALPHA, render_with_noise, run_bpy
-from test_pbrt import needs_pbrt
+from installed import needs_pbrt
 from test_textures import mitsuba_file, write_image
 from spectral_bench.exporters import art_writer, ir, ir_json, pbrt_writer, rgb_scene, textures, validate
 

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from conftest import RANDOM_TEST_ALPHA, render_with_noise, run_bpy
-from test_pbrt import needs_pbrt
+from installed import needs_pbrt
 from spectral_bench.exporters import art_writer, ir_json, pbrt_writer, rgb_scene, textures, validate
 
 # the texels, linear sRGB, as Blender's image rows bottom to top: bottom-left red, bottom-right

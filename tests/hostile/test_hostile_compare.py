@@ -27,7 +27,7 @@ import run_fuzz
 from conftest import HAND_MADE, ROOT, run_batch
 from spectral_bench.batch import exr, run_folder, spectral_exr
 from spectral_bench.batch.verdict import baseline, references
-from test_baseline import _run_folder
+from noisy_runs import noisy_run_folder
 
 COMPARE = ROOT / "batch" / "compare_runs.py"
 MAKE_REFERENCES = ROOT / "batch" / "make_references.py"
@@ -51,8 +51,8 @@ def compare_runs(*args, cwd=ROOT):
 
 def _pair(tmp_path):
     old, new = tmp_path / "old", tmp_path / "new"
-    _run_folder(old, 1, {"a": 1.0, "b": 1.0})
-    _run_folder(new, 2, {"a": 1.0, "b": 1.0})
+    noisy_run_folder(old, 1, {"a": 1.0, "b": 1.0})
+    noisy_run_folder(new, 2, {"a": 1.0, "b": 1.0})
     for f in (old, new):
         (f / HAND_MADE).write_text("written by a test\n")
     return old, new
@@ -297,7 +297,7 @@ def test_junit_inside_the_run_folder_is_refused(tmp_path):
         assert proc.returncode == 2 and f"--junit {target}: inside the output folder" in proc.stderr, proc.stderr[-2000:]
         assert not (out / "metrics.json").exists()
     run = tmp_path / "run"
-    _run_folder(run, 1, {"a": 1.0})
+    noisy_run_folder(run, 1, {"a": 1.0})
     before = run_fuzz.snapshot(run)
     proc = run_batch("--resume", run, "--junit", run / "metrics.json")
     assert proc.returncode == 2 and "--junit" in proc.stderr and run_fuzz.snapshot(run) == before, proc.stderr[-2000:]
@@ -372,7 +372,7 @@ def test_panel_follows_a_recorded_baseline_only_beside_the_run(tmp_path):
     runs = tmp_path / "runs"
     prev, cur, elsewhere = runs / "prev", runs / "cur", tmp_path / "elsewhere"
     for folder in (prev, cur, elsewhere):
-        _run_folder(folder, 1, {"a": 1.0})
+        noisy_run_folder(folder, 1, {"a": 1.0})
     zmap = cur / "a" / "results" / "mitsuba" / baseline.ZMAP
     zmap.write_bytes((cur / "a" / "results" / "mitsuba" / "render.exr").read_bytes())
     image = "a/results/mitsuba/render.exr"
@@ -410,7 +410,7 @@ def test_results_panel_does_not_follow_a_recorded_baseline_elsewhere(tmp_path):
     runs = tmp_path / "runs"
     prev, cur, elsewhere = runs / "prev", runs / "cur", tmp_path / "elsewhere"
     for folder in (prev, cur, elsewhere):
-        _run_folder(folder, 1, {"a": 1.0})
+        noisy_run_folder(folder, 1, {"a": 1.0})
     out = {}
     for run in (str(elsewhere), "prev"):
         data = json.loads((cur / "metrics.json").read_text())

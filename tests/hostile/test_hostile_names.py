@@ -167,7 +167,7 @@ def test_a_hostile_scene_among_good_ones_fails_alone_and_nothing_leaves_out(gold
 
 @pytest.mark.slow
 def test_blender_names_become_safe_ids_with_their_label(tmp_path):
-    from test_blender_ir import bpy_script
+    from conftest import bpy_script
     out = bpy_script("""
         sc = bpy.data.scenes["ggx_copper_50"]
         sc.name = "../my scene"

@@ -17,7 +17,7 @@ import uuid
 import psutil
 import pytest
 
-from test_declared_renderer import FAKE, ROOT, render  # noqa: F401 - the fake renderer script and the loop driver
+from fake_renderer import FAKE, ROOT, declaration, render  # noqa: F401 - the stand-in renderer script and the loop driver
 from spectral_bench.batch.backends import passes
 
 # A wrapper, as real renderers are often started: a shell script that runs the renderer behind it.
@@ -122,9 +122,10 @@ def test_a_renderer_flooding_its_output_is_kept_head_and_tail_in_bounded_memory(
     script = textwrap.dedent(f'''
         import json, resource, sys
         from pathlib import Path
+        sys.path.insert(0, {str(ROOT)!r})
         sys.path.insert(0, {str(ROOT / "tests")!r})
-        sys.path.insert(0, {str(ROOT / "tests" / "backends")!r})  # test_declared_renderer's room
-        import test_declared_renderer as t
+        import pkg_bootstrap; pkg_bootstrap.package()
+        import fake_renderer as t
         before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
         t.render(Path({str(tmp_path)!r}), "seed", passes_n=1, declared={declared(env, "flood")!r})
         print(json.dumps([before, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss]))
@@ -212,7 +213,6 @@ def test_a_version_command_leaving_a_child_on_its_stdout_is_read_and_its_child_e
     (its child holding the pipe used to make it wait for the 60 s limit and record "unknown"),
     and the child is ended with it."""
     from spectral_bench.batch import backends
-    from test_declared_renderer import declaration
     env, mark, pids = wrapper
     version = ["/bin/sh", "-c", 'echo "wrapped 1.2"; sleep 3600 & echo $! > "$PIDS/version.pid"; exit 0']
     b = backends.get("fake_seed", declaration=declaration(tmp_path, "seed", version=version, env=env))

@@ -13,8 +13,8 @@ import textwrap
 
 import pytest
 
-from conftest import GOLDEN, ROOT, run_batch, write_hand_made_metrics
-from test_declared_renderer import FAKE
+from conftest import GOLDEN, run_batch, write_hand_made_metrics
+from fake_renderer import FAKE
 
 pytestmark = pytest.mark.slow  # every test here costs over ~1 s of CPU, its children and module fixtures counted (benchmarks/TESTS.md)
 

@@ -28,7 +28,7 @@ from spectral_bench.batch.verdict import compare, probes, raycast, references, s
 from spectral_bench.exporters import (art_writer, fluorescence, ir, ir_json, mitsuba_writer, spectra,
                                       validate)
 
-from test_art import EXEC as ART_EXEC, needs_artist  # ART as the runner finds it (.art/env.json, PATH, ART_ARTIST)
+from installed import ART_EXEC, needs_artist  # ART as the runner finds it (.art/env.json, PATH, ART_ARTIST)
 LONE = "fluorescent_sphere_lone"
 PROBE_SIZE, PROBE_SPP = 64, 64
 

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from conftest import GOLDEN, metrics, run_batch
-from test_pbrt import needs_pbrt  # pbrt-v4 as the runner finds it (.pbrt/env.json, SPECTRAL_BENCH_PBRT_ENV, PATH)
+from installed import needs_pbrt  # pbrt-v4 as the runner finds it (.pbrt/env.json, SPECTRAL_BENCH_PBRT_ENV, PATH)
 from spectral_bench.batch.verdict import probes, stats
 from spectral_bench.batch.verdict.diagnosis import materials
 from spectral_bench.batch.verdict.probes import furnace

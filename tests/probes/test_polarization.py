@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from conftest import assert_sees, metrics, render, run_batch
+from conftest import assert_sees, metrics, render, run_batch, turned_about_view_axis
 from spectral_bench.batch.verdict import probes
 from spectral_bench.exporters import ir
 
@@ -99,23 +99,12 @@ def test_malus_law_at_45_degrees(golden, tmp_path):
     assert results[45.0] == pytest.approx(0.5 * parallel, rel=0.05)
 
 
-def _turned(scene, degrees):
-    """The plane and light turned about the camera's view axis (world +y here): the s direction
-    of the reflection then sits at ``degrees`` counter-clockwise from image right."""
-    sc = copy.deepcopy(scene)
-    a = np.radians(-degrees)  # a right-handed turn about +y by -d moves image right towards image up by d
-    rot = np.array([[np.cos(a), 0, np.sin(a), 0], [0, 1, 0, 0], [-np.sin(a), 0, np.cos(a), 0], [0, 0, 0, 1]])
-    for obj in sc["objects"]:
-        obj["shape"]["to_world"] = (rot @ np.asarray(obj["shape"]["to_world"])).tolist()
-    return sc
-
-
 @pytest.mark.slow
 def test_polariser_angle_convention_is_counter_clockwise_seen_from_the_camera(golden, tmp_path):
     """With the reflection's s direction turned to +30 degrees, a polariser at +30 passes it and
     one at -30 (60 degrees off) passes cos^2 60 = 1/4 of it: the writer maps the IR's angle
     convention onto Mitsuba's polarizer correctly, and the probe agrees."""
-    base = _turned(golden["polarizing_plane_0"], 30.0)
+    base = turned_about_view_axis(golden["polarizing_plane_0"], 30.0)
     measured = {}
     for angle in (30.0, -30.0):
         sc = copy.deepcopy(base)

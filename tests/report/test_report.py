@@ -1,24 +1,14 @@
 """The static HTML report, opened in headless Chromium (no server): images and charts load,
 and switching views works."""
 import re
-import shutil
-import subprocess
 
 import pytest
 
 from conftest import metrics, run_batch
+from installed import dump_dom, needs_chromium
 
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 pytestmark = [pytest.mark.slow,  # over ~1 s of CPU: a batch run and Chromium (benchmarks/TESTS.md)
-              pytest.mark.skipif(not CHROMIUM, reason="no chromium: report not checked in a browser "
-                                                      "(scripts/setup.sh installs it as root)")]
-
-
-def dump_dom(url):
-    proc = subprocess.run([CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--virtual-time-budget=5000",
-                           "--dump-dom", url], capture_output=True, text=True, timeout=120)
-    assert proc.returncode == 0, proc.stderr[-1000:]
-    return proc.stdout
+              needs_chromium]
 
 
 @pytest.fixture(scope="module")

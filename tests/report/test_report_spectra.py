@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from spectral_fixture import PLANT, PATCHES, spectral_run
-from test_report_viewer import CHROMIUM, chromium
+from installed import CHROMIUM, chromium
 
 
 @pytest.fixture(scope="module")

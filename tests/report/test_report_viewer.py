@@ -12,26 +12,17 @@ and writes what the page shows into body[data-result] for --dump-dom to carry ba
 import json
 import re
 import shutil
-import subprocess
 
 import numpy as np
 import pytest
 
 from conftest import metrics, run_batch, write_hand_made_metrics
+from installed import chromium, needs_chromium
 from spectral_bench.batch import records, run_folder
 
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
-pytestmark = pytest.mark.skipif(not CHROMIUM, reason="no chromium: report not checked in a browser "
-                                                      "(scripts/setup.sh installs it as root)")
+pytestmark = needs_chromium
 HALF_REL = 2.0 ** -11  # binary16 rounding, relative
 SHOWN_REL = 5e-4  # the readout's 4 significant digits
-
-
-def chromium(*args, timeout=120):
-    proc = subprocess.run([CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--virtual-time-budget=30000",
-                           "--window-size=1400,1000", *args], capture_output=True, text=True, timeout=timeout)
-    assert proc.returncode == 0, proc.stderr[-1000:]
-    return proc.stdout
 
 
 @pytest.fixture(scope="module")

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from conftest import ROOT, run_batch, run_bpy
+from noisy_runs import noisy, noisy_run_folder
 from spectral_bench.batch import exr
 from spectral_bench.batch.verdict import baseline, references
 
@@ -38,8 +39,8 @@ def test_time_change_speaks_only_beyond_the_spread_of_the_passes():
     faster = baseline.time_change(old, {"pass_times": [0.5, 0.51, 0.49, 0.5, 0.5, 0.5]})
     assert faster["text"].startswith("faster by 50 %")
     # a ratio of 1.5 whose passes spread as much says nothing
-    noisy = baseline.time_change({"pass_times": [1.0, 2.2]}, {"pass_times": [1.1, 3.4]})
-    assert noisy["text"] is None and noisy["se"] > 0.3 and "within the passes' spread" in noisy["why"]
+    spread = baseline.time_change({"pass_times": [1.0, 2.2]}, {"pass_times": [1.1, 3.4]})
+    assert spread["text"] is None and spread["se"] > 0.3 and "within the passes' spread" in spread["why"]
     # one pass: a ratio without a spread, never a sentence
     one = baseline.time_change({"pass_times": [1.0]}, {"pass_times": [2.0]})
     assert one["ratio"] == 2.0 and one["se"] is None and one["text"] is None
@@ -47,12 +48,6 @@ def test_time_change_speaks_only_beyond_the_spread_of_the_passes():
 
 
 # -- the smallest change detected with 90 % power ----------------------------------------------------
-def _noisy(rng, truth, passes, sigma):
-    """Mean and standard error of ``passes`` independent Gaussian passes around ``truth``."""
-    p = truth[None] + rng.normal(0.0, sigma, (passes,) + truth.shape)
-    return p.mean(axis=0), p.std(axis=0, ddof=1) / np.sqrt(passes)
-
-
 @pytest.mark.slow
 def test_detectable_scale_is_detected_nine_times_in_ten():
     """``detectable`` claims at least 90 % power: two images with their own noise, the new one
@@ -65,8 +60,8 @@ def test_detectable_scale_is_detected_nine_times_in_ten():
     names = ["R", "G", "B"]
 
     def pair(scale):
-        om, ose = _noisy(rng, truth, 4, 0.5)
-        nm, nse = _noisy(rng, truth * scale, 4, 0.5)
+        om, ose = noisy(rng, truth, 4, 0.5)
+        nm, nse = noisy(rng, truth * scale, 4, 0.5)
         old = references.Reference(names, om, ose, {"spp": 4096, "passes": 4}, None)
         new = references.Reference(names, nm, nse, {"spp": 4096, "passes": 4}, None)
         return references.judge_replacement(old, new, alpha=0.01, block=4, keep=True)
@@ -223,32 +218,14 @@ version = ["{{python}}", "{script}", "--version"]
 
 
 # -- the Results panel's baseline (real bpy) ---------------------------------------------------------
-def _run_folder(out, seed, gains):
-    """An outputs folder of real EXR renders with their own noise (4 passes): one job per scene,
-    each scene's image times its gain."""
-    rng = np.random.default_rng(seed)
-    truth = np.broadcast_to(np.linspace(0.2, 1.0, 16)[None, :, None], (16, 16, 3))
-    runs = []
-    for scene, gain in gains.items():
-        mean, se = _noisy(rng, truth * gain, 4, 0.05)
-        res = out / scene / "results" / "mitsuba"
-        res.mkdir(parents=True)
-        exr.write_image(res / "render.exr", ["R", "G", "B"], mean.astype(np.float32),
-                        {f"stderr.{c}": se[..., i].astype(np.float32) for i, c in enumerate("RGB")})
-        runs.append({"scene": scene, "case": "c", "backend": "mitsuba", "mode": "m", "status": "ok", "reason": "",
-                     "spp": 4096, "passes": 4, "resolution": [16, 16], "image": f"{scene}/results/mitsuba/render.exr",
-                     "channels": ["R", "G", "B"], "metrics": {}, "probes": [], "pass_times": [1.0, 1.1, 0.9, 1.0]})
-    (out / "metrics.json").write_text(json.dumps({"options": {"alpha": 0.01, "block": 4}, "runs": runs}))
-
-
 @pytest.mark.slow
 def test_results_panel_compares_with_a_baseline_and_loads_its_images(tmp_path):
     """The Results panel picks a baseline folder; Compare judges every job (the code of
     compare_runs); the changed job is drawn first with its verdict, and the image buttons load the
     baseline's render and the two-sample z-map into Blender."""
     old, new = tmp_path / "old", tmp_path / "new"
-    _run_folder(old, 1, {"a_same": 1.0, "b_brighter": 1.0})
-    _run_folder(new, 2, {"a_same": 1.0, "b_brighter": 1.2})
+    noisy_run_folder(old, 1, {"a_same": 1.0, "b_brighter": 1.0})
+    noisy_run_folder(new, 2, {"a_same": 1.0, "b_brighter": 1.2})
     out = run_bpy(f"""
         sys.path.insert(0, {TESTS!r})
         import layout_recorder as lr
@@ -285,8 +262,8 @@ def test_hostile_metrics_stay_text_and_inside_their_folders(tmp_path):
     not read (the job is unjudged, saying so), markup in a name stays text in compare.html and
     compare.md, and nothing is written outside the comparison's folder."""
     old, new = tmp_path / "old", tmp_path / "new"
-    _run_folder(old, 1, {"a": 1.0, "b": 1.0})
-    _run_folder(new, 2, {"a": 1.0, "b": 1.0})
+    noisy_run_folder(old, 1, {"a": 1.0, "b": 1.0})
+    noisy_run_folder(new, 2, {"a": 1.0, "b": 1.0})
     secret = tmp_path / "secret.exr"
     secret.write_bytes((old / "a" / "results" / "mitsuba" / "render.exr").read_bytes())
     data = json.loads((old / "metrics.json").read_text())
@@ -332,8 +309,8 @@ def test_compare_report_says_slower_only_when_the_passes_allow(tmp_path):
     never decides the exit status."""
     from spectral_bench.batch import compare_runs as cr
     old, new = tmp_path / "old", tmp_path / "new"
-    _run_folder(old, 1, {"a": 1.0, "b": 1.0})
-    _run_folder(new, 2, {"a": 1.0, "b": 1.0})
+    noisy_run_folder(old, 1, {"a": 1.0, "b": 1.0})
+    noisy_run_folder(new, 2, {"a": 1.0, "b": 1.0})
     data = json.loads((new / "metrics.json").read_text())
     data["runs"][0]["pass_times"] = [2.0, 2.2, 1.8, 2.0]
     data["runs"][1]["pass_times"] = [0.5, 3.0, 1.0, 2.5]
