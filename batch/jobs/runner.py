@@ -16,7 +16,7 @@ from pathlib import Path
 
 
 from ...exporters import art_writer, ir_json, pbrt_writer
-from .. import backends, records, scene_sources
+from .. import backends, records, run_folder, scene_sources
 from ..verdict import baseline as baselines, known, status
 from ..report import html as report, results, summary
 from ..studies import sweep
@@ -126,7 +126,7 @@ def open_baseline(opts, out=None):
         raise UsageError(f"--baseline {given} is this run's own output folder: give the folder of a previous run")
     try:
         return baselines.Run(given)
-    except baselines.BaselineError as exc:
+    except run_folder.NotARun as exc:  # missing, or not a run: named by the one reader of run folders
         raise UsageError(f"--baseline {exc}") from None
 
 

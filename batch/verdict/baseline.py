@@ -60,11 +60,6 @@ ZMAP, ZMAP_PNG = run_folder.ZMAP, run_folder.ZMAP_PNG  # written here beside eac
 STATUSES = ("changed", "unjudged", "missing", "same")  # the order changed-first listings use
 
 
-# a baseline folder that is missing or holds no run (a usage error, exit 2), named: the name the
-# runner's --baseline and the panel's Compare catch (the reader raises it: batch/run_folder.py ``read``)
-BaselineError = run_folder.NotARun
-
-
 def key_of(entry):
     """(scene, backend, mode) of a run entry, or None for an entry that is not a job record."""
     if not isinstance(entry, dict):
