@@ -399,12 +399,18 @@ def compare_with_baseline(out_dir, baseline_dir):
     return compare_runs.run(base, out_dir)[0]  # into OUT/compare, or the first free OUT/compare-N
 
 
+def baseline_word(found):
+    """The baseline verdict's word: its status, or "unstable" (batch/verdict/baseline.py shown_status)."""
+    from ..batch.verdict import baseline
+    return baseline.shown_status(found[0])
+
+
 def baseline_line(found):
     """One line for the panel: the baseline verdict and how much."""
     from ..batch.verdict import baseline
     rec = found[0]
     how = baseline.how_much(rec)
-    return f"baseline: {rec.get('status')}" + (f": {how}" if how else "")
+    return f"baseline: {baseline.shown_status(rec)}" + (f": {how}" if how else "")
 
 
 def status_icon(status):

@@ -291,7 +291,8 @@ class SPECTRAL_BENCH_PT_benchmark_results(_Base, bpy.types.Panel):
             base = found.get((scene, backend))
             if base is not None:
                 box.label(text=benchmark.baseline_line(base)[:200],
-                          icon={"changed": "ERROR", "same": "CHECKMARK"}.get(base[0].get("status"), "QUESTION"))
+                          icon={"changed": "ERROR", "same": "CHECKMARK", "unstable": "INFO"}.get(
+                              benchmark.baseline_word(base), "QUESTION"))
                 if base[0].get("reason"):
                     box.label(text=str(base[0]["reason"])[:200])
             if run.get("reason"):

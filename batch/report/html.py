@@ -537,7 +537,7 @@ def _baseline(out, run):
     base = run.get("baseline")
     if not isinstance(base, dict):
         return None
-    text = f"against baseline {_text(base.get('run'))}: {_text(base.get('status'))}"
+    text = f"against baseline {_text(base.get('run'))}: {_text(baseline.shown_status(base))}"
     test = records.noise_test_text(base.get("test"))
     failure = records.noise_test_failure(base.get("test"))
     if failure and failure in _text(base.get("reason")):

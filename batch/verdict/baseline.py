@@ -596,6 +596,15 @@ def how_much(rec):
     return "; ".join(parts)
 
 
+def shown_status(rec):
+    """The word a baseline record is shown with (summary.md, report.html, the panel), as
+    compare_runs shows its jobs: its status, or "unstable" for a ``same`` record whose verdicts
+    flipped while the images agree within noise (``unstable``): the status stays ``same``, so the
+    job is not CHANGED and the exit status not 1 (issue 45 item 6)."""
+    status = rec.get("status") if isinstance(rec, dict) else None
+    return "unstable" if status == "same" and isinstance(rec.get("unstable"), str) and rec["unstable"] else status
+
+
 def summary_section(runs):
     """The '## Against the baseline' section of summary.md: changed jobs first, with where (the
     z-map) and how much; empty when no job has a baseline record."""
@@ -606,15 +615,15 @@ def summary_section(runs):
     recs.sort(key=lambda rb: (order.get(rb[1].get("status"), 9), str(rb[0].get("scene")), str(rb[0].get("backend"))))
     count = {}
     for _, b in recs:
-        count[b.get("status")] = count.get(b.get("status"), 0) + 1
-    head = ", ".join(f"{count[s]} {s}" for s in STATUSES if s in count)
+        count[shown_status(b)] = count.get(shown_status(b), 0) + 1
+    head = ", ".join(f"{count[s]} {s}" for s in STATUSES[:-1] + ("unstable", "same") if s in count)
     out = ["", "## Against the baseline", "",
            f"Baseline: {_cell(recs[0][1].get('run'))}. {head}. Each render judged against the baseline's on both their noises (two-sample block test, "
            "Sidak-corrected), and its probes compared; this does not change a job's status or the exit status "
            "(batch/compare_runs.py has one).", "",
            "| baseline | scene | backend | mode | how much | where (z-map) | reason |", "|---|---|---|---|---|---|---|"]
     for r, b in recs:
-        out.append(f"| {_cell(b.get('status'))} | {_cell(r.get('scene'))} | {_cell(r.get('backend'))} | "
+        out.append(f"| {_cell(shown_status(b))} | {_cell(r.get('scene'))} | {_cell(r.get('backend'))} | "
                    f"{_cell(r.get('mode') or '')} | {_cell(how_much(b))} | {_cell(b.get('zmap') or '')} | "
                    f"{_cell((b.get('reason') or '')[:300])} |")
     return "\n".join(out) + "\n\n## Jobs\n\n"

@@ -19,6 +19,7 @@ import pytest
 from conftest import metrics, run_batch, write_hand_made_metrics
 from installed import chromium, needs_chromium
 from spectral_bench.batch import records, run_folder
+from spectral_bench.batch.verdict import baseline
 
 pytestmark = needs_chromium
 HALF_REL = 2.0 ** -11  # binary16 rounding, relative
@@ -450,7 +451,7 @@ def test_baseline_comparison_shown_with_its_z_map(overlays):
     line = re.search(r"<li class='baseline [a-z]*'>(.*?)</li>", page, re.S)
     assert line, "no baseline line in the page"
     text = line.group(1)
-    assert f"against baseline {first}: {base['status']}" in text.replace("&#39;", "'")
+    assert f"against baseline {first}: {baseline.shown_status(base)}" in text.replace("&#39;", "'")
     failure = records.noise_test_failure(base["test"])
     if failure:  # changed: the reason names the failing part with its own figures
         assert failure in text.replace("&#39;", "'")

@@ -49,3 +49,24 @@ def test_a_probe_that_flips_within_noise_is_unstable_here_and_one_that_moved_is_
     (j,) = json.loads((moved / "compare" / "compare.json").read_text())["jobs"]
     assert j["changed"] and j["unstable"] is None and any(c.startswith("probe p moved beyond noise") for c in j["changes"]), j
     assert "| CHANGED | s |" in cmp.stdout
+
+
+def test_the_baseline_summary_and_the_report_say_unstable_as_compare_runs_does():
+    """A ``same`` baseline record whose verdicts flipped within noise (``unstable``) is shown as
+    unstable in summary.md's baseline section (its row and its count), the report's baseline line
+    and the panel's (baseline.shown_status), as compare_runs lists it; its status stays ``same``."""
+    from spectral_bench.batch.report import html
+    from spectral_bench.batch.verdict import baseline
+    flipped = "verdict unstable: the deviation 0.10 % is at the test's detectable 0.11 % (status ok -> failed)"
+    recs = {"a": {"run": "old", "status": "same", "unstable": flipped, "reason": flipped},
+            "b": {"run": "old", "status": "same", "unstable": None, "reason": ""},
+            "c": {"run": "old", "status": "changed", "reason": "image differs beyond noise"}}
+    assert [baseline.shown_status(r) for r in recs.values()] == ["unstable", "same", "changed"]
+    runs = [{"scene": s, "backend": "mitsuba", "mode": "m", "baseline": r} for s, r in recs.items()]
+    text = baseline.summary_section(runs)
+    assert "Baseline: old. 1 changed, 1 unstable, 1 same." in text, text
+    rows = [line for line in text.splitlines() if line.startswith("| ") and "mitsuba" in line]
+    assert [r.split(" | ")[0] for r in rows] == ["| changed", "| unstable", "| same"], rows
+    assert recs["a"]["status"] == "same"
+    line = html._baseline(None, {"baseline": recs["a"]})
+    assert line["text"].startswith("against baseline old: unstable"), line

@@ -154,7 +154,8 @@ def test_a_verdict_that_flips_within_noise_is_unstable_not_changed(runs):
 
     rec = rb["baseline"]  # --baseline a: the same record, the same words
     assert rec["status"] == "same" and rec["unstable"] == rec["reason"] == j["unstable"], rec
-    assert j["unstable"] in (b / "summary.md").read_text().split("## Jobs")[0]
+    against = (b / "summary.md").read_text().split("## Jobs")[0]
+    assert j["unstable"] in against and f"| unstable | {SCENE} |" in against and "1 unstable" in against, against
     assert str(escape(j["unstable"])) in (b / "report.html").read_text()  # as the report's autoescaping writes it
 
 
@@ -204,7 +205,7 @@ def test_the_panel_shows_the_failing_part_and_the_unstable_verdict(runs):
         assert "noise test: " + records.noise_test_text(rb["test"]) in labels, labels
         assert any(t and t.startswith("verdict unstable: the deviation ") and "is at the test's detectable" in t
                    for t in labels), labels
-        assert any(t and t.startswith("baseline: same") for t in labels), labels
+        assert any(t and t.startswith("baseline: unstable") for t in labels), labels  # compare_runs' word
     if rb["status"] == "failed":
         assert any(t and t.startswith("noise test: FAIL: scale test failed: ") for t in out["before"])
 
