@@ -36,7 +36,6 @@ import json
 import os
 import sys
 import tempfile
-import types
 from pathlib import Path
 
 import numpy as np

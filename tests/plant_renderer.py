@@ -45,7 +45,6 @@ Mitsuba backend reads them.
     python tests/plant_renderer.py scene.xml --out pass.exr --spp 16 --seed 0 --plant flip=y
 """
 import argparse
-import json
 import os
 import re
 import sys

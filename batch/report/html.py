@@ -515,7 +515,7 @@ def _prism_line(run):
         for c, e, m, s in zip("RGB", exp, meas + [None] * 3, se + [None] * 3):
             parts.append(f"{c} {_fmt(e, '{:.2f}')} expected, {_fmt(m, '{:.2f}') or '?'} measured"
                          + (f" +- {s:.2g}" if _num(s) else ""))
-        return (f"band positions (px along the fan from 550 nm's band centre; marked on the image): " + "; ".join(parts)
+        return ("band positions (px along the fan from 550 nm's band centre; marked on the image): " + "; ".join(parts)
                 + f"; colour order {_text(p.get('order_expected'))} expected, {_text(p.get('order_measured'))} measured")
     return None
 

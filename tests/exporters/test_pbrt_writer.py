@@ -3,7 +3,6 @@ written scene.pbrt by a small parser of pbrt's format (directives, typed paramet
 light normalisation; what pbrt-v4 cannot express named per object and field; hostile names; the
 golden files. Rendering the exports with pbrt itself is tests/backends/test_pbrt.py's part."""
 import copy
-import json
 import math
 import re
 import shlex

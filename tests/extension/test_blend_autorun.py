@@ -15,7 +15,6 @@ control at the end of the extension's process, a plain append again, writes one 
 the whole time).
 """
 import json
-import os
 import subprocess
 import sys
 import textwrap

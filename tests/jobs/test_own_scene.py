@@ -3,7 +3,6 @@ shows (examples/scenes/), listed, given a reference and judged; and every output
 a render, so a scene no probe fits, judged against a reference its own renderer made, reads as a
 regression check ("checked against itself: detects change, not error"), never as a plain ok."""
 import json
-from pathlib import Path
 from xml.etree import ElementTree as ET
 
 import pytest

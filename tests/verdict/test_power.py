@@ -6,7 +6,6 @@ tiny suite's 0.125 and the 620x420 charts), and a scale above 1 is refused (exit
 The power test simulates on the stored noise model of a committed reference (its mean, its
 per-sample variance and its own standard error), not by rendering: planted uniform scale errors of
 the size ``detectable`` states must be detected about 90 % of the time."""
-import json
 
 import numpy as np
 import pytest

@@ -45,7 +45,6 @@ intern/cycles/kernel/svm/closure.h for the roughness conventions):
 import argparse
 import json
 import math
-import os
 import sys
 import tempfile
 import time

@@ -27,7 +27,6 @@ are identical, measured.)
 import argparse
 import json
 import math
-import os
 import sys
 import time
 from pathlib import Path

@@ -17,7 +17,6 @@ CUDA fails the job with its own message).
 """
 import atexit
 import importlib.util
-import json
 import os
 import queue
 import subprocess

@@ -32,7 +32,6 @@ at 256, 1e-10). A scene whose sampler is not ``independent`` is refused with the
 of a stratified sampler is not known.
 """
 import json
-import math
 import os
 import re
 import shutil
