@@ -114,3 +114,27 @@ def test_ggx_block_moments_are_each_blocks_own_bit_for_bit():
                                float((resid @ y_row).std(ddof=1) / np.sqrt(len(m_px))))
             k += 1
     assert k == len(blocks) and len(set(n.tolist())) >= 5 and n.max() >= 256
+
+
+def test_rough_film_geometry_is_shared_by_scenes_that_differ_in_camera_name_bit_for_bit(golden):
+    """iridescent_spheres_film, _height and _materials differ in their materials and camera names
+    alone: the rough-film probe's sphere geometry (the occlusion quadrature) is computed for the
+    first and taken by the others, and it is what each scene's own camera, name and all, gives."""
+    import copy
+    from spectral_bench.batch.verdict.probes import rough_film
+    names = ["iridescent_spheres_film", "iridescent_spheres_height", "iridescent_spheres_materials"]
+    w, h = 100, 32  # the 800 x 256 scenes at 1/8
+    scenes = [copy.deepcopy(golden[n]) for n in names]
+    assert len({s["camera"]["name"] for s in scenes}) == 3
+    index = rough_film.applies(scenes[0])[1]
+    rough_film._geometry.cache.clear()
+    first = rough_film.sphere_geometry(scenes[0], index, w, h)
+    for scene in scenes:
+        got = rough_film.sphere_geometry(scene, index, w, h)
+        assert got is first  # remembered: the later scenes pay nothing
+        alpha = float(scene["objects"][index]["bsdf"]["roughness"]["alpha"])
+        plain = rough_film._geometry.__wrapped__(scene["camera"], [o["shape"] for o in scene["objects"]], index,
+                                                 alpha, w, h)  # the whole camera, as before issue 45's key
+        assert len(plain) == len(got) == 6 and len(got[0]) > 50
+        for a, b in zip(got, plain):
+            assert a.dtype == b.dtype and np.array_equal(a, b) and np.array_equal(a.view(np.uint8), b.view(np.uint8))
