@@ -1,6 +1,7 @@
 """The probes' faster computations (issue 45 item 1) pinned to the straightforward ones they
 replace, bit for bit, on small cases: the same expected images, so the same verdicts."""
 import numpy as np
+import pytest
 
 from spectral_bench.batch.verdict.probes import common
 
@@ -138,3 +139,135 @@ def test_rough_film_geometry_is_shared_by_scenes_that_differ_in_camera_name_bit_
         assert len(plain) == len(got) == 6 and len(got[0]) > 50
         for a, b in zip(got, plain):
             assert a.dtype == b.dtype and np.array_equal(a, b) and np.array_equal(a.view(np.uint8), b.view(np.uint8))
+
+
+def _rough_judge_plain(px, lo, hi, blocks, alpha):
+    """rough_film._judge as it was before issue 45's change: one_sided_p called per group."""
+    from scipy import stats as _st
+    from spectral_bench.batch.verdict import stats
+    from spectral_bench.batch.verdict.probes import rough_film
+    n = len(px)
+    groups = [np.arange(n)] + list(blocks)
+    tests = len(groups) * 6
+    threshold = stats.sidak_threshold(alpha, tests)
+    p_all, z_all, out = [], [], {}
+    kept = {"measured": [], "lo": [], "hi": [], "se": [], "dof": []}
+    for g_i, g in enumerate(groups):
+        m, lo_m, hi_m = px[g].mean(axis=0), lo[g].mean(axis=0), hi[g].mean(axis=0)
+        se = (px[g] - lo[g]).std(axis=0, ddof=1) / np.sqrt(len(g))
+        for key, value in (("measured", m), ("lo", lo_m), ("hi", hi_m), ("se", se)):
+            kept[key].append(np.round(value, 10).tolist())
+        kept["dof"].append(len(g) - 1)
+        z_hi = (m - hi_m) / np.maximum(se, 1e-300)
+        z_lo = (lo_m - m) / np.maximum(se, 1e-300)
+        p = np.minimum(stats.one_sided_p(z_hi, len(g) - 1), stats.one_sided_p(z_lo, len(g) - 1))
+        p_all.append(p)
+        z_all.append(np.maximum(z_hi, z_lo))
+        if g_i == 0:
+            shift = _st.t.isf(threshold, n - 1) + _st.t.isf(1 - rough_film.POWER, n - 1)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                out = {"lo": lo_m.tolist(), "hi": hi_m.tolist(), "measured": m.tolist(), "se": se.tolist(),
+                       "dof": n - 1, "detectable_up": (shift * se / np.abs(hi_m)).tolist(),
+                       "detectable_down": (shift * se / np.abs(lo_m)).tolist(),
+                       "width": ((hi_m - lo_m) / np.abs(lo_m)).tolist(), "region_p": float(np.min(p))}
+    p_all, z_all = np.array(p_all), np.array(z_all)
+    worst = np.unravel_index(np.argmin(p_all), p_all.shape)
+    out.update({"pass": bool(np.all(p_all >= threshold) and np.all(np.isfinite(px))), "p": float(p_all.min()),
+                "threshold": threshold, "tests": tests, "tiles": len(blocks), "z": float(np.max(z_all)),
+                "worst": "region" if worst[0] == 0 else f"tile {worst[0]}", "worst_channel": "RGB"[worst[1]],
+                "groups": kept})
+    return out
+
+
+def test_rough_film_judge_takes_every_group_s_p_at_once_bit_for_bit():
+    """rough_film._judge's p-values of all groups in one call per side: the same record, every
+    number and key in order, as one call per group, for passing and failing groups of many sizes
+    (tiles of 16 x 16 pixels, some part-covered) and both sides."""
+    import json
+    from spectral_bench.batch.verdict.probes import rough_film
+    rng = np.random.default_rng(45)
+    ys, xs = np.nonzero(rng.random((120, 150)) < 0.9)
+    lo = 0.2 + 0.6 * rng.random((len(ys), 3))
+    hi = lo * (1 + 0.01 * rng.random((len(ys), 3)))
+    outcomes = set()
+    for shift in (0.0, 0.004, -0.004, 0.05):  # inside, a little above / below, far above
+        px = (lo + hi) / 2 * (1 + shift) + 0.01 * rng.normal(size=lo.shape)
+        if shift:
+            px[(ys // 16 == 3) & (xs // 16 == 4)] *= 1.02  # one tile off too
+        blocks = rough_film._tiles(ys, xs)
+        assert len(blocks) >= 50 and len({len(b) for b in blocks}) >= 3
+        for alpha in (0.01, 1e-4):
+            fast = rough_film._judge(px, lo, hi, blocks, alpha)
+            plain = _rough_judge_plain(px, lo, hi, blocks, alpha)
+            assert json.dumps(fast) == json.dumps(plain)
+            outcomes.add(fast["pass"])
+    assert outcomes == {True, False}  # passing and failing records alike
+
+
+def test_rough_film_lookup_at_shared_cosines_is_the_plain_lookup_bit_for_bit():
+    from spectral_bench.batch.verdict.probes import rough_film
+    rng = np.random.default_rng(45)
+    theta = np.linspace(0.0, np.pi / 2, rough_film.THETA_TABLE)
+    cos = rng.random((500, 16))
+    cos[0, :4] = [0.0, 1.0, 1e-12, 1 - 1e-12]  # the grid's ends
+    at = rough_film._lookup_at(theta, cos)
+    for _ in range(2):  # two tables (the ground truth's and an observer's) at the same cosines
+        table = rng.random((rough_film.THETA_TABLE, 3))
+        x = np.arccos(np.clip(cos, 0.0, 1.0)) * ((len(theta) - 1) / (np.pi / 2))  # _lookup before issue 45
+        i = np.minimum(x.astype(np.intp), len(theta) - 2)
+        plain = table[i] + (x - i)[..., None] * (table[i + 1] - table[i])
+        assert np.array_equal(rough_film._lookup(theta, table, cos, at).view(np.int64), plain.view(np.int64))
+        assert np.array_equal(rough_film._lookup(theta, table, cos).view(np.int64), plain.view(np.int64))
+
+
+def _rough_fresnel_plain(bsdf):
+    """rough_film.fresnel_table as it was before issue 45: airy.py's functions on the whole table."""
+    from spectral_bench.batch.verdict import airy
+    from spectral_bench.batch.verdict.probes import rough_film
+    from spectral_bench.exporters import spectra
+    wl = spectra.cie_1931_cmfs()[0]
+    eta_s, k_s = rough_film._eta_k(bsdf)
+    n3 = spectra.evaluate(eta_s, wl) + 1j * spectra.evaluate(k_s, wl)
+    cos = np.linspace(0.0, 1.0, rough_film.COS_TABLE)
+    film = bsdf.get("thin_film")
+    if film is None:
+        rs, rp = airy.bare_reflectance(cos[:, None], 1.0, n3[None, :])
+        return 0.5 * (rs + rp)
+    return airy.unpolarized_reflectance(cos[:, None], wl[None, :], film.get("ext_ior", 1.0), film["ior"],
+                                        film["thickness"], n3[None, :])
+
+
+@pytest.mark.parametrize("cos_table", [257, pytest.param(None, marks=pytest.mark.slow)])
+def test_rough_film_fresnel_table_sharing_the_base_is_airy_s_bit_for_bit(golden, monkeypatch, cos_table):
+    """The rough-film probe's Fresnel tables with the base's part (q3) computed once per base and
+    exterior: the same numbers as airy.py's functions for every rough sphere of the three
+    iridescent sphere scenes (filmed and bare, two bases), a named conductor and another exterior;
+    on 257 cosines (fast) and on the probe's own COS_TABLE (slow: 8 s)."""
+    from spectral_bench.batch.verdict.probes import rough_film
+    if cos_table is not None:
+        monkeypatch.setattr(rough_film, "COS_TABLE", cos_table)
+    try:
+        _check_rough_fresnel_tables(golden)
+    finally:  # the remembered tables are keyed by the material alone: none of another size is left
+        rough_film._base_side.cache.clear()
+        rough_film.fresnel_table.cache.clear()
+
+
+def _check_rough_fresnel_tables(golden):
+    import copy
+    from spectral_bench.batch.verdict.probes import rough_film
+    bsdfs = [copy.deepcopy(golden[n]["objects"][i]["bsdf"])
+             for n in ("iridescent_spheres_film", "iridescent_spheres_height", "iridescent_spheres_materials")
+             for i in rough_film.applies(golden[n])]
+    assert len(bsdfs) == 12 and sum(b.get("thin_film") is None for b in bsdfs) >= 2
+    other = copy.deepcopy(bsdfs[0])
+    other["thin_film"] = dict(other["thin_film"], ext_ior=1.33, thickness=333.0)
+    named = {"type": "conductor", "material": "Au", "roughness": {"alpha": 0.2, "distribution": "beckmann"}}
+    rough_film._base_side.cache.clear()
+    rough_film.fresnel_table.cache.clear()
+    for bsdf in bsdfs + [other, named, dict(named, thin_film={"ior": 1.4, "thickness": 400.0})]:
+        cos, wl, got = rough_film.fresnel_table(bsdf)
+        plain = _rough_fresnel_plain(bsdf)
+        assert got.shape == plain.shape == (rough_film.COS_TABLE, len(wl))
+        assert np.array_equal(got.view(np.int64), plain.view(np.int64))
+    assert len(rough_film._base_side.cache) < len(rough_film.fresnel_table.cache) - 5  # bases shared
