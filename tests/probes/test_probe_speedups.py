@@ -271,3 +271,49 @@ def _check_rough_fresnel_tables(golden):
         assert got.shape == plain.shape == (rough_film.COS_TABLE, len(wl))
         assert np.array_equal(got.view(np.int64), plain.view(np.int64))
     assert len(rough_film._base_side.cache) < len(rough_film.fresnel_table.cache) - 5  # bases shared
+
+
+def test_white_furnace_geometry_is_shared_by_the_ggx_furnaces_bit_for_bit(golden):
+    """furnace_ggx_010 ... 100 differ in alpha and camera name alone: the white-furnace probe's
+    pixel geometry is computed for the first and taken by the others, and it is what each scene's
+    own camera, name and all, gives."""
+    import copy
+    from spectral_bench.batch.verdict import raycast
+    from spectral_bench.batch.verdict.probes import white_furnace
+    scenes = [copy.deepcopy(golden[f"furnace_ggx_{a}"]) for a in ("010", "030", "060", "100")]
+    assert len({s["camera"]["name"] for s in scenes}) == 4
+    white_furnace.geometry.cache.clear()
+    first = None
+    for scene in scenes:
+        i = white_furnace.applies(scene)
+        shape = scene["objects"][i]["shape"]
+        got = white_furnace.geometry(raycast.camera_fields(scene["camera"]), shape, 64, 64)
+        first = first or got
+        assert got is first
+        plain = white_furnace.geometry.__wrapped__(scene["camera"], shape, 64, 64)
+        assert len(got[0]) > 100
+        for a, b in zip(got, plain):
+            assert a.dtype == b.dtype and np.array_equal(a.view(np.uint8), b.view(np.uint8))
+
+
+def test_lambert_patches_cast_no_ray_in_a_scene_without_patches(golden, monkeypatch):
+    """The Lambert probe casts its corner rays only where a scene has patches: a scene with a sky
+    and none gives no record, as before, without the cast; a chart still gets its records."""
+    import copy
+    from spectral_bench.batch.verdict import raycast
+    from spectral_bench.batch.verdict.probes import common, lambert
+    chart = copy.deepcopy(golden["macbeth_chart_D65"])
+    chart["render"]["width"], chart["render"]["height"] = 96, 64
+    casts = []
+    real = raycast.corner_hits
+    monkeypatch.setattr(raycast, "corner_hits", lambda *a: casts.append(1) or real(*a))
+    skies = [n for n, sc in golden.items() if sc.get("environment") and not list(lambert._patches(sc))][:6]
+    assert len(skies) == 6
+    for name in skies:
+        sc = golden[name]
+        img = np.full((8, 12, 3), 0.5, dtype=np.float32)
+        assert lambert.patches(common.Measurement(sc, ["R", "G", "B"], img)) == []
+    assert casts == []
+    img = (0.5 + 0.01 * np.random.default_rng(45).normal(size=(64, 96, 3))).astype(np.float32)
+    records = lambert.patches(common.Measurement(chart, ["R", "G", "B"], img))
+    assert casts == [1] and len(records) > 20 and records[-1]["name"] == "lambert chart luminance scale"
