@@ -195,8 +195,8 @@ def _base_side(eta, k, n1):
     CMFs' wavelengths), q3 = n3 cos theta_3 (COS_TABLE x wavelengths)): the part of the Fresnel
     table that depends on the base and the exterior alone, computed as airy.py's functions do
     (reference_code/appearance.py ``_film_interfaces``, ``fresnel_amplitudes``). Spheres of one
-    base share it, filmed or bare (7 of the default suite's 12 rough spheres share one base:
-    issue 45 item 1)."""
+    base share it, filmed or bare (the default suite's 12 rough spheres have 3 bases, 8 of them
+    one: issue 45 item 1)."""
     wl = spectra.cie_1931_cmfs()[0]
     n3 = (spectra.evaluate(eta, wl) + 1j * spectra.evaluate(k, wl))[None, :]
     cos1 = np.clip(np.linspace(0.0, 1.0, COS_TABLE)[:, None], 0.0, 1.0)
