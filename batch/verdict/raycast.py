@@ -6,6 +6,17 @@ probe is only derived for scenes made of them. Conventions are the IR's (exporte
 import numpy as np
 
 
+CAMERA_FIELDS = ("to_world", "fov", "fov_axis")  # all that camera_rays and camera_rays_at read of a camera
+
+
+def camera_fields(camera):
+    """The fields of ``camera`` that the ray casts here read (not its name, not a polariser): the
+    key under which a probe remembers what it computed from the camera's rays, so that scenes
+    which differ only in those (iridescent_spheres_film, _height, _materials; polarizing_plane_0
+    and _90) share it (issue 45 item 1)."""
+    return {k: camera[k] for k in CAMERA_FIELDS if k in camera}
+
+
 def camera_rays(camera, width, height, points="centers", rows=None):
     """Origins (3,) and unit directions of rays through pixel centers (H, W, 3), pixel corners
     (H+1, W+1, 3), or a point (ox, oy) in [0, 1)^2 inside every pixel (H, W, 3). Pixel (0, 0)

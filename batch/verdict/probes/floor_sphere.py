@@ -310,7 +310,7 @@ def sphere_on_floor(m):
     shares_r = [(big, share) for big, share, _sq in _squares(scene, si, fi)]
     a, u_lo, u_hi, ups, contraction = _spectra(sphere["bsdf"], objs[fi]["bsdf"], env["radiance"], shares_r)
     h, w = image.shape[:2]
-    camera = {k: scene["camera"][k] for k in ("to_world", "fov", "fov_axis") if k in scene["camera"]}  # what raycast reads
+    camera = raycast.camera_fields(scene["camera"])  # what raycast reads
     mask, f, per = _centre_shares(camera, [o["shape"] for o in objs], si, fi, w, h)
     sphere_pixels = int(mask.sum())
     if contraction >= 1.0:

@@ -90,7 +90,7 @@ def _footprints(camera, objects, di, li, w, h):
 def _expected(scene, di, li, w, h, pol):
     """Footprint means of (I through the polariser or (S0, S1, S2)) / L, and the mask of pixels
     valid over their whole footprint."""
-    camera = {k: scene["camera"][k] for k in ("to_world", "fov", "fov_axis") if k in scene["camera"]}  # what raycast reads
+    camera = raycast.camera_fields(scene["camera"])  # what raycast reads
     valid_all, rs_all, rp_all, chi_all, corners, cos_centre, eta = _footprints(camera, scene["objects"], di, li, w, h)
     mask, acc = None, None
     for k, (offset, weight) in enumerate(raycast.footprint_offsets(FOOTPRINT)):

@@ -186,7 +186,8 @@ def white_furnace(m):
     rough = bsdf["roughness"]
     label = f"{rough['distribution']} white furnace {obj['name']}: E(mu_o, {float(rough['alpha']):g}) L_env, single scattering"
     hgt, wid = image.shape[:2]
-    ys, xs, cos, wts = geometry(scene["camera"], obj["shape"], wid, hgt)
+    # keyed by the camera's ray-cast fields, not its name: furnace_ggx_010 ... 100 share one geometry
+    ys, xs, cos, wts = geometry(raycast.camera_fields(scene["camera"]), obj["shape"], wid, hgt)
     n = len(ys)
     if n < max(MIN_PIXELS, MIN_RING):
         return [_probe(label, None, None, None, "sigma", None, pixels=n)]
