@@ -540,11 +540,10 @@ def _baseline(out, run):
     text = f"against baseline {_text(base.get('run'))}: {_text(baseline.shown_status(base))}"
     test = records.noise_test_text(base.get("test"))
     failure = records.noise_test_failure(base.get("test"))
-    if failure and failure in _text(base.get("reason")):
-        pass  # the reason (below) names the failing part with its figures already
-    elif test:  # the two-sample test's parts, the failing one first with its own figures (the job's cell's words)
+    named = bool(failure) and failure in _text(base.get("reason"))  # the reason (below) says it with its figures
+    if test and not named:  # the two-sample test's parts, the failing one first with its own figures (the job's cell's words)
         text += f" (two-sample noise test {test})"
-    elif _num(base.get("p_min")) and _num(base.get("threshold")):  # a record without the test's parts
+    elif not test and _num(base.get("p_min")) and _num(base.get("threshold")):  # a record without the test's parts
         ok = base["p_min"] >= base["threshold"]
         text += f" (smallest p {base['p_min']:.3g} {'>=' if ok else '<'} threshold {base['threshold']:.3g})"
     try:
